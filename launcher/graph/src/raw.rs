@@ -1,0 +1,245 @@
+//! The graph as written: graph.yaml read into typed fields with positions, before anything is
+//! checked against node descriptions. Wrong types and unknown keys are reported here; a field
+//! that could not be read is left out (so it is reported once, not again as "missing").
+
+use crate::diagnostic::{Problems, Span};
+use crate::model::{Graph, Mode, Restart, RestartPolicy};
+use crate::shape::{self, Spanned};
+use crate::yaml::{Entry, Node, Value};
+
+const TOP_KEYS: &[&str] = &["name", "mode", "window", "queue", "zenoh", "nodes"];
+const ZENOH_KEYS: &[&str] = &["machines"];
+const MACHINE_KEYS: &[&str] = &["listen", "connect"];
+const NODE_KEYS: &[&str] = &["id", "run", "machine", "params", "inputs", "outputs", "restart"];
+const INPUT_KEYS: &[&str] = &["from", "feedback"];
+const RESTART_KEYS: &[&str] = &["policy", "max"];
+
+/// A declared machine.
+pub(crate) struct RawMachine {
+    pub name: Spanned<String>,
+    pub listen: Vec<String>,
+    pub connect: Vec<String>,
+}
+
+/// One `port: reference` of a node's `inputs:`.
+pub(crate) struct RawInput {
+    /// Port name and the position of the key.
+    pub port: Spanned<String>,
+    /// `node/output` text and its position.
+    pub from: Spanned<String>,
+    pub feedback: bool,
+}
+
+/// One node as written.
+pub(crate) struct RawNode<'a> {
+    pub at: Span,
+    pub id: Option<Spanned<String>>,
+    pub run: Option<Spanned<String>>,
+    pub machine: Option<Spanned<String>>,
+    pub params: &'a [Entry],
+    pub inputs: Vec<RawInput>,
+    pub outputs: Option<Vec<Spanned<String>>>,
+    pub restart: RestartPolicy,
+}
+
+impl RawNode<'_> {
+    /// Where to report something about the whole node: its id, else its start.
+    pub(crate) fn anchor(&self) -> Span {
+        self.id.as_ref().map_or(self.at, |id| id.at)
+    }
+}
+
+/// The whole file as written.
+pub(crate) struct RawGraph<'a> {
+    pub name: Option<Spanned<String>>,
+    pub mode: Mode,
+    pub window: u32,
+    pub queue: u32,
+    /// Declared machines; empty when graph.yaml declares none.
+    pub machines: Vec<RawMachine>,
+    pub nodes: Vec<RawNode<'a>>,
+}
+
+/// Reads the document root. `None` only when the root is not a mapping.
+pub(crate) fn read<'a>(root: &'a Node, p: &mut Problems) -> Option<RawGraph<'a>> {
+    let top = shape::mapping(root, "a graph file", TOP_KEYS, p)?;
+    let name = match top.get("name") {
+        Some(node) => shape::string(node, "`name`", p),
+        None => {
+            p.error(top.at, "missing `name` (the instance name, e.g. `name: default`)");
+            None
+        }
+    };
+    let mode = top.get("mode").and_then(|n| read_mode(n, p)).unwrap_or(Graph::DEFAULT_MODE);
+    let window =
+        top.get("window").and_then(|n| shape::count(n, "`window`", 1, p)).unwrap_or(Graph::DEFAULT_WINDOW);
+    let queue = top.get("queue").and_then(|n| shape::count(n, "`queue`", 1, p)).unwrap_or(Graph::DEFAULT_QUEUE);
+    let machines = top.get("zenoh").map(|n| read_zenoh(n, p)).unwrap_or_default();
+    let nodes = match top.get("nodes") {
+        Some(node) => read_nodes(node, p),
+        None => {
+            p.error(top.at, "missing `nodes` (the list of nodes of the graph)");
+            Vec::new()
+        }
+    };
+    Some(RawGraph { name, mode, window, queue, machines, nodes })
+}
+
+fn read_mode(node: &Node, p: &mut Problems) -> Option<Mode> {
+    let text = shape::string(node, "`mode`", p)?;
+    match text.value.as_str() {
+        "lockstep" => Some(Mode::Lockstep),
+        "live" => Some(Mode::Live),
+        other => {
+            p.error(text.at, format!("unknown mode `{other}`; use `lockstep` or `live`"));
+            None
+        }
+    }
+}
+
+fn read_zenoh(node: &Node, p: &mut Problems) -> Vec<RawMachine> {
+    let Some(zenoh) = shape::mapping(node, "`zenoh`", ZENOH_KEYS, p) else {
+        return Vec::new();
+    };
+    let Some(machines) = zenoh.get("machines") else {
+        return Vec::new();
+    };
+    let Some(entries) = shape::entries(machines, "`zenoh.machines`", p) else {
+        return Vec::new();
+    };
+    if entries.is_empty() {
+        p.error(machines.at, "`zenoh.machines` is empty; declare at least one machine or leave it out");
+    }
+    entries.iter().map(|e| read_machine(e, p)).collect()
+}
+
+fn read_machine(entry: &Entry, p: &mut Problems) -> RawMachine {
+    let name = Spanned { value: entry.key.clone(), at: entry.key_at };
+    if !evseg_schemas::keys::is_valid_chunk(&name.value) {
+        p.error(name.at, format!("invalid machine name `{}`: use ASCII letters, digits, `-` and `_`", name.value));
+    }
+    let what = format!("machine `{}`", name.value);
+    let mut machine = RawMachine { name, listen: Vec::new(), connect: Vec::new() };
+    let Some(fields) = shape::mapping(&entry.value, &what, MACHINE_KEYS, p) else {
+        return machine;
+    };
+    for (key, list) in [("listen", &mut machine.listen), ("connect", &mut machine.connect)] {
+        let Some(node) = fields.get(key) else { continue };
+        for endpoint in shape::string_list(node, &format!("`{key}` of {what}"), p).unwrap_or_default() {
+            if is_endpoint(&endpoint.value) {
+                list.push(endpoint.value);
+            } else {
+                p.error(
+                    endpoint.at,
+                    format!("`{}` is not a Zenoh endpoint; write `protocol/address`, e.g. `tcp/127.0.0.1:7447`", endpoint.value),
+                );
+            }
+        }
+    }
+    machine
+}
+
+/// `protocol/address` with a non-empty protocol of letters, digits and `-`, and an address.
+fn is_endpoint(text: &str) -> bool {
+    match text.split_once('/') {
+        Some((protocol, address)) => {
+            !protocol.is_empty()
+                && protocol.bytes().all(|b| b.is_ascii_alphanumeric() || b == b'-')
+                && !address.is_empty()
+        }
+        None => false,
+    }
+}
+
+fn read_nodes<'a>(node: &'a Node, p: &mut Problems) -> Vec<RawNode<'a>> {
+    let Value::Seq(items) = &node.value else {
+        p.error(node.at, format!("`nodes` must be a list of nodes (`- id: ...`), got {}", node.describe()));
+        return Vec::new();
+    };
+    if items.is_empty() {
+        p.error(node.at, "`nodes` is empty; a graph needs at least one node");
+    }
+    items.iter().filter_map(|item| read_node(item, p)).collect()
+}
+
+fn read_node<'a>(node: &'a Node, p: &mut Problems) -> Option<RawNode<'a>> {
+    let fields = shape::mapping(node, "a node", NODE_KEYS, p)?;
+    let id = match fields.get("id") {
+        Some(n) => shape::string(n, "`id`", p),
+        None => {
+            p.error(fields.at, "this node has no `id`");
+            None
+        }
+    };
+    let run = match fields.get("run") {
+        Some(n) => shape::string(n, "`run`", p),
+        None => {
+            p.error(fields.at, "this node has no `run` (the binary that implements it)");
+            None
+        }
+    };
+    let machine = fields.get("machine").and_then(|n| shape::string(n, "`machine`", p));
+    let params = fields.get("params").and_then(|n| shape::entries(n, "`params`", p)).unwrap_or(&[]);
+    let inputs = fields.get("inputs").map(|n| read_inputs(n, p)).unwrap_or_default();
+    let outputs = fields.get("outputs").and_then(|n| shape::string_list(n, "`outputs`", p));
+    let restart = fields.get("restart").and_then(|n| read_restart(n, p)).unwrap_or_default();
+    Some(RawNode { at: node.at, id, run, machine, params, inputs, outputs, restart })
+}
+
+fn read_inputs(node: &Node, p: &mut Problems) -> Vec<RawInput> {
+    let Some(entries) = shape::entries(node, "`inputs` (port: node/output)", p) else {
+        return Vec::new();
+    };
+    let mut inputs = Vec::new();
+    for entry in entries {
+        let port = Spanned { value: entry.key.clone(), at: entry.key_at };
+        let what = format!("input `{}`", port.value);
+        let read = match &entry.value.value {
+            Value::Map(_) => read_input_object(&entry.value, &what, p),
+            Value::Str(_) => shape::string(&entry.value, &what, p).map(|from| (from, false)),
+            _ => {
+                let got = entry.value.describe();
+                p.error(
+                    entry.value.at,
+                    format!("{what} must be `node/output` or `{{ from: node/output, feedback: true }}`, got {got}"),
+                );
+                None
+            }
+        };
+        if let Some((from, feedback)) = read {
+            inputs.push(RawInput { port, from, feedback });
+        }
+    }
+    inputs
+}
+
+fn read_input_object(node: &Node, what: &str, p: &mut Problems) -> Option<(Spanned<String>, bool)> {
+    let fields = shape::mapping(node, what, INPUT_KEYS, p)?;
+    let feedback = fields.get("feedback").and_then(|n| shape::boolean(n, "`feedback`", p)).unwrap_or(false);
+    match fields.get("from") {
+        Some(n) => shape::string(n, "`from`", p).map(|from| (from, feedback)),
+        None => {
+            p.error(fields.at, format!("{what} has no `from` (the `node/output` it reads)"));
+            None
+        }
+    }
+}
+
+fn read_restart(node: &Node, p: &mut Problems) -> Option<RestartPolicy> {
+    let fields = shape::mapping(node, "`restart`", RESTART_KEYS, p)?;
+    let mut restart = RestartPolicy::default();
+    if let Some(text) = fields.get("policy").and_then(|n| shape::string(n, "`policy`", p)) {
+        restart.policy = match text.value.as_str() {
+            "never" => Restart::Never,
+            "on-failure" => Restart::OnFailure,
+            other => {
+                p.error(text.at, format!("unknown restart policy `{other}`; use `never` or `on-failure`"));
+                Restart::Never
+            }
+        };
+    }
+    if let Some(max) = fields.get("max").and_then(|n| shape::count(n, "`max`", 0, p)) {
+        restart.max = max;
+    }
+    Some(restart)
+}
