@@ -1,0 +1,566 @@
+//! Reading an EVIMO2 v2 sequence folder.
+//!
+//! Time convention of everything this module returns: seconds **relative to the first event**,
+//! i.e. `t = t_file - t0` where `t0 = dataset_events_t.npy[0]` (absolute, seconds on the EVIMO2
+//! sequence clock, the clock of every `ts` in meta). `t0` is kept as [`Sequence::t0_s`] and, rounded
+//! to µs, as [`CameraInfo::time_origin_us`]. A folder with no events has `t0 = 0`. IMU sample times
+//! are on the IMU clock (add [`CameraInfo::imu_time_offset_s`] for camera time).
+
+use std::fs::File;
+use std::io::{Read, Seek, SeekFrom};
+use std::path::{Path, PathBuf};
+
+use evseg_schemas::{CameraInfo, CameraMotion, Events, ImuSample, Mask};
+
+use crate::error::{Evimo2Error, Result};
+use crate::meta::{self, FrameTruth, MetaOptions};
+use crate::npy::{self, DType, NpyHeader};
+use crate::npz::NpzReader;
+
+/// Event times file.
+pub const EVENTS_T: &str = "dataset_events_t.npy";
+/// Event pixel coordinates file, (N, 2) = (x, y).
+pub const EVENTS_XY: &str = "dataset_events_xy.npy";
+/// Event polarity file.
+pub const EVENTS_P: &str = "dataset_events_p.npy";
+/// Masks archive (`mask_%010d` keys).
+pub const MASK_NPZ: &str = "dataset_mask.npz";
+/// Depth archive (`depth_%010d` keys), optional.
+pub const DEPTH_NPZ: &str = "dataset_depth.npz";
+/// Calibration, index and meta archive.
+pub const INFO_NPZ: &str = "dataset_info.npz";
+
+/// EVIMO2 stores object id * this factor in masks.
+pub const MASK_ID_SCALE: u16 = 1000;
+
+/// Events read per block while scanning times in [`EventReader::read_until`] (64 Ki events =
+/// 512 KiB of float64): large enough for sequential-read speed, small enough to stay in cache.
+const DEFAULT_SCAN_BLOCK: usize = 1 << 16;
+
+/// One column file of the events (`t`, `xy` or `p`), read by row ranges.
+struct Column {
+    file: File,
+    name: String,
+    header: NpyHeader,
+    /// Bytes per row (item size * elements per row).
+    row_bytes: usize,
+    rows: u64,
+}
+
+impl Column {
+    /// Opens `path`, checks dtype class and shape `(N,)`/`(N, 1)` (`width` 1) or `(N, width)`, and
+    /// that the file holds all the data the header announces.
+    fn open(path: &Path, width: usize, want: &str, accept: fn(DType) -> bool) -> Result<Self> {
+        let name = path.display().to_string();
+        let mut file = File::open(path).map_err(|e| Evimo2Error::io(&name, e))?;
+        let header = npy::read_header(&mut std::io::BufReader::new(&mut file), &name)?;
+        if !accept(header.dtype) {
+            return Err(Evimo2Error::invalid(&name, format!("dtype '{}' is not {want}", header.descr)));
+        }
+        let rows = match header.shape.as_slice() {
+            [n] if width == 1 => *n as u64,
+            [n, w] if *w == width => *n as u64,
+            other => {
+                let expected = if width == 1 { "(N,) or (N, 1)".to_string() } else { format!("(N, {width})") };
+                return Err(Evimo2Error::invalid(&name, format!("shape {other:?} is not {expected}")));
+            }
+        };
+        if header.fortran_order && width > 1 {
+            return Err(Evimo2Error::invalid(&name, "Fortran-order (column-major) arrays are not supported"));
+        }
+        let row_bytes = header.dtype.item_size() * width;
+        let need = header.data_offset + rows * row_bytes as u64;
+        let have = file.metadata().map_err(|e| Evimo2Error::io(&name, e))?.len();
+        if have < need {
+            return Err(Evimo2Error::format(
+                &name,
+                have,
+                format!("truncated: header announces {rows} rows ({need} bytes in all) but the file has {have} bytes"),
+            ));
+        }
+        Ok(Self { file, name, header, row_bytes, rows })
+    }
+
+    /// Reads rows `start..start + count` as raw bytes into `buf`.
+    fn read_rows(&mut self, start: u64, count: usize, buf: &mut Vec<u8>) -> Result<()> {
+        let offset = self.header.data_offset + start * self.row_bytes as u64;
+        buf.resize(count * self.row_bytes, 0);
+        self.file.seek(SeekFrom::Start(offset)).map_err(|e| Evimo2Error::io(&self.name, e))?;
+        self.file.read_exact(buf).map_err(|e| {
+            if e.kind() == std::io::ErrorKind::UnexpectedEof {
+                Evimo2Error::format(&self.name, offset, "file ended while reading events (truncated since opened?)")
+            } else {
+                Evimo2Error::io(&self.name, e)
+            }
+        })
+    }
+}
+
+fn is_float(d: DType) -> bool {
+    matches!(d, DType::F8 | DType::F4)
+}
+
+/// Streams the events of a sequence folder in chunks, never loading the files whole.
+///
+/// Events come in file order. EVIMO2 files are time-sorted, but files in the wild may not be:
+/// a timestamp smaller than the previous one is counted ([`EventReader::non_monotonic`]) and passed
+/// through unchanged.
+pub struct EventReader {
+    t: Column,
+    xy: Column,
+    p: Column,
+    /// Absolute time of the first event, seconds.
+    t0: f64,
+    /// Next event to return.
+    pos: u64,
+    /// Decoded absolute times of rows `pos..pos + t_cache.len() - t_head`.
+    t_cache: Vec<f64>,
+    t_head: usize,
+    /// Time of the last returned event (relative), for the monotonicity count.
+    last_t: f64,
+    non_monotonic: u64,
+    /// Rows read per block when scanning times, see [`DEFAULT_SCAN_BLOCK`].
+    scan_block: usize,
+    buf: Vec<u8>,
+}
+
+impl std::fmt::Debug for EventReader {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("EventReader")
+            .field("events", &self.t.rows)
+            .field("position", &self.pos)
+            .field("t0", &self.t0)
+            .finish()
+    }
+}
+
+impl EventReader {
+    /// Opens the three event files of `folder` and checks their dtypes, shapes, sizes and that they
+    /// hold the same number of events.
+    pub fn open(folder: &Path) -> Result<Self> {
+        let t = Column::open(&folder.join(EVENTS_T), 1, "float64/float32", is_float)?;
+        let xy = Column::open(&folder.join(EVENTS_XY), 2, "an integer type", DType::is_integer)?;
+        let p = Column::open(&folder.join(EVENTS_P), 1, "an integer or bool type", DType::is_integer)?;
+        if t.rows != xy.rows || t.rows != p.rows {
+            return Err(Evimo2Error::invalid(
+                format!("{}, {}, {}", t.name, xy.name, p.name),
+                format!(
+                    "event files disagree on the number of events: t has {}, xy has {}, p has {}",
+                    t.rows, xy.rows, p.rows
+                ),
+            ));
+        }
+        let mut reader = Self {
+            t,
+            xy,
+            p,
+            t0: 0.0,
+            pos: 0,
+            t_cache: Vec::new(),
+            t_head: 0,
+            last_t: f64::NEG_INFINITY,
+            non_monotonic: 0,
+            scan_block: DEFAULT_SCAN_BLOCK,
+            buf: Vec::new(),
+        };
+        if reader.t.rows > 0 {
+            reader.fill_t(1)?;
+            reader.t0 = reader.t_cache[0];
+        }
+        Ok(reader)
+    }
+
+    /// Sets how many events are read per block while scanning times (default 65 536; min 1).
+    pub fn set_scan_block(&mut self, rows: usize) {
+        self.scan_block = rows.max(1);
+    }
+
+    /// Total number of events in the files.
+    pub fn len(&self) -> u64 {
+        self.t.rows
+    }
+
+    /// True when the files hold no events.
+    pub fn is_empty(&self) -> bool {
+        self.t.rows == 0
+    }
+
+    /// Index of the next event to be returned.
+    pub fn position(&self) -> u64 {
+        self.pos
+    }
+
+    /// Absolute time of the first event, seconds on the EVIMO2 clock (0 when there are none).
+    pub fn t0_s(&self) -> f64 {
+        self.t0
+    }
+
+    /// Number of events returned so far whose time is smaller than the previous event's.
+    pub fn non_monotonic(&self) -> u64 {
+        self.non_monotonic
+    }
+
+    /// Ensures the time cache holds at least `want` rows from `pos` (fewer at the end of file).
+    fn fill_t(&mut self, want: usize) -> Result<()> {
+        let have = self.t_cache.len() - self.t_head;
+        if have >= want {
+            return Ok(());
+        }
+        if self.t_head > 0 {
+            self.t_cache.drain(..self.t_head);
+            self.t_head = 0;
+        }
+        let cache_end = self.pos + self.t_cache.len() as u64;
+        let remaining = self.t.rows - cache_end;
+        let count = ((want - have).max(self.scan_block) as u64).min(remaining) as usize;
+        if count == 0 {
+            return Ok(());
+        }
+        let mut buf = std::mem::take(&mut self.buf);
+        self.t.read_rows(cache_end, count, &mut buf)?;
+        let (dtype, big) = (self.t.header.dtype, self.t.header.big_endian);
+        npy::decode_f64_into(dtype, big, &buf, &mut self.t_cache);
+        self.buf = buf;
+        Ok(())
+    }
+
+    /// Returns the next `count` events (cached times must already cover them).
+    fn take(&mut self, count: usize) -> Result<Events> {
+        let mut events = Events::with_capacity(count);
+        let times = &self.t_cache[self.t_head..self.t_head + count];
+        for &abs in times {
+            let t = abs - self.t0;
+            if t < self.last_t {
+                self.non_monotonic += 1;
+            }
+            self.last_t = t;
+            events.t.push(t);
+        }
+        let mut buf = std::mem::take(&mut self.buf);
+        self.xy.read_rows(self.pos, count, &mut buf)?;
+        let xy = npy::decode_u16(self.xy.header.dtype, self.xy.header.big_endian, &buf).map_err(|bad| {
+            let row = self.pos + bad.map_or(0, |i| i as u64 / 2);
+            Evimo2Error::format(
+                &self.xy.name,
+                self.xy.header.data_offset + row * self.xy.row_bytes as u64,
+                format!("event {row}: pixel coordinate outside 0..=65535"),
+            )
+        })?;
+        events.x.extend(xy.iter().step_by(2));
+        events.y.extend(xy.iter().skip(1).step_by(2));
+        self.p.read_rows(self.pos, count, &mut buf)?;
+        let p = npy::decode_u8(self.p.header.dtype, self.p.header.big_endian, &buf).map_err(|bad| {
+            let row = self.pos + bad.map_or(0, |i| i as u64);
+            Evimo2Error::format(
+                &self.p.name,
+                self.p.header.data_offset + row * self.p.row_bytes as u64,
+                format!("event {row}: polarity outside 0..=255"),
+            )
+        })?;
+        events.p = p;
+        self.buf = buf;
+        self.t_head += count;
+        self.pos += count as u64;
+        Ok(events)
+    }
+
+    /// The next up to `max_events` events (t relative to the first event, seconds), or `None` at
+    /// the end of the files.
+    pub fn next_chunk(&mut self, max_events: usize) -> Result<Option<Events>> {
+        let count = (max_events as u64).min(self.t.rows - self.pos) as usize;
+        if count == 0 {
+            return Ok(None);
+        }
+        self.fill_t(count)?;
+        self.take(count).map(Some)
+    }
+
+    /// All events from the current position up to (excluding) the first one with relative time
+    /// `>= t_end` seconds. Empty when the next event is already at or after `t_end` or the files
+    /// are exhausted.
+    pub fn read_until(&mut self, t_end: f64) -> Result<Events> {
+        let abs_end = t_end + self.t0;
+        let mut scanned = 0usize;
+        loop {
+            let cached = self.t_cache.len() - self.t_head;
+            if scanned == cached {
+                if self.pos + cached as u64 >= self.t.rows {
+                    break;
+                }
+                self.fill_t(cached + self.scan_block)?;
+            }
+            let window = &self.t_cache[self.t_head + scanned..];
+            match window.iter().position(|&t| t >= abs_end) {
+                Some(i) => {
+                    scanned += i;
+                    break;
+                }
+                None => scanned += window.len(),
+            }
+        }
+        self.take(scanned)
+    }
+
+    /// Reads every remaining event.
+    pub fn read_all(&mut self) -> Result<Events> {
+        let remaining = usize::try_from(self.t.rows - self.pos).map_err(|_| {
+            Evimo2Error::invalid(&self.t.name, "too many events to hold in memory on this platform")
+        })?;
+        Ok(self.next_chunk(remaining)?.unwrap_or_default())
+    }
+}
+
+/// One depth frame (no schema type exists for depth).
+#[derive(Debug, Clone, PartialEq)]
+pub struct DepthFrame {
+    /// Frame id (the number in `depth_%010d`).
+    pub id: u64,
+    /// Frame time, seconds relative to the first event.
+    pub t: f64,
+    /// Width, pixels.
+    pub width: u16,
+    /// Height, pixels.
+    pub height: u16,
+    /// Depth per pixel, millimetres, row-major; 0 = unknown.
+    pub depth_mm: Vec<u16>,
+}
+
+/// One per-frame member of a mask or depth archive.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FrameEntry {
+    /// Frame id parsed from the member name.
+    pub id: u64,
+    /// Frame time from meta, seconds relative to the first event.
+    pub t: f64,
+    /// Member name, e.g. `mask_0000000012.npy`.
+    pub member: String,
+}
+
+/// Lazily reads the per-frame (H, W) uint16 arrays of `dataset_mask.npz` or `dataset_depth.npz`.
+#[derive(Debug)]
+pub struct FrameArrayReader {
+    npz: NpzReader,
+    entries: Vec<FrameEntry>,
+    width: u16,
+    height: u16,
+}
+
+impl FrameArrayReader {
+    /// Lists the `prefix_%010d.npy` members of `path` and gives each the time of the meta frame
+    /// with the same id. Entries are sorted by id. A member without a matching frame is an error.
+    pub fn open(path: &Path, prefix: &str, frames: &[FrameTruth], width: u16, height: u16) -> Result<Self> {
+        let npz = NpzReader::open(path)?;
+        let mut entries = Vec::new();
+        for member in npz.member_names() {
+            let Some(digits) = member.strip_prefix(prefix).and_then(|m| m.strip_prefix('_')) else { continue };
+            let Some(digits) = digits.strip_suffix(".npy") else { continue };
+            let Ok(id) = digits.parse::<u64>() else { continue };
+            let Some(frame) = frames.iter().find(|f| f.id == id) else {
+                return Err(Evimo2Error::invalid(
+                    format!("{}[{member}]", npz.file()),
+                    format!("no frame with id {id} in meta['frames'] to give this {prefix} a time"),
+                ));
+            };
+            entries.push(FrameEntry { id, t: frame.t, member });
+        }
+        entries.sort_by_key(|e| e.id);
+        Ok(Self { npz, entries, width, height })
+    }
+
+    /// The frames in the archive, sorted by id.
+    pub fn entries(&self) -> &[FrameEntry] {
+        &self.entries
+    }
+
+    /// Number of frames.
+    pub fn len(&self) -> usize {
+        self.entries.len()
+    }
+
+    /// True when the archive has no frames.
+    pub fn is_empty(&self) -> bool {
+        self.entries.is_empty()
+    }
+
+    /// Reads frame `index` (position in [`Self::entries`]) as raw uint16 values, row-major.
+    pub fn read_raw(&mut self, index: usize) -> Result<(FrameEntry, Vec<u16>)> {
+        let Some(entry) = self.entries.get(index).cloned() else {
+            return Err(Evimo2Error::invalid(
+                self.npz.file(),
+                format!("frame index {index} out of range ({} frames)", self.entries.len()),
+            ));
+        };
+        let label = format!("{}[{}]", self.npz.file(), entry.member);
+        let arr = self.npz.read_member(&entry.member)?;
+        let h = &arr.header;
+        if h.shape != [self.height as usize, self.width as usize] {
+            return Err(Evimo2Error::invalid(
+                &label,
+                format!("shape {:?} differs from the camera's (res_y, res_x) = ({}, {})", h.shape, self.height, self.width),
+            ));
+        }
+        if h.fortran_order {
+            return Err(Evimo2Error::invalid(&label, "Fortran-order (column-major) arrays are not supported"));
+        }
+        let values = npy::decode_u16(h.dtype, h.big_endian, &arr.data).map_err(|bad| match bad {
+            Some(i) => Evimo2Error::format(&label, h.data_offset, format!("pixel {i}: value outside 0..=65535")),
+            None => Evimo2Error::invalid(&label, format!("dtype '{}' is not an integer type", h.descr)),
+        })?;
+        Ok((entry, values))
+    }
+}
+
+/// Lazily reads the masks of `dataset_mask.npz` as [`Mask`]s (ids = stored value / 1000, integer
+/// division; 0 = background).
+#[derive(Debug)]
+pub struct MaskReader {
+    inner: FrameArrayReader,
+}
+
+impl MaskReader {
+    /// The frames in the archive, sorted by id.
+    pub fn entries(&self) -> &[FrameEntry] {
+        self.inner.entries()
+    }
+
+    /// Number of masks.
+    pub fn len(&self) -> usize {
+        self.inner.len()
+    }
+
+    /// True when there are no masks.
+    pub fn is_empty(&self) -> bool {
+        self.inner.is_empty()
+    }
+
+    /// Reads mask `index` (position in [`Self::entries`]).
+    pub fn read(&mut self, index: usize) -> Result<Mask> {
+        let (entry, mut values) = self.inner.read_raw(index)?;
+        for v in &mut values {
+            *v /= MASK_ID_SCALE;
+        }
+        Ok(Mask { t: entry.t, width: self.inner.width, height: self.inner.height, ids: values })
+    }
+
+    /// Iterates over all masks in id order, reading each on demand.
+    pub fn iter(&mut self) -> impl Iterator<Item = Result<Mask>> + '_ {
+        (0..self.len()).map(move |i| self.read(i))
+    }
+}
+
+/// Lazily reads `dataset_depth.npz`.
+#[derive(Debug)]
+pub struct DepthReader {
+    inner: FrameArrayReader,
+}
+
+impl DepthReader {
+    /// The frames in the archive, sorted by id.
+    pub fn entries(&self) -> &[FrameEntry] {
+        self.inner.entries()
+    }
+
+    /// Number of depth frames.
+    pub fn len(&self) -> usize {
+        self.inner.len()
+    }
+
+    /// True when there are no depth frames.
+    pub fn is_empty(&self) -> bool {
+        self.inner.is_empty()
+    }
+
+    /// Reads depth frame `index` (position in [`Self::entries`]).
+    pub fn read(&mut self, index: usize) -> Result<DepthFrame> {
+        let (entry, depth_mm) = self.inner.read_raw(index)?;
+        Ok(DepthFrame { id: entry.id, t: entry.t, width: self.inner.width, height: self.inner.height, depth_mm })
+    }
+}
+
+/// Options for [`Sequence::open`]; see [`MetaOptions`] for each field's default.
+pub type ReadOptions = MetaOptions;
+
+/// An opened EVIMO2 v2 sequence folder: calibration, IMU, poses and frame list in memory; events,
+/// masks and depth streamed on demand.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Sequence {
+    /// The folder.
+    pub folder: PathBuf,
+    /// Camera calibration and conventions.
+    pub camera: CameraInfo,
+    /// Absolute time of the first event, seconds on the EVIMO2 clock: every relative time is
+    /// `ts - t0_s`.
+    pub t0_s: f64,
+    /// `meta['meta']['ros_time_offset']` (Unix seconds of the EVIMO2 clock's zero), if present.
+    pub ros_time_offset_s: Option<f64>,
+    /// Number of events.
+    pub event_count: u64,
+    /// IMU topics in the file, sorted.
+    pub imu_topics: Vec<String>,
+    /// The IMU topic read into `imu`.
+    pub imu_topic: Option<String>,
+    /// IMU samples, IMU frame (rad/s, m/s²), `t` relative to the first event on the IMU clock.
+    pub imu: Vec<ImuSample>,
+    /// Camera poses (camera -> world) from `full_trajectory`, or `frames` without it.
+    pub camera_poses: Vec<CameraMotion>,
+    /// Ground-truth frames (times, camera pose, object poses object -> camera).
+    pub frames: Vec<FrameTruth>,
+}
+
+impl Sequence {
+    /// Reads `dataset_info.npz` and the first event time.
+    pub fn open(folder: &Path, options: &ReadOptions) -> Result<Self> {
+        let events = EventReader::open(folder)?;
+        let t0 = events.t0_s();
+        let info_path = folder.join(INFO_NPZ);
+        let mut info = NpzReader::open(&info_path)?;
+        let label = format!("{}[meta.npy]", info.file());
+        let arr = info.read_key("meta")?;
+        let value = meta::meta_from_npy(&arr, &label)?;
+        let m = meta::convert(&value, t0, options, &label)?;
+        Ok(Self {
+            folder: folder.to_path_buf(),
+            camera: m.camera,
+            t0_s: t0,
+            ros_time_offset_s: m.ros_time_offset_s,
+            event_count: events.len(),
+            imu_topics: m.imu_topics,
+            imu_topic: m.imu_topic,
+            imu: m.imu,
+            camera_poses: m.camera_poses,
+            frames: m.frames,
+        })
+    }
+
+    /// Opens the event files for streaming from the first event.
+    pub fn events(&self) -> Result<EventReader> {
+        EventReader::open(&self.folder)
+    }
+
+    /// Opens `dataset_mask.npz`.
+    pub fn masks(&self) -> Result<MaskReader> {
+        let inner = FrameArrayReader::open(
+            &self.folder.join(MASK_NPZ),
+            "mask",
+            &self.frames,
+            self.camera.width,
+            self.camera.height,
+        )?;
+        Ok(MaskReader { inner })
+    }
+
+    /// Opens `dataset_depth.npz`, or `None` when the folder has none.
+    pub fn depth(&self) -> Result<Option<DepthReader>> {
+        let path = self.folder.join(DEPTH_NPZ);
+        if !path.exists() {
+            return Ok(None);
+        }
+        let inner = FrameArrayReader::open(&path, "depth", &self.frames, self.camera.width, self.camera.height)?;
+        Ok(Some(DepthReader { inner }))
+    }
+
+    /// Object poses of all frames, in frame order (object -> camera, relative times).
+    pub fn object_poses(&self) -> Vec<evseg_schemas::ObjectPose> {
+        self.frames.iter().flat_map(|f| f.objects.iter().copied()).collect()
+    }
+}
