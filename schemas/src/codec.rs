@@ -111,12 +111,7 @@ fn now_ns() -> u64 {
 
 /// Encodes a data frame for `body` with sequence number `seq` and time span
 /// `[t_start, t_end)` seconds.
-pub fn encode<T: Message>(
-    seq: u64,
-    t_start: f64,
-    t_end: f64,
-    body: &T,
-) -> Result<Vec<u8>, CodecError> {
+pub fn encode<T: Message>(seq: u64, t_start: f64, t_end: f64, body: &T) -> Result<Vec<u8>, CodecError> {
     let envelope = Envelope {
         schema: T::SCHEMA.to_string(),
         version: T::VERSION,
@@ -143,11 +138,26 @@ pub fn encode_end<T: Message>(count: u64, t_end: f64) -> Result<Vec<u8>, CodecEr
     encode_with::<T>(&envelope, None)
 }
 
+/// Encodes an end-of-stream frame for a schema known only by name (the runtime ends ports whose
+/// Rust type it does not know); the version is the schema's current one, 0 if unknown.
+pub fn encode_end_named(schema: &str, count: u64, t_end: f64) -> Result<Vec<u8>, CodecError> {
+    let envelope = Envelope {
+        schema: schema.to_string(),
+        version: crate::messages::schema_version(schema).unwrap_or(0),
+        kind: FrameKind::End,
+        seq: count,
+        t_start: t_end,
+        t_end,
+        publish_ns: now_ns(),
+    };
+    bincode::serde::encode_to_vec(&envelope, config()).map_err(|e| CodecError::Encode {
+        schema: "evseg.End",
+        reason: e.to_string(),
+    })
+}
+
 /// Encodes a frame from an explicit envelope (used by replay, which keeps recorded envelopes).
-pub fn encode_with<T: Message>(
-    envelope: &Envelope,
-    body: Option<&T>,
-) -> Result<Vec<u8>, CodecError> {
+pub fn encode_with<T: Message>(envelope: &Envelope, body: Option<&T>) -> Result<Vec<u8>, CodecError> {
     let err = |e: bincode::error::EncodeError| CodecError::Encode {
         schema: T::SCHEMA,
         reason: e.to_string(),
@@ -179,18 +189,13 @@ pub fn decode<T: Message>(bytes: &[u8]) -> Result<Frame<T>, CodecError> {
         });
     }
     if envelope.kind == FrameKind::End {
-        return Ok(Frame {
-            envelope,
-            body: None,
-        });
+        return Ok(Frame { envelope, body: None });
     }
     let cfg = config().with_limit::<MAX_FRAME_BYTES>();
     let (body, n) =
-        bincode::serde::decode_from_slice::<T, _>(&bytes[used..], cfg).map_err(|e| {
-            CodecError::Body {
-                schema: T::SCHEMA,
-                reason: e.to_string(),
-            }
+        bincode::serde::decode_from_slice::<T, _>(&bytes[used..], cfg).map_err(|e| CodecError::Body {
+            schema: T::SCHEMA,
+            reason: e.to_string(),
         })?;
     let extra = bytes.len() - used - n;
     if extra != 0 {
@@ -288,10 +293,7 @@ mod tests {
         assert!(decode::<EventPacket>(&[0xff; 64]).is_err());
         let bytes = encode(1, 0.0, 1.0, &packet()).unwrap();
         for cut in 0..bytes.len() {
-            assert!(
-                decode::<EventPacket>(&bytes[..cut]).is_err(),
-                "cut at {cut}"
-            );
+            assert!(decode::<EventPacket>(&bytes[..cut]).is_err(), "cut at {cut}");
         }
         let mut longer = bytes.clone();
         longer.push(0);

@@ -18,10 +18,9 @@
 
 pub mod codec;
 pub mod describe;
+pub mod digest;
 pub mod keys;
 pub mod messages;
 
-pub use codec::{
-    CodecError, Envelope, Frame, FrameKind, Message, decode, decode_header, encode, encode_end,
-};
+pub use codec::{CodecError, Envelope, Frame, FrameKind, Message, decode, decode_header, encode, encode_end};
 pub use messages::*;

@@ -382,15 +382,21 @@ impl Message for Metrics {
     const VERSION: u16 = 1;
 }
 
-/// Names of every message schema, for `evseg check` and `--describe`.
-pub const ALL_SCHEMAS: &[&str] = &[
-    EventPacket::SCHEMA,
-    Slice::SCHEMA,
-    NormalFlow::SCHEMA,
-    Clusters::SCHEMA,
-    Residuals::SCHEMA,
-    Segmentation::SCHEMA,
-    Tracks::SCHEMA,
-    Truth::SCHEMA,
-    Metrics::SCHEMA,
+/// Name and current version of every message schema, for `evseg check`, `--describe` and
+/// end-of-stream frames.
+pub const ALL_SCHEMAS: &[(&str, u16)] = &[
+    (EventPacket::SCHEMA, EventPacket::VERSION),
+    (Slice::SCHEMA, Slice::VERSION),
+    (NormalFlow::SCHEMA, NormalFlow::VERSION),
+    (Clusters::SCHEMA, Clusters::VERSION),
+    (Residuals::SCHEMA, Residuals::VERSION),
+    (Segmentation::SCHEMA, Segmentation::VERSION),
+    (Tracks::SCHEMA, Tracks::VERSION),
+    (Truth::SCHEMA, Truth::VERSION),
+    (Metrics::SCHEMA, Metrics::VERSION),
 ];
+
+/// Current version of the schema called `name`, if it is one of the pipeline's.
+pub fn schema_version(name: &str) -> Option<u16> {
+    ALL_SCHEMAS.iter().find(|(n, _)| *n == name).map(|(_, v)| *v)
+}

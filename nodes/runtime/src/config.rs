@@ -1,0 +1,137 @@
+//! What the launcher hands a node: its keys, its wiring, its parameters and the run's settings.
+//!
+//! The launcher writes one JSON file per node into the run folder and starts the node with
+//! `--config <file>`. Nodes never compute keys themselves, so replay and A/B remap for free.
+
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::RuntimeError;
+
+/// How the graph trades completeness for latency.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Mode {
+    /// Lossless and deterministic: producers hold at most `window` messages in flight per edge and
+    /// wait for their consumers' progress.
+    Lockstep,
+    /// Sources never wait; a stage that falls behind drops its oldest input and counts the drops.
+    Live,
+}
+
+/// Zenoh connection settings of a node.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ZenohSettings {
+    /// Zenoh mode of the node's session (`client` or `peer`).
+    pub mode: String,
+    /// Endpoints to connect to (the launcher's router on this machine).
+    pub connect: Vec<String>,
+    /// Endpoints to listen on (peers only; empty for clients).
+    #[serde(default)]
+    pub listen: Vec<String>,
+}
+
+/// One consumer of an output: a node's input port.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ConsumerRef {
+    /// Consumer node id.
+    pub node: String,
+    /// Consumer input port.
+    pub port: String,
+    /// True when the consumer takes this output as a feedback input (previous slice).
+    pub feedback: bool,
+    /// The consumer's progress key.
+    pub ack_key: String,
+}
+
+/// One input port of the node, bound to a key.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct InputBinding {
+    /// Port name.
+    pub port: String,
+    /// Key expression it subscribes to.
+    pub key: String,
+    /// Schema name the port expects.
+    pub schema: String,
+    /// Feedback input: for slice `k` the node gets the producer's message `k - 1`.
+    pub feedback: bool,
+    /// Producer node id (for messages).
+    pub producer: String,
+}
+
+/// One output port of the node, bound to a key.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct OutputBinding {
+    /// Port name.
+    pub port: String,
+    /// Key expression it publishes on.
+    pub key: String,
+    /// Schema name of its messages.
+    pub schema: String,
+    /// Who consumes it (for lock-step credits and start-up).
+    pub consumers: Vec<ConsumerRef>,
+}
+
+/// Everything a node needs to run in a graph.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct NodeConfig {
+    /// Graph instance name (part of every key).
+    pub instance: String,
+    /// This node's id.
+    pub node: String,
+    /// Lock-step or live.
+    pub mode: Mode,
+    /// Lock-step credit: messages in flight per edge (>= 1).
+    pub window: u64,
+    /// Live mode: input queue length per port before the oldest is dropped (>= 1).
+    pub queue: usize,
+    /// Zenoh settings.
+    pub zenoh: ZenohSettings,
+    /// Parameters (defaults filled in by the launcher).
+    pub params: serde_json::Map<String, serde_json::Value>,
+    /// Input bindings.
+    pub inputs: Vec<InputBinding>,
+    /// Output bindings.
+    pub outputs: Vec<OutputBinding>,
+    /// Key this node publishes its progress on.
+    pub ack_key: String,
+    /// Key of this node's liveliness token.
+    pub live_key: String,
+    /// Key this node publishes statistics on.
+    pub stats_key: String,
+    /// Folder of the run (logs, reports); nodes may write files below it.
+    pub run_dir: PathBuf,
+}
+
+impl NodeConfig {
+    /// Reads a config file written by the launcher.
+    pub fn load(path: &Path) -> Result<Self, RuntimeError> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| RuntimeError::Config(format!("cannot read {}: {e}", path.display())))?;
+        serde_json::from_str(&text)
+            .map_err(|e| RuntimeError::Config(format!("{}: invalid node config: {e}", path.display())))
+    }
+
+    /// Parameter `name` converted to `T`; the error names the node and the parameter.
+    pub fn param<T: serde::de::DeserializeOwned>(&self, name: &str) -> Result<T, RuntimeError> {
+        let value = self.params.get(name).ok_or_else(|| RuntimeError::Param {
+            node: self.node.clone(),
+            name: name.to_string(),
+            reason: "missing".into(),
+        })?;
+        serde_json::from_value(value.clone()).map_err(|e| RuntimeError::Param {
+            node: self.node.clone(),
+            name: name.to_string(),
+            reason: format!("{e} (value {value})"),
+        })
+    }
+
+    /// Parameter `name` as `T`, or `None` when it is absent or null.
+    pub fn param_opt<T: serde::de::DeserializeOwned>(&self, name: &str) -> Result<Option<T>, RuntimeError> {
+        match self.params.get(name) {
+            None | Some(serde_json::Value::Null) => Ok(None),
+            Some(_) => self.param(name).map(Some),
+        }
+    }
+}

@@ -1,0 +1,324 @@
+//! Joining several inputs by slice sequence number.
+//!
+//! A node with inputs `a`, `b` and a feedback input `f` is called for slice `k` with `a[k]`,
+//! `b[k]` and `f[k-1]` (none for the first slice). In lock-step mode the joiner waits for
+//! exactly those; in live mode it takes the newest sequence number that every main input has,
+//! drops older incomplete sets (counted), and gives feedback inputs the newest earlier message.
+
+use std::collections::BTreeMap;
+
+use evseg_schemas::{Envelope, FrameKind};
+
+/// One received frame: its envelope and its full bytes (envelope included).
+#[derive(Debug, Clone)]
+pub struct RawFrame {
+    /// Decoded header.
+    pub envelope: Envelope,
+    /// The encoded frame, as received.
+    pub bytes: Vec<u8>,
+}
+
+/// A complete set of inputs for one slice.
+#[derive(Debug, Clone)]
+pub struct Joined {
+    /// Sequence number of the slice.
+    pub seq: u64,
+    /// Sensor time span `[t_start, t_end)` of the slice, seconds.
+    pub t_start: f64,
+    /// End of the span, seconds.
+    pub t_end: f64,
+    /// Per input port (config order): the frame, or `None` for a feedback input without one.
+    pub frames: Vec<Option<RawFrame>>,
+}
+
+/// What the joiner has for the node now.
+#[derive(Debug)]
+pub enum JoinState {
+    /// A complete set is ready.
+    Ready(Joined),
+    /// All main inputs have ended and everything was handed out.
+    Finished,
+    /// Waiting for more frames.
+    Waiting,
+}
+
+/// Inputs that cannot be joined (lock-step only).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("input `{ended}` ended after {count} messages but input `{other}` has message {count}")]
+pub struct JoinError {
+    /// Port that ended early.
+    pub ended: String,
+    /// Its message count.
+    pub count: u64,
+    /// Port that has more.
+    pub other: String,
+}
+
+#[derive(Debug, Default)]
+struct Port {
+    name: String,
+    feedback: bool,
+    pending: BTreeMap<u64, RawFrame>,
+    end: Option<u64>,
+}
+
+/// Joins frames from several ports by sequence number.
+#[derive(Debug)]
+pub struct Joiner {
+    ports: Vec<Port>,
+    next: u64,
+    live: bool,
+    dropped: u64,
+}
+
+impl Joiner {
+    /// A joiner for ports `(name, feedback)`; `live` selects the live-mode policy.
+    pub fn new(ports: &[(String, bool)], live: bool) -> Self {
+        Self {
+            ports: ports
+                .iter()
+                .map(|(name, feedback)| Port {
+                    name: name.clone(),
+                    feedback: *feedback,
+                    ..Port::default()
+                })
+                .collect(),
+            next: 0,
+            live,
+            dropped: 0,
+        }
+    }
+
+    /// Frames dropped because their set could never be completed (live mode).
+    pub fn dropped(&self) -> u64 {
+        self.dropped
+    }
+
+    /// Adds a received frame on port `port`.
+    pub fn push(&mut self, port: usize, frame: RawFrame) {
+        let Some(p) = self.ports.get_mut(port) else { return };
+        match frame.envelope.kind {
+            FrameKind::End => p.end = Some(frame.envelope.seq),
+            FrameKind::Data => {
+                // A frame older than what was already handed out can only be a duplicate.
+                if !p.feedback && frame.envelope.seq < self.next {
+                    self.dropped += 1;
+                    return;
+                }
+                p.pending.insert(frame.envelope.seq, frame);
+            }
+        }
+    }
+
+    fn main_ports(&self) -> impl Iterator<Item = &Port> {
+        self.ports.iter().filter(|p| !p.feedback)
+    }
+
+    /// The next complete set, if any.
+    pub fn poll(&mut self) -> Result<JoinState, JoinError> {
+        if self.main_ports().next().is_none() {
+            return Ok(JoinState::Finished);
+        }
+        let seq = if self.live {
+            match self.live_candidate() {
+                Some(s) => s,
+                None => return Ok(self.finished_or_waiting()),
+            }
+        } else {
+            self.next
+        };
+        // Lock-step: every main port must have `seq`, or have ended at exactly `seq`.
+        let mut ended = None;
+        let mut present = None;
+        for p in self.main_ports() {
+            if p.pending.contains_key(&seq) {
+                present = Some(p.name.clone());
+            } else if let Some(c) = p.end
+                && c <= seq
+            {
+                ended = Some((p.name.clone(), c));
+            } else {
+                return Ok(JoinState::Waiting);
+            }
+        }
+        match (ended, present) {
+            (Some((ended, count)), Some(other)) => return Err(JoinError { ended, count, other }),
+            (Some(_), None) => return Ok(JoinState::Finished),
+            _ => {}
+        }
+        // Feedback ports: message seq-1.
+        let mut frames = Vec::with_capacity(self.ports.len());
+        for p in &self.ports {
+            if !p.feedback {
+                continue;
+            }
+            if seq == 0 {
+                continue;
+            }
+            let want = seq - 1;
+            let have = p.pending.contains_key(&want);
+            let over = p.end.is_some_and(|c| c <= want);
+            if !have && !over && !self.live {
+                return Ok(JoinState::Waiting);
+            }
+        }
+        let live = self.live;
+        let mut t_span = None;
+        for p in &mut self.ports {
+            if p.feedback {
+                let f = if seq == 0 {
+                    None
+                } else if live {
+                    let newest = p.pending.range(..seq).next_back().map(|(k, _)| *k);
+                    newest.and_then(|k| {
+                        p.pending = p.pending.split_off(&k);
+                        p.pending.get(&k).cloned()
+                    })
+                } else {
+                    let f = p.pending.remove(&(seq - 1));
+                    p.pending = p.pending.split_off(&seq);
+                    f
+                };
+                frames.push(f);
+            } else {
+                let f = p.pending.remove(&seq);
+                if t_span.is_none() {
+                    t_span = f.as_ref().map(|f| (f.envelope.t_start, f.envelope.t_end));
+                }
+                frames.push(f);
+            }
+        }
+        self.next = seq + 1;
+        let (t_start, t_end) = t_span.unwrap_or((0.0, 0.0));
+        Ok(JoinState::Ready(Joined {
+            seq,
+            t_start,
+            t_end,
+            frames,
+        }))
+    }
+
+    fn finished_or_waiting(&self) -> JoinState {
+        if self.main_ports().all(|p| p.end.is_some() && p.pending.is_empty()) {
+            JoinState::Finished
+        } else {
+            JoinState::Waiting
+        }
+    }
+
+    /// Live mode: the newest sequence number every main port can have, dropping older partial sets.
+    fn live_candidate(&mut self) -> Option<u64> {
+        let mut cand: Option<u64> = None;
+        for p in self.ports.iter().filter(|p| !p.feedback) {
+            match p.pending.keys().next_back() {
+                // The newest frame of the port bounds what can still complete.
+                Some(&newest) => cand = Some(cand.map_or(newest, |c| c.min(newest))),
+                None => return None,
+            }
+        }
+        let cand = cand?;
+        // Every main port has a frame >= cand; the set for cand completes only if all have it.
+        if self
+            .ports
+            .iter()
+            .filter(|p| !p.feedback)
+            .all(|p| p.pending.contains_key(&cand))
+        {
+            let mut dropped = 0;
+            for p in self.ports.iter_mut().filter(|p| !p.feedback) {
+                let keep = p.pending.split_off(&cand);
+                dropped += p.pending.len() as u64;
+                p.pending = keep;
+            }
+            self.dropped += dropped;
+            Some(cand)
+        } else {
+            None
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn frame(seq: u64, kind: FrameKind) -> RawFrame {
+        RawFrame {
+            envelope: Envelope {
+                schema: "s".into(),
+                version: 1,
+                kind,
+                seq,
+                t_start: seq as f64,
+                t_end: seq as f64 + 1.0,
+                publish_ns: 0,
+            },
+            bytes: vec![seq as u8],
+        }
+    }
+
+    fn ready(j: &mut Joiner) -> Joined {
+        match j.poll().unwrap() {
+            JoinState::Ready(x) => x,
+            other => panic!("expected ready, got {other:?}"),
+        }
+    }
+
+    #[test]
+    fn lockstep_joins_by_seq_in_order() {
+        let mut j = Joiner::new(&[("a".into(), false), ("b".into(), false)], false);
+        j.push(0, frame(1, FrameKind::Data));
+        j.push(0, frame(0, FrameKind::Data));
+        assert!(matches!(j.poll().unwrap(), JoinState::Waiting));
+        j.push(1, frame(0, FrameKind::Data));
+        let x = ready(&mut j);
+        assert_eq!(x.seq, 0);
+        assert!(matches!(j.poll().unwrap(), JoinState::Waiting));
+        j.push(1, frame(1, FrameKind::Data));
+        assert_eq!(ready(&mut j).seq, 1);
+        j.push(0, frame(2, FrameKind::End));
+        j.push(1, frame(2, FrameKind::End));
+        assert!(matches!(j.poll().unwrap(), JoinState::Finished));
+    }
+
+    #[test]
+    fn feedback_gets_previous_slice() {
+        let mut j = Joiner::new(&[("a".into(), false), ("fb".into(), true)], false);
+        j.push(0, frame(0, FrameKind::Data));
+        j.push(0, frame(1, FrameKind::Data));
+        let x = ready(&mut j);
+        assert_eq!(x.seq, 0);
+        assert!(x.frames[1].is_none());
+        // Slice 1 needs feedback 0.
+        assert!(matches!(j.poll().unwrap(), JoinState::Waiting));
+        j.push(1, frame(0, FrameKind::Data));
+        let x = ready(&mut j);
+        assert_eq!(x.seq, 1);
+        assert_eq!(x.frames[1].as_ref().unwrap().envelope.seq, 0);
+    }
+
+    #[test]
+    fn inconsistent_ends_are_an_error() {
+        let mut j = Joiner::new(&[("a".into(), false), ("b".into(), false)], false);
+        j.push(0, frame(0, FrameKind::End));
+        j.push(1, frame(0, FrameKind::Data));
+        let e = j.poll().unwrap_err();
+        assert_eq!(e.ended, "a");
+        assert_eq!(e.other, "b");
+    }
+
+    #[test]
+    fn live_skips_incomplete_sets_and_counts_them() {
+        let mut j = Joiner::new(&[("a".into(), false), ("b".into(), false)], true);
+        j.push(0, frame(0, FrameKind::Data));
+        j.push(0, frame(1, FrameKind::Data));
+        j.push(0, frame(2, FrameKind::Data));
+        j.push(1, frame(2, FrameKind::Data));
+        let x = ready(&mut j);
+        assert_eq!(x.seq, 2);
+        assert_eq!(j.dropped(), 2);
+        j.push(0, frame(3, FrameKind::End));
+        j.push(1, frame(3, FrameKind::End));
+        assert!(matches!(j.poll().unwrap(), JoinState::Finished));
+    }
+}

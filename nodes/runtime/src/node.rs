@@ -1,0 +1,699 @@
+//! The node lifecycle: command line, session, ports, the processing loop, end of stream.
+//!
+//! A stage implements [`Stage`] (inputs to outputs, one joined slice at a time) or [`Source`]
+//! (produces until exhausted), and its `main` calls [`run_stage`] or [`run_source`] with its
+//! [`NodeDescription`]. Everything else (Zenoh, joins, credits, stats, shutdown) happens here.
+
+use std::collections::HashMap;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::{Duration, Instant};
+
+use evseg_schemas::describe::NodeDescription;
+use evseg_schemas::{Message, codec};
+use zenoh::Wait;
+use zenoh::qos::CongestionControl;
+
+use crate::config::{Mode, NodeConfig};
+use crate::error::{BoxError, RuntimeError};
+use crate::join::{JoinState, Joined, Joiner, RawFrame};
+use crate::progress::{DONE, Progress, Stats};
+use crate::signals;
+use crate::transport::{CreditBook, Inbox, POLL, open_session, subscribe_inputs};
+
+/// How long a producer waits at start-up for its consumers to appear before failing.
+pub const STARTUP_TIMEOUT: Duration = Duration::from_secs(60);
+/// How long a finished node waits for its consumers to finish before leaving anyway.
+pub const DRAIN_TIMEOUT: Duration = Duration::from_secs(600);
+
+/// A stage: called once per joined slice.
+pub trait Stage {
+    /// Processes one joined slice; publishes results through `out`.
+    fn process(&mut self, input: &Inputs, out: &mut Outputs) -> Result<(), BoxError>;
+
+    /// Called once after the last slice; may publish final results.
+    fn finish(&mut self, _out: &mut Outputs) -> Result<(), BoxError> {
+        Ok(())
+    }
+}
+
+/// A source: called repeatedly until it reports exhaustion.
+pub trait Source {
+    /// Produces the next batch through `out`; returns `false` when there is nothing more.
+    fn step(&mut self, out: &mut Outputs) -> Result<bool, BoxError>;
+}
+
+/// The inputs of one joined slice, decoded on demand.
+pub struct Inputs<'a> {
+    cfg: &'a NodeConfig,
+    joined: &'a Joined,
+}
+
+impl Inputs<'_> {
+    /// Sequence number of the slice.
+    pub fn seq(&self) -> u64 {
+        self.joined.seq
+    }
+
+    /// Sensor time span of the slice `[start, end)`, seconds.
+    pub fn span(&self) -> (f64, f64) {
+        (self.joined.t_start, self.joined.t_end)
+    }
+
+    fn index(&self, port: &str) -> Result<usize, RuntimeError> {
+        self.cfg
+            .inputs
+            .iter()
+            .position(|i| i.port == port)
+            .ok_or_else(|| RuntimeError::NoPort {
+                node: self.cfg.node.clone(),
+                direction: "input",
+                port: port.to_string(),
+            })
+    }
+
+    /// True when `port` is connected in the graph.
+    pub fn is_connected(&self, port: &str) -> bool {
+        self.index(port).is_ok()
+    }
+
+    /// The message on `port`, or `None` when the port is unconnected or is a feedback input
+    /// without a previous message.
+    pub fn get_opt<T: Message>(&self, port: &str) -> Result<Option<T>, RuntimeError> {
+        let Ok(i) = self.index(port) else { return Ok(None) };
+        let Some(frame) = &self.joined.frames[i] else {
+            return Ok(None);
+        };
+        let decoded = codec::decode::<T>(&frame.bytes).map_err(|source| RuntimeError::Decode {
+            node: self.cfg.node.clone(),
+            port: port.to_string(),
+            key: self.cfg.inputs[i].key.clone(),
+            source,
+        })?;
+        Ok(decoded.body)
+    }
+
+    /// The message on `port`; an error if there is none.
+    pub fn get<T: Message>(&self, port: &str) -> Result<T, RuntimeError> {
+        self.get_opt(port)?.ok_or_else(|| RuntimeError::NoPort {
+            node: self.cfg.node.clone(),
+            direction: "input (with a message)",
+            port: port.to_string(),
+        })
+    }
+
+    /// The sensor time span of the message on `port`, if present.
+    pub fn span_of(&self, port: &str) -> Option<(f64, f64)> {
+        let i = self.index(port).ok()?;
+        self.joined.frames[i]
+            .as_ref()
+            .map(|f| (f.envelope.t_start, f.envelope.t_end))
+    }
+}
+
+struct OutPort {
+    publisher: zenoh::pubsub::Publisher<'static>,
+    /// (consumer node, consumer port, feedback)
+    consumers: Vec<(String, String, bool)>,
+    sent: u64,
+    t_end: f64,
+}
+
+/// The outputs of a node. Publishing in lock-step mode waits for credit from every consumer.
+pub struct Outputs {
+    node: String,
+    mode: Mode,
+    window: u64,
+    ports: Vec<(String, OutPort)>,
+    book: Arc<CreditBook>,
+    consumers_ready: bool,
+    published: Arc<AtomicU64>,
+}
+
+impl Outputs {
+    fn port_mut(&mut self, port: &str) -> Result<&mut OutPort, RuntimeError> {
+        let node = self.node.clone();
+        self.ports
+            .iter_mut()
+            .find(|(n, _)| n == port)
+            .map(|(_, p)| p)
+            .ok_or(RuntimeError::NoPort {
+                node,
+                direction: "output",
+                port: port.to_string(),
+            })
+    }
+
+    /// True when output `port` is wired in the graph (publishing to an unwired port is allowed
+    /// and costs nothing but the encoding).
+    pub fn has(&self, port: &str) -> bool {
+        self.ports.iter().any(|(n, _)| n == port)
+    }
+
+    fn watch_list(&self) -> Vec<(String, String)> {
+        self.ports
+            .iter()
+            .flat_map(|(name, p)| p.consumers.iter().map(move |(c, _, _)| (c.clone(), name.clone())))
+            .collect()
+    }
+
+    fn wait_consumers_alive(&mut self) -> Result<(), RuntimeError> {
+        if self.consumers_ready {
+            return Ok(());
+        }
+        let needed: Vec<String> = self.watch_list().into_iter().map(|(c, _)| c).collect();
+        let timeout = match self.mode {
+            Mode::Lockstep => STARTUP_TIMEOUT,
+            Mode::Live => Duration::from_secs(10),
+        };
+        let ok = self.book.wait_until(&self.node, &[], Some(timeout), |_, alive| {
+            needed.iter().all(|n| alive.contains(n))
+        })?;
+        if !ok && self.mode == Mode::Lockstep {
+            return Err(RuntimeError::Zenoh(format!(
+                "node {}: consumers {needed:?} did not appear within {}s",
+                self.node,
+                timeout.as_secs()
+            )));
+        }
+        self.consumers_ready = true;
+        Ok(())
+    }
+
+    /// Publishes `msg` on `port` as sequence number `seq` covering `[t_start, t_end)` seconds.
+    pub fn send<T: Message>(
+        &mut self,
+        port: &str,
+        seq: u64,
+        t_start: f64,
+        t_end: f64,
+        msg: &T,
+    ) -> Result<(), RuntimeError> {
+        if !self.has(port) {
+            return Ok(());
+        }
+        let bytes = codec::encode(seq, t_start, t_end, msg).map_err(|source| RuntimeError::Encode {
+            node: self.node.clone(),
+            port: port.to_string(),
+            source,
+        })?;
+        self.send_bytes(port, seq, t_end, bytes)
+    }
+
+    /// Publishes an already encoded frame (replay).
+    pub fn send_bytes(
+        &mut self,
+        port: &str,
+        seq: u64,
+        t_end: f64,
+        bytes: Vec<u8>,
+    ) -> Result<(), RuntimeError> {
+        self.wait_consumers_alive()?;
+        let (mode, window, node) = (self.mode, self.window, self.node.clone());
+        let book = self.book.clone();
+        let watch = self.watch_list();
+        let p = self.port_mut(port)?;
+        if mode == Mode::Lockstep {
+            let consumers = p.consumers.clone();
+            book.wait_until(&node, &watch, None, |consumed, _| {
+                consumers.iter().all(|(c, cp, _)| {
+                    let n = consumed.get(&(c.clone(), cp.clone())).copied().unwrap_or(0);
+                    n == DONE || seq < n.saturating_add(window)
+                })
+            })?;
+        }
+        p.publisher
+            .put(bytes)
+            .wait()
+            .map_err(|e| RuntimeError::Zenoh(e.to_string()))?;
+        p.sent = p.sent.max(seq + 1);
+        p.t_end = p.t_end.max(t_end);
+        self.published.fetch_add(1, Ordering::Relaxed);
+        Ok(())
+    }
+
+    /// Publishes end-of-stream frames on every output.
+    fn end_all(&mut self, schemas: &HashMap<String, String>) -> Result<(), RuntimeError> {
+        self.wait_consumers_alive()?;
+        for (name, p) in &mut self.ports {
+            let schema = schemas.get(name).cloned().unwrap_or_default();
+            let bytes =
+                codec::encode_end_named(&schema, p.sent, p.t_end).map_err(|source| RuntimeError::Encode {
+                    node: self.node.clone(),
+                    port: name.clone(),
+                    source,
+                })?;
+            p.publisher
+                .put(bytes)
+                .wait()
+                .map_err(|e| RuntimeError::Zenoh(e.to_string()))?;
+        }
+        Ok(())
+    }
+
+    /// Waits until every consumer reports it has finished (so nothing sent is lost on exit).
+    fn wait_consumers_done(&self) -> Result<(), RuntimeError> {
+        let list: Vec<(String, String)> = self
+            .ports
+            .iter()
+            .flat_map(|(_, p)| p.consumers.iter().map(|(c, cp, _)| (c.clone(), cp.clone())))
+            .collect();
+        let watch = self.watch_list();
+        let ok = self
+            .book
+            .wait_until(&self.node, &watch, Some(DRAIN_TIMEOUT), |consumed, _| {
+                list.iter().all(|k| consumed.get(k).copied() == Some(DONE))
+            })?;
+        if !ok {
+            tracing::warn!(node = %self.node, "consumers did not finish within {}s", DRAIN_TIMEOUT.as_secs());
+        }
+        Ok(())
+    }
+}
+
+/// Parsed command line of a node binary.
+enum Cli {
+    Describe,
+    Run(PathBuf),
+}
+
+fn parse_cli() -> Result<Cli, RuntimeError> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    match args.as_slice() {
+        [a] if a == "--describe" => Ok(Cli::Describe),
+        [a, path] if a == "--config" => Ok(Cli::Run(PathBuf::from(path))),
+        _ => Err(RuntimeError::Config(
+            "usage: <node> --describe | <node> --config <file> (nodes are started by `evseg run`)".into(),
+        )),
+    }
+}
+
+fn init_tracing() {
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .try_init();
+}
+
+/// Shared counters published on the stats key.
+#[derive(Default)]
+struct Counters {
+    received: AtomicU64,
+    processed: AtomicU64,
+    refused: AtomicU64,
+    dropped: AtomicU64,
+    last_seq: AtomicU64,
+    busy_ns: AtomicU64,
+}
+
+struct Running {
+    cfg: NodeConfig,
+    session: zenoh::Session,
+    outputs: Outputs,
+    counters: Arc<Counters>,
+    schemas: HashMap<String, String>,
+    inbox: Arc<Inbox>,
+    _handles: Vec<Box<dyn std::any::Any + Send>>,
+    _token: zenoh::liveliness::LivelinessToken,
+}
+
+impl Running {
+    fn stats(&self, finished: bool) -> Stats {
+        let c = &self.counters;
+        let last = c.last_seq.load(Ordering::Relaxed);
+        Stats {
+            node: self.cfg.node.clone(),
+            received: c.received.load(Ordering::Relaxed),
+            published: self.outputs.published.load(Ordering::Relaxed),
+            processed: c.processed.load(Ordering::Relaxed),
+            dropped: c.dropped.load(Ordering::Relaxed),
+            refused: c.refused.load(Ordering::Relaxed),
+            last_seq: if last == u64::MAX { None } else { Some(last) },
+            busy_s: c.busy_ns.load(Ordering::Relaxed) as f64 * 1e-9,
+            finished,
+        }
+    }
+
+    fn publish_stats(&self, finished: bool) {
+        if let Ok(json) = serde_json::to_vec(&self.stats(finished)) {
+            let _ = self.session.put(self.cfg.stats_key.clone(), json).wait();
+        }
+    }
+
+    fn publish_progress(&self, consumed: Vec<(String, u64)>) -> Result<(), RuntimeError> {
+        let p = Progress {
+            node: self.cfg.node.clone(),
+            consumed,
+        };
+        let json = serde_json::to_vec(&p).map_err(|e| RuntimeError::Config(e.to_string()))?;
+        self.session
+            .put(self.cfg.ack_key.clone(), json)
+            .wait()
+            .map_err(|e| RuntimeError::Zenoh(e.to_string()))
+    }
+
+    fn finish(mut self) -> Result<(), RuntimeError> {
+        self.outputs.end_all(&self.schemas)?;
+        let done = self.cfg.inputs.iter().map(|i| (i.port.clone(), DONE)).collect();
+        self.publish_progress(done)?;
+        self.publish_stats(true);
+        self.outputs.wait_consumers_done()?;
+        self.publish_stats(true);
+        let _ = self.session.close().wait();
+        Ok(())
+    }
+}
+
+fn start(description: &NodeDescription, path: &PathBuf) -> Result<Running, RuntimeError> {
+    let cfg = NodeConfig::load(path)?;
+    if cfg.window == 0 || cfg.queue == 0 {
+        return Err(RuntimeError::Config(format!(
+            "{}: window and queue must be >= 1",
+            path.display()
+        )));
+    }
+    for i in &cfg.inputs {
+        if description.input(&i.port).is_none() {
+            return Err(RuntimeError::Config(format!(
+                "node {}: config names unknown input `{}`",
+                cfg.node, i.port
+            )));
+        }
+    }
+    for o in &cfg.outputs {
+        if description.output(&o.port).is_none() {
+            return Err(RuntimeError::Config(format!(
+                "node {}: config names unknown output `{}`",
+                cfg.node, o.port
+            )));
+        }
+    }
+    let session = open_session(&cfg.zenoh)?;
+    let (book, mut handles) = CreditBook::start(&session, &cfg)?;
+    let cc = match cfg.mode {
+        Mode::Lockstep => CongestionControl::Block,
+        Mode::Live => CongestionControl::Drop,
+    };
+    let mut ports = Vec::new();
+    let mut schemas = HashMap::new();
+    for o in &cfg.outputs {
+        let publisher = session
+            .declare_publisher(o.key.clone())
+            .congestion_control(cc)
+            .wait()
+            .map_err(|e| RuntimeError::Zenoh(e.to_string()))?;
+        let consumers = o
+            .consumers
+            .iter()
+            .map(|c| (c.node.clone(), c.port.clone(), c.feedback))
+            .collect();
+        schemas.insert(o.port.clone(), o.schema.clone());
+        ports.push((
+            o.port.clone(),
+            OutPort {
+                publisher,
+                consumers,
+                sent: 0,
+                t_end: 0.0,
+            },
+        ));
+    }
+    let outputs = Outputs {
+        node: cfg.node.clone(),
+        mode: cfg.mode,
+        window: cfg.window,
+        ports,
+        book,
+        consumers_ready: false,
+        published: Arc::new(AtomicU64::new(0)),
+    };
+    let counters = Arc::new(Counters {
+        last_seq: AtomicU64::new(u64::MAX),
+        ..Counters::default()
+    });
+    // Input subscribers are declared before the liveliness token, so a producer that sees the
+    // token knows its data will be received.
+    let bound = match cfg.mode {
+        Mode::Lockstep => None,
+        Mode::Live => Some(cfg.queue),
+    };
+    let inbox = Inbox::new(cfg.inputs.len(), bound);
+    for s in subscribe_inputs(&session, &cfg, &inbox)? {
+        handles.push(Box::new(s));
+    }
+    let token = session
+        .liveliness()
+        .declare_token(cfg.live_key.clone())
+        .wait()
+        .map_err(|e| RuntimeError::Zenoh(e.to_string()))?;
+    tracing::info!(node = %cfg.node, mode = ?cfg.mode, inputs = cfg.inputs.len(), outputs = cfg.outputs.len(), "started");
+    Ok(Running {
+        cfg,
+        session,
+        outputs,
+        counters,
+        schemas,
+        inbox,
+        _handles: handles,
+        _token: token,
+    })
+}
+
+/// Runs a stage node: `--describe` prints `description` as JSON; `--config FILE` runs it.
+/// `make` builds the stage from the node config (its parameters). Returns the process exit code.
+pub fn run_stage<S: Stage>(
+    description: NodeDescription,
+    make: impl FnOnce(&NodeConfig) -> Result<S, BoxError>,
+) -> std::process::ExitCode {
+    main_wrapper(description, |run| {
+        let mut stage =
+            make(&run.cfg).map_err(|e| RuntimeError::Config(format!("node {}: {e}", run.cfg.node)))?;
+        stage_loop(run, &mut stage)
+    })
+}
+
+/// Runs a source node (see [`run_stage`]).
+pub fn run_source<S: Source>(
+    description: NodeDescription,
+    make: impl FnOnce(&NodeConfig) -> Result<S, BoxError>,
+) -> std::process::ExitCode {
+    main_wrapper(description, |run| {
+        let mut source =
+            make(&run.cfg).map_err(|e| RuntimeError::Config(format!("node {}: {e}", run.cfg.node)))?;
+        source_loop(run, &mut source)
+    })
+}
+
+fn main_wrapper(
+    description: NodeDescription,
+    body: impl FnOnce(Running) -> Result<(), RuntimeError>,
+) -> std::process::ExitCode {
+    init_tracing();
+    signals::install();
+    let cli = match parse_cli() {
+        Ok(c) => c,
+        Err(e) => {
+            eprintln!("{}: {e}", description.binary);
+            return std::process::ExitCode::from(2);
+        }
+    };
+    match cli {
+        Cli::Describe => match serde_json::to_string_pretty(&description) {
+            Ok(s) => {
+                println!("{s}");
+                std::process::ExitCode::SUCCESS
+            }
+            Err(e) => {
+                eprintln!("{e}");
+                std::process::ExitCode::FAILURE
+            }
+        },
+        Cli::Run(path) => {
+            let result = start(&description, &path).and_then(body);
+            match result {
+                Ok(()) => {
+                    tracing::info!("finished");
+                    std::process::ExitCode::SUCCESS
+                }
+                Err(RuntimeError::Stopped) => {
+                    tracing::info!("stopped on request");
+                    std::process::ExitCode::from(130)
+                }
+                Err(e) => {
+                    tracing::error!("{e}");
+                    eprintln!("error: {e}");
+                    std::process::ExitCode::FAILURE
+                }
+            }
+        }
+    }
+}
+
+fn maybe_stats(run: &Running, last: &mut Instant) {
+    if last.elapsed() >= Duration::from_millis(500) {
+        run.publish_stats(false);
+        *last = Instant::now();
+    }
+}
+
+fn source_loop<S: Source>(mut run: Running, source: &mut S) -> Result<(), RuntimeError> {
+    let mut last_stats = Instant::now();
+    loop {
+        if signals::stop_requested() {
+            return Err(RuntimeError::Stopped);
+        }
+        let t0 = Instant::now();
+        let more = source
+            .step(&mut run.outputs)
+            .map_err(|e| match e.downcast::<RuntimeError>() {
+                Ok(rt) => *rt,
+                Err(source) => RuntimeError::Logic {
+                    node: run.cfg.node.clone(),
+                    seq: run.outputs.published.load(Ordering::Relaxed),
+                    source,
+                },
+            })?;
+        run.counters
+            .busy_ns
+            .fetch_add(t0.elapsed().as_nanos() as u64, Ordering::Relaxed);
+        run.counters.processed.fetch_add(1, Ordering::Relaxed);
+        maybe_stats(&run, &mut last_stats);
+        if !more {
+            break;
+        }
+    }
+    run.finish()
+}
+
+fn stage_loop<S: Stage>(mut run: Running, stage: &mut S) -> Result<(), RuntimeError> {
+    let inbox = run.inbox.clone();
+    let ports: Vec<(String, bool)> = run
+        .cfg
+        .inputs
+        .iter()
+        .map(|i| (i.port.clone(), i.feedback))
+        .collect();
+    let mut joiner = Joiner::new(&ports, run.cfg.mode == Mode::Live);
+    let mut last_stats = Instant::now();
+    loop {
+        if signals::stop_requested() {
+            return Err(RuntimeError::Stopped);
+        }
+        for arrival in inbox.drain(POLL) {
+            let binding = &run.cfg.inputs[arrival.port];
+            match codec::decode_header(&arrival.bytes) {
+                Ok((envelope, _))
+                    if envelope.schema == binding.schema
+                        || envelope.kind == evseg_schemas::FrameKind::End =>
+                {
+                    if envelope.kind == evseg_schemas::FrameKind::Data {
+                        run.counters.received.fetch_add(1, Ordering::Relaxed);
+                    }
+                    joiner.push(
+                        arrival.port,
+                        RawFrame {
+                            envelope,
+                            bytes: arrival.bytes,
+                        },
+                    );
+                }
+                Ok((envelope, _)) => {
+                    run.counters.refused.fetch_add(1, Ordering::Relaxed);
+                    let msg = format!(
+                        "node {}, input `{}` (key {}): expected {} but received {} v{} from `{}`",
+                        run.cfg.node,
+                        binding.port,
+                        binding.key,
+                        binding.schema,
+                        envelope.schema,
+                        envelope.version,
+                        binding.producer
+                    );
+                    if run.cfg.mode == Mode::Lockstep {
+                        return Err(RuntimeError::Config(msg));
+                    }
+                    tracing::error!("{msg} (message dropped)");
+                }
+                Err(e) => {
+                    run.counters.refused.fetch_add(1, Ordering::Relaxed);
+                    let err = RuntimeError::Decode {
+                        node: run.cfg.node.clone(),
+                        port: binding.port.clone(),
+                        key: binding.key.clone(),
+                        source: e,
+                    };
+                    if run.cfg.mode == Mode::Lockstep {
+                        return Err(err);
+                    }
+                    tracing::error!("{err} (message dropped)");
+                }
+            }
+        }
+        loop {
+            let state = joiner
+                .poll()
+                .map_err(|e| RuntimeError::Config(format!("node {}: {e}", run.cfg.node)))?;
+            match state {
+                JoinState::Waiting => break,
+                JoinState::Finished => {
+                    let t0 = Instant::now();
+                    stage
+                        .finish(&mut run.outputs)
+                        .map_err(|e| logic_error(&run, u64::MAX, e))?;
+                    run.counters
+                        .busy_ns
+                        .fetch_add(t0.elapsed().as_nanos() as u64, Ordering::Relaxed);
+                    run.counters
+                        .dropped
+                        .store(inbox.dropped() + joiner.dropped(), Ordering::Relaxed);
+                    return run.finish();
+                }
+                JoinState::Ready(joined) => {
+                    let t0 = Instant::now();
+                    let inputs = Inputs {
+                        cfg: &run.cfg,
+                        joined: &joined,
+                    };
+                    stage
+                        .process(&inputs, &mut run.outputs)
+                        .map_err(|e| logic_error(&run, joined.seq, e))?;
+                    run.counters
+                        .busy_ns
+                        .fetch_add(t0.elapsed().as_nanos() as u64, Ordering::Relaxed);
+                    run.counters.processed.fetch_add(1, Ordering::Relaxed);
+                    run.counters.last_seq.store(joined.seq, Ordering::Relaxed);
+                    let consumed = run
+                        .cfg
+                        .inputs
+                        .iter()
+                        .map(|i| {
+                            (
+                                i.port.clone(),
+                                if i.feedback { joined.seq } else { joined.seq + 1 },
+                            )
+                        })
+                        .collect();
+                    run.publish_progress(consumed)?;
+                }
+            }
+        }
+        run.counters
+            .dropped
+            .store(inbox.dropped() + joiner.dropped(), Ordering::Relaxed);
+        maybe_stats(&run, &mut last_stats);
+    }
+}
+
+fn logic_error(run: &Running, seq: u64, e: BoxError) -> RuntimeError {
+    match e.downcast::<RuntimeError>() {
+        Ok(rt) => *rt,
+        Err(source) => RuntimeError::Logic {
+            node: run.cfg.node.clone(),
+            seq,
+            source,
+        },
+    }
+}

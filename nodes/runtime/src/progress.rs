@@ -1,0 +1,41 @@
+//! Progress (acknowledgement) and statistics messages of the runtime itself.
+//!
+//! These are control messages between nodes and to the launcher, not pipeline data; they are JSON
+//! so that a person can read them with any Zenoh tool.
+
+use serde::{Deserialize, Serialize};
+
+/// Count meaning "this port is finished; never wait for it again".
+pub const DONE: u64 = u64::MAX;
+
+/// What a node has consumed, published on its progress key after every processed slice.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Progress {
+    /// Node id of the consumer.
+    pub node: String,
+    /// Per input port: number of messages consumed (sequence numbers `0..count`), or [`DONE`].
+    pub consumed: Vec<(String, u64)>,
+}
+
+/// Counters a node publishes on its statistics key about twice a second and when it ends.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct Stats {
+    /// Node id.
+    pub node: String,
+    /// Data messages received (all inputs).
+    pub received: u64,
+    /// Data messages published (all outputs).
+    pub published: u64,
+    /// Joined slices processed (or, for a source, steps taken).
+    pub processed: u64,
+    /// Inputs dropped (live mode: queue overflow or incomplete joins).
+    pub dropped: u64,
+    /// Messages refused (wrong schema or version, undecodable).
+    pub refused: u64,
+    /// Last sequence number processed.
+    pub last_seq: Option<u64>,
+    /// Seconds spent in the node's own logic.
+    pub busy_s: f64,
+    /// True once the node has finished.
+    pub finished: bool,
+}

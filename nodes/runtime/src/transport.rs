@@ -1,0 +1,288 @@
+//! The Zenoh side of a node: the session, the inbox its subscribers fill, and the credit book
+//! that makes lock-step runs lossless.
+
+use std::collections::{HashMap, HashSet, VecDeque};
+use std::sync::{Arc, Condvar, Mutex, MutexGuard};
+use std::time::{Duration, Instant};
+
+use zenoh::Wait;
+use zenoh::sample::SampleKind;
+
+use crate::config::{NodeConfig, ZenohSettings};
+use crate::error::RuntimeError;
+use crate::progress::{DONE, Progress};
+use crate::signals;
+
+/// How often blocking waits wake up to check for stop requests and vanished peers.
+pub const POLL: Duration = Duration::from_millis(50);
+
+fn zerr(e: impl std::fmt::Display) -> RuntimeError {
+    RuntimeError::Zenoh(e.to_string())
+}
+
+fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
+    // A poisoned lock only means another thread panicked while holding it; the data is plain
+    // counters and queues, still usable.
+    m.lock().unwrap_or_else(|p| p.into_inner())
+}
+
+/// Opens a Zenoh session with the given settings; multicast scouting is off, endpoints are explicit.
+pub fn open_session(z: &ZenohSettings) -> Result<zenoh::Session, RuntimeError> {
+    let mut config = zenoh::Config::default();
+    let list = |v: &[String]| serde_json::to_string(v).unwrap_or_else(|_| "[]".into());
+    config
+        .insert_json5("mode", &format!("\"{}\"", z.mode))
+        .map_err(zerr)?;
+    config
+        .insert_json5("scouting/multicast/enabled", "false")
+        .map_err(zerr)?;
+    config
+        .insert_json5("connect/endpoints", &list(&z.connect))
+        .map_err(zerr)?;
+    config
+        .insert_json5("listen/endpoints", &list(&z.listen))
+        .map_err(zerr)?;
+    // Keep retrying the connection to the router for a while instead of failing at once: the
+    // launcher may still be binding its port.
+    config.insert_json5("connect/timeout_ms", "10000").map_err(zerr)?;
+    config
+        .insert_json5("connect/exit_on_failure", "true")
+        .map_err(zerr)?;
+    zenoh::open(config).wait().map_err(zerr)
+}
+
+/// A received frame: which input port, and the raw bytes.
+pub struct Arrival {
+    /// Index of the input port in the node config.
+    pub port: usize,
+    /// Encoded frame.
+    pub bytes: Vec<u8>,
+}
+
+#[derive(Default)]
+struct InboxState {
+    queues: Vec<VecDeque<Vec<u8>>>,
+    dropped: u64,
+}
+
+/// Frames received by the node's subscribers, per port. In live mode each port's queue is
+/// bounded and the oldest frame is dropped (and counted) when it overflows.
+pub struct Inbox {
+    state: Mutex<InboxState>,
+    ready: Condvar,
+    bound: Option<usize>,
+}
+
+impl Inbox {
+    /// An inbox for `ports` inputs; `bound` = live-mode queue length, `None` = unbounded.
+    pub fn new(ports: usize, bound: Option<usize>) -> Arc<Self> {
+        Arc::new(Self {
+            state: Mutex::new(InboxState {
+                queues: vec![VecDeque::new(); ports],
+                dropped: 0,
+            }),
+            ready: Condvar::new(),
+            bound,
+        })
+    }
+
+    fn push(&self, port: usize, bytes: Vec<u8>) {
+        let mut s = lock(&self.state);
+        if let Some(q) = s.queues.get_mut(port) {
+            q.push_back(bytes);
+            if let Some(bound) = self.bound
+                && q.len() > bound
+            {
+                q.pop_front();
+                s.dropped += 1;
+            }
+        }
+        self.ready.notify_all();
+    }
+
+    /// Takes every queued frame, oldest first per port; waits up to `timeout` for one.
+    pub fn drain(&self, timeout: Duration) -> Vec<Arrival> {
+        let mut s = lock(&self.state);
+        if s.queues.iter().all(|q| q.is_empty()) {
+            s = self
+                .ready
+                .wait_timeout(s, timeout)
+                .map(|(g, _)| g)
+                .unwrap_or_else(|p| p.into_inner().0);
+        }
+        let mut out = Vec::new();
+        for (port, q) in s.queues.iter_mut().enumerate() {
+            out.extend(q.drain(..).map(|bytes| Arrival { port, bytes }));
+        }
+        out
+    }
+
+    /// Frames dropped so far by queue overflow.
+    pub fn dropped(&self) -> u64 {
+        lock(&self.state).dropped
+    }
+}
+
+/// Declares one subscriber per input port, each feeding `inbox`.
+pub fn subscribe_inputs(
+    session: &zenoh::Session,
+    cfg: &NodeConfig,
+    inbox: &Arc<Inbox>,
+) -> Result<Vec<zenoh::pubsub::Subscriber<()>>, RuntimeError> {
+    let mut subs = Vec::new();
+    for (i, input) in cfg.inputs.iter().enumerate() {
+        let inbox = inbox.clone();
+        let sub = session
+            .declare_subscriber(input.key.clone())
+            .callback(move |sample| {
+                if sample.kind() == SampleKind::Put {
+                    inbox.push(i, sample.payload().to_bytes().into_owned());
+                }
+            })
+            .wait()
+            .map_err(zerr)?;
+        subs.push(sub);
+    }
+    Ok(subs)
+}
+
+#[derive(Default)]
+struct BookState {
+    /// (consumer node, consumer port) -> messages consumed (or DONE).
+    consumed: HashMap<(String, String), u64>,
+    /// Nodes whose liveliness token is present.
+    alive: HashSet<String>,
+    /// Nodes whose token has been seen at least once.
+    seen: HashSet<String>,
+}
+
+/// The credit book of a producer: what each consumer of each output has consumed, and who is
+/// alive. Lock-step publishing waits here.
+pub struct CreditBook {
+    state: Mutex<BookState>,
+    changed: Condvar,
+}
+
+impl CreditBook {
+    /// Subscribes to the progress keys of every consumer of `cfg`'s outputs, and to the
+    /// instance's liveliness tokens. The returned handles must be kept alive.
+    pub fn start(
+        session: &zenoh::Session,
+        cfg: &NodeConfig,
+    ) -> Result<(Arc<Self>, Vec<Box<dyn std::any::Any + Send>>), RuntimeError> {
+        let book = Arc::new(Self {
+            state: Mutex::new(BookState::default()),
+            changed: Condvar::new(),
+        });
+        let mut handles: Vec<Box<dyn std::any::Any + Send>> = Vec::new();
+        let mut ack_keys: Vec<&str> = cfg
+            .outputs
+            .iter()
+            .flat_map(|o| o.consumers.iter().map(|c| c.ack_key.as_str()))
+            .collect();
+        ack_keys.sort_unstable();
+        ack_keys.dedup();
+        for key in ack_keys {
+            let b = book.clone();
+            let sub = session
+                .declare_subscriber(key.to_string())
+                .callback(move |sample| {
+                    let bytes = sample.payload().to_bytes();
+                    if let Ok(p) = serde_json::from_slice::<Progress>(&bytes) {
+                        b.record(&p);
+                    }
+                })
+                .wait()
+                .map_err(zerr)?;
+            handles.push(Box::new(sub));
+        }
+        let b = book.clone();
+        let live_prefix = cfg
+            .live_key
+            .rsplit_once('/')
+            .map(|(p, _)| p.to_string())
+            .unwrap_or_default();
+        let sub = session
+            .liveliness()
+            .declare_subscriber(format!("{live_prefix}/*"))
+            .history(true)
+            .callback(move |sample| {
+                let key = sample.key_expr().as_str();
+                let node = key.rsplit('/').next().unwrap_or("").to_string();
+                let mut s = lock(&b.state);
+                if sample.kind() == SampleKind::Put {
+                    s.alive.insert(node.clone());
+                    s.seen.insert(node);
+                } else {
+                    s.alive.remove(&node);
+                }
+                b.changed.notify_all();
+            })
+            .wait()
+            .map_err(zerr)?;
+        handles.push(Box::new(sub));
+        Ok((book, handles))
+    }
+
+    fn record(&self, p: &Progress) {
+        let mut s = lock(&self.state);
+        for (port, count) in &p.consumed {
+            let e = s.consumed.entry((p.node.clone(), port.clone())).or_insert(0);
+            *e = (*e).max(*count);
+        }
+        self.changed.notify_all();
+    }
+
+    /// Messages consumed by `node`'s `port` so far (0 when unknown, [`DONE`] when finished).
+    pub fn consumed(&self, node: &str, port: &str) -> u64 {
+        lock(&self.state)
+            .consumed
+            .get(&(node.to_string(), port.to_string()))
+            .copied()
+            .unwrap_or(0)
+    }
+
+    /// Waits until `pred` holds for the book, checking stop requests and vanished consumers.
+    /// `watch` names the consumers that must stay alive while waiting (node, output port).
+    /// Returns `Ok(false)` on timeout.
+    pub fn wait_until(
+        &self,
+        node: &str,
+        watch: &[(String, String)],
+        timeout: Option<Duration>,
+        mut pred: impl FnMut(&HashMap<(String, String), u64>, &HashSet<String>) -> bool,
+    ) -> Result<bool, RuntimeError> {
+        let start = Instant::now();
+        let mut s = lock(&self.state);
+        loop {
+            if pred(&s.consumed, &s.alive) {
+                return Ok(true);
+            }
+            if signals::stop_requested() {
+                return Err(RuntimeError::Stopped);
+            }
+            for (consumer, port) in watch {
+                if s.seen.contains(consumer) && !s.alive.contains(consumer) {
+                    let finished = s.consumed.iter().any(|((n, _), c)| n == consumer && *c == DONE);
+                    if !finished {
+                        return Err(RuntimeError::ConsumerGone {
+                            node: node.to_string(),
+                            port: port.clone(),
+                            consumer: consumer.clone(),
+                        });
+                    }
+                }
+            }
+            if let Some(t) = timeout
+                && start.elapsed() >= t
+            {
+                return Ok(false);
+            }
+            s = self
+                .changed
+                .wait_timeout(s, POLL)
+                .map(|(g, _)| g)
+                .unwrap_or_else(|p| p.into_inner().0);
+        }
+    }
+}
