@@ -33,14 +33,24 @@ pub(crate) fn check(raw: &RawGraph<'_>, resolver: Resolver<'_>, p: &mut Problems
     if let Some(name) = &raw.name
         && !is_valid_chunk(&name.value)
     {
-        p.error(name.at, format!("invalid instance name `{}`: use ASCII letters, digits, `-` and `_`", name.value));
+        p.error(
+            name.at,
+            format!(
+                "invalid instance name `{}`: use ASCII letters, digits, `-` and `_`",
+                name.value
+            ),
+        );
     }
     let machines: Vec<Machine> = if raw.machines.is_empty() {
         vec![Machine::default_local()]
     } else {
         raw.machines
             .iter()
-            .map(|m| Machine { name: m.name.value.clone(), listen: m.listen.clone(), connect: m.connect.clone() })
+            .map(|m| Machine {
+                name: m.name.value.clone(),
+                listen: m.listen.clone(),
+                connect: m.connect.clone(),
+            })
             .collect()
     };
     let index_of = index_ids(&raw.nodes, p);
@@ -103,12 +113,21 @@ fn index_ids<'a>(nodes: &'a [RawNode<'_>], p: &mut Problems) -> HashMap<&'a str,
     for (i, node) in nodes.iter().enumerate() {
         let Some(id) = &node.id else { continue };
         if !is_valid_chunk(&id.value) {
-            p.error(id.at, format!("invalid node id `{}`: use ASCII letters, digits, `-` and `_`", id.value));
+            p.error(
+                id.at,
+                format!(
+                    "invalid node id `{}`: use ASCII letters, digits, `-` and `_`",
+                    id.value
+                ),
+            );
         }
         match index_of.get(id.value.as_str()) {
             Some(&first) => {
                 let line = nodes[first].anchor().line;
-                p.error(id.at, format!("duplicate node id `{}` (first defined at line {line})", id.value));
+                p.error(
+                    id.at,
+                    format!("duplicate node id `{}` (first defined at line {line})", id.value),
+                );
             }
             None => {
                 index_of.insert(&id.value, i);
@@ -119,7 +138,10 @@ fn index_ids<'a>(nodes: &'a [RawNode<'_>], p: &mut Problems) -> HashMap<&'a str,
 }
 
 /// Each distinct binary's description (asked once), or the message to report at `run:`.
-fn describe_all(nodes: &[RawNode<'_>], resolver: Resolver<'_>) -> HashMap<String, Result<NodeDescription, String>> {
+fn describe_all(
+    nodes: &[RawNode<'_>],
+    resolver: Resolver<'_>,
+) -> HashMap<String, Result<NodeDescription, String>> {
     let mut descriptions = HashMap::new();
     for run in nodes.iter().filter_map(|n| n.run.as_ref()) {
         if descriptions.contains_key(&run.value) {
@@ -133,7 +155,10 @@ fn describe_all(nodes: &[RawNode<'_>], resolver: Resolver<'_>) -> HashMap<String
                 )),
                 None => Ok(d),
             },
-            Err(message) => Err(format!("cannot get the description of binary `{}`: {message}", run.value)),
+            Err(message) => Err(format!(
+                "cannot get the description of binary `{}`: {message}",
+                run.value
+            )),
         };
         descriptions.insert(run.value.clone(), described);
     }
@@ -142,7 +167,10 @@ fn describe_all(nodes: &[RawNode<'_>], resolver: Resolver<'_>) -> HashMap<String
 
 /// How a node is named in messages: its id, else its position.
 fn node_name(node: &RawNode<'_>) -> String {
-    node.id.as_ref().map_or_else(|| format!("(node at line {})", node.at.line), |id| id.value.clone())
+    node.id.as_ref().map_or_else(
+        || format!("(node at line {})", node.at.line),
+        |id| id.value.clone(),
+    )
 }
 
 /// Checks what can be checked on one node alone: machine, parameters, outputs, input ports.
@@ -177,8 +205,11 @@ fn check_node<'d>(
         published: Vec::new(),
         inputs: Vec::new(),
     };
-    let Some(description) = description else { return work };
-    (work.params, work.param_spans) = params::resolve(node.params, description, &node_name(node), node.anchor(), p);
+    let Some(description) = description else {
+        return work;
+    };
+    (work.params, work.param_spans) =
+        params::resolve(node.params, description, &node_name(node), node.anchor(), p);
 
     let output_names: Vec<&str> = description.outputs.iter().map(|o| o.name.as_str()).collect();
     match &node.outputs {
@@ -197,7 +228,13 @@ fn check_node<'d>(
                         ),
                     );
                 } else if let Some(first) = listed[..k].iter().find(|o| o.value == item.value) {
-                    p.error(item.at, format!("output `{}` is listed twice (first at line {})", item.value, first.at.line));
+                    p.error(
+                        item.at,
+                        format!(
+                            "output `{}` is listed twice (first at line {})",
+                            item.value, first.at.line
+                        ),
+                    );
                 }
             }
             work.published = output_names
@@ -246,7 +283,14 @@ fn wire(
             let consumer = work[to].description;
             if let Some((from, spec)) = wire_one(node, consumer, input, work, index_of, nodes, p) {
                 work[to].inputs.push(spec);
-                edges.push(WiredEdge { edge: Edge { from, to, feedback: input.feedback }, input: k });
+                edges.push(WiredEdge {
+                    edge: Edge {
+                        from,
+                        to,
+                        feedback: input.feedback,
+                    },
+                    input: k,
+                });
             }
         }
     }
@@ -263,17 +307,25 @@ fn wire_one(
     p: &mut Problems,
 ) -> Option<(usize, InputSpec)> {
     let reference = &input.from;
-    let Some((producer_id, output)) =
-        reference.value.split_once('/').filter(|(n, o)| is_valid_chunk(n) && is_valid_chunk(o))
+    let Some((producer_id, output)) = reference
+        .value
+        .split_once('/')
+        .filter(|(n, o)| is_valid_chunk(n) && is_valid_chunk(o))
     else {
         p.error(
             reference.at,
-            format!("`{}` is not a reference to an output; write `node/output`, e.g. `source/events`", reference.value),
+            format!(
+                "`{}` is not a reference to an output; write `node/output`, e.g. `source/events`",
+                reference.value
+            ),
         );
         return None;
     };
     let Some(&from) = index_of.get(producer_id) else {
-        let ids: Vec<&str> = nodes.iter().filter_map(|n| Some(n.id.as_ref()?.value.as_str())).collect();
+        let ids: Vec<&str> = nodes
+            .iter()
+            .filter_map(|n| Some(n.id.as_ref()?.value.as_str()))
+            .collect();
         p.error(
             reference.at,
             format!(
@@ -339,10 +391,18 @@ fn wire_one(
 
 /// Reports each required input of node `i` that `inputs:` does not mention, naming the outputs
 /// in the graph that have the right schema.
-fn report_missing_inputs(i: usize, node: &RawNode<'_>, nodes: &[RawNode<'_>], work: &[NodeWork<'_>], p: &mut Problems) {
-    let Some(description) = work[i].description else { return };
+fn report_missing_inputs(
+    i: usize,
+    node: &RawNode<'_>,
+    nodes: &[RawNode<'_>],
+    work: &[NodeWork<'_>],
+    p: &mut Problems,
+) {
+    let (Some(description), Some(named)) = (work[i].description, &node.named_ports) else {
+        return;
+    };
     for port in description.inputs.iter().filter(|port| !port.optional) {
-        if node.inputs.iter().any(|input| input.port.value == port.name) {
+        if named.contains(&port.name) {
             continue;
         }
         let candidates: Vec<String> = nodes
@@ -352,7 +412,11 @@ fn report_missing_inputs(i: usize, node: &RawNode<'_>, nodes: &[RawNode<'_>], wo
             .flat_map(|(id, w)| {
                 w.published
                     .iter()
-                    .filter(|o| w.description.and_then(|d| d.output(o)).is_some_and(|o| o.schema == port.schema))
+                    .filter(|o| {
+                        w.description
+                            .and_then(|d| d.output(o))
+                            .is_some_and(|o| o.schema == port.schema)
+                    })
                     .map(move |o| format!("{}/{o}", id.value))
             })
             .collect();
@@ -380,11 +444,14 @@ fn build_nodes(nodes: &[RawNode<'_>], work: Vec<NodeWork<'_>>, order: &[usize]) 
     for (node, w) in nodes.iter().zip(&work) {
         let id = node.id.as_ref()?;
         for input in &w.inputs {
-            consumers.entry((input.from_node.clone(), input.from_output.clone())).or_default().push(Consumer {
-                node: id.value.clone(),
-                port: input.port.clone(),
-                feedback: input.feedback,
-            });
+            consumers
+                .entry((input.from_node.clone(), input.from_output.clone()))
+                .or_default()
+                .push(Consumer {
+                    node: id.value.clone(),
+                    port: input.port.clone(),
+                    feedback: input.feedback,
+                });
         }
     }
     let mut specs: Vec<Option<NodeSpec>> = Vec::with_capacity(nodes.len());
@@ -400,7 +467,11 @@ fn build_nodes(nodes: &[RawNode<'_>], work: Vec<NodeWork<'_>>, order: &[usize]) 
                 let port = description.output(name)?;
                 let mut readers = consumers.remove(&(id.clone(), name.clone())).unwrap_or_default();
                 readers.sort();
-                Some(OutputSpec { name: name.clone(), schema: port.schema.clone(), consumers: readers })
+                Some(OutputSpec {
+                    name: name.clone(),
+                    schema: port.schema.clone(),
+                    consumers: readers,
+                })
             })
             .collect();
         specs.push(Some(NodeSpec {

@@ -109,7 +109,9 @@ pub(crate) fn find_cycles(n: usize, edges: &[Edge]) -> Vec<Cycle> {
                 }
             }
         }
-        let Some((closing_edge, last)) = closing else { continue };
+        let Some((closing_edge, last)) = closing else {
+            continue;
+        };
         reported[c] = true;
         // Walk the breadth-first parents back to `start` (whose parent is none).
         let mut path = vec![last];
@@ -119,7 +121,10 @@ pub(crate) fn find_cycles(n: usize, edges: &[Edge]) -> Vec<Cycle> {
             node = prev;
         }
         path.reverse();
-        cycles.push(Cycle { nodes: path, closing_edge });
+        cycles.push(Cycle {
+            nodes: path,
+            closing_edge,
+        });
     }
     cycles
 }
@@ -154,7 +159,11 @@ mod tests {
     use super::*;
 
     fn e(from: usize, to: usize) -> Edge {
-        Edge { from, to, feedback: false }
+        Edge {
+            from,
+            to,
+            feedback: false,
+        }
     }
 
     #[test]
@@ -169,7 +178,13 @@ mod tests {
         // 0 -> 1 -> 2 -> 0, plus 3 hanging off 2.
         let edges = [e(0, 1), e(1, 2), e(2, 0), e(2, 3)];
         let cycles = find_cycles(4, &edges);
-        assert_eq!(cycles, [Cycle { nodes: vec![0, 1, 2], closing_edge: 2 }]);
+        assert_eq!(
+            cycles,
+            [Cycle {
+                nodes: vec![0, 1, 2],
+                closing_edge: 2
+            }]
+        );
     }
 
     #[test]
@@ -178,13 +193,30 @@ mod tests {
         let cycles = find_cycles(3, &edges);
         assert_eq!(
             cycles,
-            [Cycle { nodes: vec![0], closing_edge: 0 }, Cycle { nodes: vec![1, 2], closing_edge: 2 }]
+            [
+                Cycle {
+                    nodes: vec![0],
+                    closing_edge: 0
+                },
+                Cycle {
+                    nodes: vec![1, 2],
+                    closing_edge: 2
+                }
+            ]
         );
     }
 
     #[test]
     fn feedback_edges_break_cycles() {
-        let edges = [e(0, 1), e(1, 2), Edge { from: 2, to: 0, feedback: true }];
+        let edges = [
+            e(0, 1),
+            e(1, 2),
+            Edge {
+                from: 2,
+                to: 0,
+                feedback: true,
+            },
+        ];
         assert!(find_cycles(3, &edges).is_empty());
         assert_eq!(topological_order(3, &edges), [0, 1, 2]);
     }
@@ -193,6 +225,12 @@ mod tests {
     fn shortest_cycle_through_the_start() {
         // 0 -> 1 -> 2 -> 3 -> 0 and the shortcut 1 -> 3.
         let edges = [e(0, 1), e(1, 2), e(2, 3), e(3, 0), e(1, 3)];
-        assert_eq!(find_cycles(4, &edges), [Cycle { nodes: vec![0, 1, 3], closing_edge: 3 }]);
+        assert_eq!(
+            find_cycles(4, &edges),
+            [Cycle {
+                nodes: vec![0, 1, 3],
+                closing_edge: 3
+            }]
+        );
     }
 }

@@ -24,7 +24,8 @@ use std::path::Path;
 pub use check::Resolver;
 pub use diagnostic::{Diagnostic, Span};
 pub use model::{
-    Consumer, Graph, InputSpec, Machine, Mode, NodeKeys, NodeSpec, OutputSpec, PortKey, Restart, RestartPolicy,
+    Consumer, Graph, InputSpec, Machine, Mode, NodeKeys, NodeSpec, OutputSpec, PortKey, Restart,
+    RestartPolicy,
 };
 
 use diagnostic::Problems;
@@ -53,7 +54,11 @@ pub enum GraphError {
 
 /// One diagnostic per line.
 fn render(diagnostics: &[Diagnostic]) -> String {
-    diagnostics.iter().map(ToString::to_string).collect::<Vec<_>>().join("\n")
+    diagnostics
+        .iter()
+        .map(ToString::to_string)
+        .collect::<Vec<_>>()
+        .join("\n")
 }
 
 /// Reads and checks the graph file at `path`; see [`check_str`]. Diagnostics name the file as
@@ -61,7 +66,10 @@ fn render(diagnostics: &[Diagnostic]) -> String {
 /// bad byte.
 pub fn load(path: &Path, resolver: Resolver<'_>) -> Result<Graph, GraphError> {
     let file = path.display().to_string();
-    let bytes = std::fs::read(path).map_err(|source| GraphError::Io { file: file.clone(), source })?;
+    let bytes = std::fs::read(path).map_err(|source| GraphError::Io {
+        file: file.clone(),
+        source,
+    })?;
     match std::str::from_utf8(&bytes) {
         Ok(text) => check_str(&file, text, resolver),
         Err(e) => {
@@ -75,7 +83,11 @@ pub fn load(path: &Path, resolver: Resolver<'_>) -> Result<Graph, GraphError> {
                 bytes[e.valid_up_to()],
                 e.valid_up_to()
             );
-            Err(GraphError::Invalid(vec![Diagnostic::new(&file, Span::new(line, column), message)]))
+            Err(GraphError::Invalid(vec![Diagnostic::new(
+                &file,
+                Span::new(line, column),
+                message,
+            )]))
         }
     }
 }
@@ -107,10 +119,15 @@ pub fn load(path: &Path, resolver: Resolver<'_>) -> Result<Graph, GraphError> {
 pub fn check_str(file_name: &str, text: &str, resolver: Resolver<'_>) -> Result<Graph, GraphError> {
     let mut problems = Problems::new(file_name);
     let graph = match yaml::parse(text, &mut problems) {
-        Some(root) => raw::read(&root, &mut problems).and_then(|raw| check::check(&raw, resolver, &mut problems)),
+        Some(root) => {
+            raw::read(&root, &mut problems).and_then(|raw| check::check(&raw, resolver, &mut problems))
+        }
         None => {
             if problems.is_empty() {
-                problems.error(Span::new(1, 1), "the file holds no graph (expected `name:` and `nodes:`)");
+                problems.error(
+                    Span::new(1, 1),
+                    "the file holds no graph (expected `name:` and `nodes:`)",
+                );
             }
             None
         }

@@ -9,8 +9,8 @@ use std::collections::BTreeMap;
 use evseg_schemas::keys;
 use serde::Serialize;
 
-use crate::diagnostic::{Diagnostic, Span};
 use crate::GraphError;
+use crate::diagnostic::{Diagnostic, Span};
 
 /// How the nodes pace each other.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
@@ -94,7 +94,10 @@ impl RestartPolicy {
 
 impl Default for RestartPolicy {
     fn default() -> Self {
-        RestartPolicy { policy: Restart::Never, max: Self::DEFAULT_MAX }
+        RestartPolicy {
+            policy: Restart::Never,
+            max: Self::DEFAULT_MAX,
+        }
     }
 }
 
@@ -235,7 +238,9 @@ impl Graph {
     /// is not a valid key chunk (ASCII letters, digits, `-`, `_`).
     pub fn with_instance(mut self, name: &str) -> Result<Graph, GraphError> {
         if !keys::is_valid_chunk(name) {
-            return Err(GraphError::InvalidInstance { name: name.to_string() });
+            return Err(GraphError::InvalidInstance {
+                name: name.to_string(),
+            });
         }
         self.name = name.to_string();
         Ok(self)
@@ -293,7 +298,13 @@ impl Graph {
         self.nodes
             .iter()
             .flat_map(|n| {
-                n.outputs.iter().map(|o| (n.id.clone(), o.name.clone(), keys::data(&self.name, &n.id, &o.name)))
+                n.outputs.iter().map(|o| {
+                    (
+                        n.id.clone(),
+                        o.name.clone(),
+                        keys::data(&self.name, &n.id, &o.name),
+                    )
+                })
             })
             .collect()
     }

@@ -30,7 +30,10 @@ pub(crate) fn to_json(node: &Node, p: &mut Problems) -> Option<Json> {
         Value::Float(x) => match Number::from_f64(*x) {
             Some(n) => Json::Number(n),
             None => {
-                p.error(node.at, format!("{x} cannot be a parameter value: JSON has no infinity or NaN"));
+                p.error(
+                    node.at,
+                    format!("{x} cannot be a parameter value: JSON has no infinity or NaN"),
+                );
                 return None;
             }
         },
@@ -72,9 +75,10 @@ pub(crate) fn to_json(node: &Node, p: &mut Problems) -> Option<Json> {
 
 /// The parameters of a node: the values given (checked against `description`) plus defaults
 /// for the rest, in the description's order, and the position of each given key.
-/// `anchor` is where a missing required parameter is reported (the node's id).
+/// `anchor` is where a missing required parameter is reported (the node's id). `given` is
+/// `None` when `params:` could not be read (then missing parameters are not reported).
 pub(crate) fn resolve(
-    given: &[Entry],
+    given: Option<&[Entry]>,
     description: &NodeDescription,
     node_name: &str,
     anchor: Span,
@@ -83,7 +87,7 @@ pub(crate) fn resolve(
     let names: Vec<&str> = description.params.iter().map(|d| d.name.as_str()).collect();
     let mut values: BTreeMap<&str, Json> = BTreeMap::new();
     let mut spans = BTreeMap::new();
-    for entry in given {
+    for entry in given.unwrap_or_default() {
         let Some(declared) = description.param(&entry.key) else {
             p.error(
                 entry.key_at,
@@ -98,11 +102,16 @@ pub(crate) fn resolve(
             continue;
         };
         spans.insert(entry.key.clone(), entry.key_at);
-        let Some(value) = to_json(&entry.value, p) else { continue };
+        let Some(value) = to_json(&entry.value, p) else {
+            continue;
+        };
         let expected = json_kind(&declared.default);
         if declared.default.is_null() {
             if value.is_null() {
-                p.error(entry.value.at, format!("parameter `{}` is required and cannot be null", entry.key));
+                p.error(
+                    entry.value.at,
+                    format!("parameter `{}` is required and cannot be null", entry.key),
+                );
                 continue;
             }
         } else if json_kind(&value) != expected {
@@ -126,14 +135,18 @@ pub(crate) fn resolve(
                 out.insert(declared.name.clone(), value);
             }
             None if declared.default.is_null() => {
-                if !spans.contains_key(&declared.name) {
+                if given.is_some() && !spans.contains_key(&declared.name) {
                     p.error(
                         anchor,
                         format!(
                             "node `{node_name}` needs parameter `{}` (`{}` has no default for it){}",
                             declared.name,
                             description.binary,
-                            if declared.doc.is_empty() { String::new() } else { format!(": {}", declared.doc) }
+                            if declared.doc.is_empty() {
+                                String::new()
+                            } else {
+                                format!(": {}", declared.doc)
+                            }
                         ),
                     );
                 }

@@ -36,8 +36,14 @@ pub(crate) struct RawNode<'a> {
     pub id: Option<Spanned<String>>,
     pub run: Option<Spanned<String>>,
     pub machine: Option<Spanned<String>>,
-    pub params: &'a [Entry],
+    /// Given parameters; `None` when `params:` is not a mapping (already reported), so missing
+    /// required parameters are not reported on top.
+    pub params: Option<&'a [Entry]>,
+    /// Inputs that could be read.
     pub inputs: Vec<RawInput>,
+    /// Every port named under `inputs:`, readable or not; `None` when `inputs:` is not a
+    /// mapping. Used so that a badly written input is not also reported as missing.
+    pub named_ports: Option<Vec<String>>,
     pub outputs: Option<Vec<Spanned<String>>>,
     pub restart: RestartPolicy,
 }
@@ -70,10 +76,18 @@ pub(crate) fn read<'a>(root: &'a Node, p: &mut Problems) -> Option<RawGraph<'a>>
             None
         }
     };
-    let mode = top.get("mode").and_then(|n| read_mode(n, p)).unwrap_or(Graph::DEFAULT_MODE);
-    let window =
-        top.get("window").and_then(|n| shape::count(n, "`window`", 1, p)).unwrap_or(Graph::DEFAULT_WINDOW);
-    let queue = top.get("queue").and_then(|n| shape::count(n, "`queue`", 1, p)).unwrap_or(Graph::DEFAULT_QUEUE);
+    let mode = top
+        .get("mode")
+        .and_then(|n| read_mode(n, p))
+        .unwrap_or(Graph::DEFAULT_MODE);
+    let window = top
+        .get("window")
+        .and_then(|n| shape::count(n, "`window`", 1, p))
+        .unwrap_or(Graph::DEFAULT_WINDOW);
+    let queue = top
+        .get("queue")
+        .and_then(|n| shape::count(n, "`queue`", 1, p))
+        .unwrap_or(Graph::DEFAULT_QUEUE);
     let machines = top.get("zenoh").map(|n| read_zenoh(n, p)).unwrap_or_default();
     let nodes = match top.get("nodes") {
         Some(node) => read_nodes(node, p),
@@ -82,7 +96,14 @@ pub(crate) fn read<'a>(root: &'a Node, p: &mut Problems) -> Option<RawGraph<'a>>
             Vec::new()
         }
     };
-    Some(RawGraph { name, mode, window, queue, machines, nodes })
+    Some(RawGraph {
+        name,
+        mode,
+        window,
+        queue,
+        machines,
+        nodes,
+    })
 }
 
 fn read_mode(node: &Node, p: &mut Problems) -> Option<Mode> {
@@ -91,7 +112,10 @@ fn read_mode(node: &Node, p: &mut Problems) -> Option<Mode> {
         "lockstep" => Some(Mode::Lockstep),
         "live" => Some(Mode::Live),
         other => {
-            p.error(text.at, format!("unknown mode `{other}`; use `lockstep` or `live`"));
+            p.error(
+                text.at,
+                format!("unknown mode `{other}`; use `lockstep` or `live`"),
+            );
             None
         }
     }
@@ -108,18 +132,34 @@ fn read_zenoh(node: &Node, p: &mut Problems) -> Vec<RawMachine> {
         return Vec::new();
     };
     if entries.is_empty() {
-        p.error(machines.at, "`zenoh.machines` is empty; declare at least one machine or leave it out");
+        p.error(
+            machines.at,
+            "`zenoh.machines` is empty; declare at least one machine or leave it out",
+        );
     }
     entries.iter().map(|e| read_machine(e, p)).collect()
 }
 
 fn read_machine(entry: &Entry, p: &mut Problems) -> RawMachine {
-    let name = Spanned { value: entry.key.clone(), at: entry.key_at };
+    let name = Spanned {
+        value: entry.key.clone(),
+        at: entry.key_at,
+    };
     if !evseg_schemas::keys::is_valid_chunk(&name.value) {
-        p.error(name.at, format!("invalid machine name `{}`: use ASCII letters, digits, `-` and `_`", name.value));
+        p.error(
+            name.at,
+            format!(
+                "invalid machine name `{}`: use ASCII letters, digits, `-` and `_`",
+                name.value
+            ),
+        );
     }
     let what = format!("machine `{}`", name.value);
-    let mut machine = RawMachine { name, listen: Vec::new(), connect: Vec::new() };
+    let mut machine = RawMachine {
+        name,
+        listen: Vec::new(),
+        connect: Vec::new(),
+    };
     let Some(fields) = shape::mapping(&entry.value, &what, MACHINE_KEYS, p) else {
         return machine;
     };
@@ -131,7 +171,10 @@ fn read_machine(entry: &Entry, p: &mut Problems) -> RawMachine {
             } else {
                 p.error(
                     endpoint.at,
-                    format!("`{}` is not a Zenoh endpoint; write `protocol/address`, e.g. `tcp/127.0.0.1:7447`", endpoint.value),
+                    format!(
+                        "`{}` is not a Zenoh endpoint; write `protocol/address`, e.g. `tcp/127.0.0.1:7447`",
+                        endpoint.value
+                    ),
                 );
             }
         }
@@ -153,7 +196,13 @@ fn is_endpoint(text: &str) -> bool {
 
 fn read_nodes<'a>(node: &'a Node, p: &mut Problems) -> Vec<RawNode<'a>> {
     let Value::Seq(items) = &node.value else {
-        p.error(node.at, format!("`nodes` must be a list of nodes (`- id: ...`), got {}", node.describe()));
+        p.error(
+            node.at,
+            format!(
+                "`nodes` must be a list of nodes (`- id: ...`), got {}",
+                node.describe()
+            ),
+        );
         return Vec::new();
     };
     if items.is_empty() {
@@ -174,25 +223,55 @@ fn read_node<'a>(node: &'a Node, p: &mut Problems) -> Option<RawNode<'a>> {
     let run = match fields.get("run") {
         Some(n) => shape::string(n, "`run`", p),
         None => {
-            p.error(fields.at, "this node has no `run` (the binary that implements it)");
+            p.error(
+                fields.at,
+                "this node has no `run` (the binary that implements it)",
+            );
             None
         }
     };
-    let machine = fields.get("machine").and_then(|n| shape::string(n, "`machine`", p));
-    let params = fields.get("params").and_then(|n| shape::entries(n, "`params`", p)).unwrap_or(&[]);
-    let inputs = fields.get("inputs").map(|n| read_inputs(n, p)).unwrap_or_default();
-    let outputs = fields.get("outputs").and_then(|n| shape::string_list(n, "`outputs`", p));
-    let restart = fields.get("restart").and_then(|n| read_restart(n, p)).unwrap_or_default();
-    Some(RawNode { at: node.at, id, run, machine, params, inputs, outputs, restart })
+    let machine = fields
+        .get("machine")
+        .and_then(|n| shape::string(n, "`machine`", p));
+    let params = match fields.get("params") {
+        Some(n) => shape::entries(n, "`params`", p),
+        None => Some(&[][..]),
+    };
+    let (inputs, named_ports) = match fields.get("inputs") {
+        Some(n) => read_inputs(n, p),
+        None => (Vec::new(), Some(Vec::new())),
+    };
+    let outputs = fields
+        .get("outputs")
+        .and_then(|n| shape::string_list(n, "`outputs`", p));
+    let restart = fields
+        .get("restart")
+        .and_then(|n| read_restart(n, p))
+        .unwrap_or_default();
+    Some(RawNode {
+        at: node.at,
+        id,
+        run,
+        machine,
+        params,
+        inputs,
+        named_ports,
+        outputs,
+        restart,
+    })
 }
 
-fn read_inputs(node: &Node, p: &mut Problems) -> Vec<RawInput> {
+/// The readable inputs and the names of all ports given (`None` when not a mapping).
+fn read_inputs(node: &Node, p: &mut Problems) -> (Vec<RawInput>, Option<Vec<String>>) {
     let Some(entries) = shape::entries(node, "`inputs` (port: node/output)", p) else {
-        return Vec::new();
+        return (Vec::new(), None);
     };
     let mut inputs = Vec::new();
     for entry in entries {
-        let port = Spanned { value: entry.key.clone(), at: entry.key_at };
+        let port = Spanned {
+            value: entry.key.clone(),
+            at: entry.key_at,
+        };
         let what = format!("input `{}`", port.value);
         let read = match &entry.value.value {
             Value::Map(_) => read_input_object(&entry.value, &what, p),
@@ -201,7 +280,9 @@ fn read_inputs(node: &Node, p: &mut Problems) -> Vec<RawInput> {
                 let got = entry.value.describe();
                 p.error(
                     entry.value.at,
-                    format!("{what} must be `node/output` or `{{ from: node/output, feedback: true }}`, got {got}"),
+                    format!(
+                        "{what} must be `node/output` or `{{ from: node/output, feedback: true }}`, got {got}"
+                    ),
                 );
                 None
             }
@@ -210,16 +291,22 @@ fn read_inputs(node: &Node, p: &mut Problems) -> Vec<RawInput> {
             inputs.push(RawInput { port, from, feedback });
         }
     }
-    inputs
+    (inputs, Some(entries.iter().map(|e| e.key.clone()).collect()))
 }
 
 fn read_input_object(node: &Node, what: &str, p: &mut Problems) -> Option<(Spanned<String>, bool)> {
     let fields = shape::mapping(node, what, INPUT_KEYS, p)?;
-    let feedback = fields.get("feedback").and_then(|n| shape::boolean(n, "`feedback`", p)).unwrap_or(false);
+    let feedback = fields
+        .get("feedback")
+        .and_then(|n| shape::boolean(n, "`feedback`", p))
+        .unwrap_or(false);
     match fields.get("from") {
         Some(n) => shape::string(n, "`from`", p).map(|from| (from, feedback)),
         None => {
-            p.error(fields.at, format!("{what} has no `from` (the `node/output` it reads)"));
+            p.error(
+                fields.at,
+                format!("{what} has no `from` (the `node/output` it reads)"),
+            );
             None
         }
     }
@@ -233,7 +320,10 @@ fn read_restart(node: &Node, p: &mut Problems) -> Option<RestartPolicy> {
             "never" => Restart::Never,
             "on-failure" => Restart::OnFailure,
             other => {
-                p.error(text.at, format!("unknown restart policy `{other}`; use `never` or `on-failure`"));
+                p.error(
+                    text.at,
+                    format!("unknown restart policy `{other}`; use `never` or `on-failure`"),
+                );
                 Restart::Never
             }
         };

@@ -25,9 +25,21 @@ impl<'a> Fields<'a> {
 
 /// Reads `node` as a mapping called `what` ("a node", "the top level", ...) whose keys must be
 /// among `allowed`. Unknown keys are reported (and ignored); `None` when it is not a mapping.
-pub(crate) fn mapping<'a>(node: &'a Node, what: &str, allowed: &[&str], p: &mut Problems) -> Option<Fields<'a>> {
+pub(crate) fn mapping<'a>(
+    node: &'a Node,
+    what: &str,
+    allowed: &[&str],
+    p: &mut Problems,
+) -> Option<Fields<'a>> {
     let Value::Map(entries) = &node.value else {
-        p.error(node.at, format!("{what} must be a mapping with keys {}, got {}", name_list(allowed), node.describe()));
+        p.error(
+            node.at,
+            format!(
+                "{what} must be a mapping with keys {}, got {}",
+                name_list(allowed),
+                node.describe()
+            ),
+        );
         return None;
     };
     for entry in entries {
@@ -51,7 +63,10 @@ pub(crate) fn entries<'a>(node: &'a Node, what: &str, p: &mut Problems) -> Optio
     match &node.value {
         Value::Map(entries) => Some(entries),
         _ => {
-            p.error(node.at, format!("{what} must be a mapping, got {}", node.describe()));
+            p.error(
+                node.at,
+                format!("{what} must be a mapping, got {}", node.describe()),
+            );
             None
         }
     }
@@ -60,13 +75,25 @@ pub(crate) fn entries<'a>(node: &'a Node, what: &str, p: &mut Problems) -> Optio
 /// A string value.
 pub(crate) fn string(node: &Node, what: &str, p: &mut Problems) -> Option<Spanned<String>> {
     match &node.value {
-        Value::Str(s) => Some(Spanned { value: s.clone(), at: node.at }),
+        Value::Str(s) => Some(Spanned {
+            value: s.clone(),
+            at: node.at,
+        }),
         Value::Int(_) | Value::Float(_) | Value::Bool(_) => {
-            p.error(node.at, format!("{what} must be a string, got {} (quote it to use it as text)", node.describe()));
+            p.error(
+                node.at,
+                format!(
+                    "{what} must be a string, got {} (quote it to use it as text)",
+                    node.describe()
+                ),
+            );
             None
         }
         _ => {
-            p.error(node.at, format!("{what} must be a string, got {}", node.describe()));
+            p.error(
+                node.at,
+                format!("{what} must be a string, got {}", node.describe()),
+            );
             None
         }
     }
@@ -87,7 +114,10 @@ pub(crate) fn count(node: &Node, what: &str, min: u32, p: &mut Problems) -> Opti
             }
         },
         _ => {
-            p.error(node.at, format!("{what} must be an integer >= {min}, got {}", node.describe()));
+            p.error(
+                node.at,
+                format!("{what} must be an integer >= {min}, got {}", node.describe()),
+            );
             None
         }
     }
@@ -98,7 +128,10 @@ pub(crate) fn boolean(node: &Node, what: &str, p: &mut Problems) -> Option<bool>
     match &node.value {
         Value::Bool(b) => Some(*b),
         _ => {
-            p.error(node.at, format!("{what} must be true or false, got {}", node.describe()));
+            p.error(
+                node.at,
+                format!("{what} must be true or false, got {}", node.describe()),
+            );
             None
         }
     }
@@ -107,8 +140,16 @@ pub(crate) fn boolean(node: &Node, what: &str, p: &mut Problems) -> Option<bool>
 /// A list of strings; wrong items are reported and left out.
 pub(crate) fn string_list(node: &Node, what: &str, p: &mut Problems) -> Option<Vec<Spanned<String>>> {
     let Value::Seq(items) = &node.value else {
-        p.error(node.at, format!("{what} must be a list of strings, got {}", node.describe()));
+        p.error(
+            node.at,
+            format!("{what} must be a list of strings, got {}", node.describe()),
+        );
         return None;
     };
-    Some(items.iter().filter_map(|item| string(item, &format!("each item of {what}"), p)).collect())
+    Some(
+        items
+            .iter()
+            .filter_map(|item| string(item, &format!("each item of {what}"), p))
+            .collect(),
+    )
 }

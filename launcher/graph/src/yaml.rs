@@ -88,6 +88,8 @@ struct Frame {
     at: Span,
     anchor: usize,
     open: Open,
+    /// The bracket that opened a flow collection (`[` or `{`); `None` for block style.
+    flow: Option<char>,
 }
 
 /// Builds the tree from parser events.
@@ -115,8 +117,7 @@ pub(crate) fn parse(text: &str, problems: &mut Problems) -> Option<Node> {
         let (event, span) = match next {
             Ok(ok) => ok,
             Err(e) => {
-                let message = format!("YAML syntax error: {}", e.info());
-                builder.problems.error(span_of(e.marker()), message);
+                builder.syntax_error(text, e.marker(), e.info());
                 return None;
             }
         };
@@ -137,9 +138,20 @@ pub(crate) fn parse(text: &str, problems: &mut Problems) -> Option<Node> {
             }
             Event::Alias(id) => builder.alias(id, at),
             Event::Scalar(text, style, anchor, tag) => builder.scalar(text, style, anchor, tag, at),
-            Event::SequenceStart(anchor, tag) => builder.start(Open::Seq(Vec::new()), anchor, tag, "seq", at),
+            Event::SequenceStart(anchor, tag) => {
+                let flow = (span.end.index() > span.start.index()).then_some('[');
+                builder.start(Open::Seq(Vec::new()), anchor, tag, "seq", at, flow)
+            }
             Event::MappingStart(anchor, tag) => {
-                builder.start(Open::Map(Vec::new(), KeyState::Expect), anchor, tag, "map", at)
+                let flow = (span.end.index() > span.start.index()).then_some('{');
+                builder.start(
+                    Open::Map(Vec::new(), KeyState::Expect),
+                    anchor,
+                    tag,
+                    "map",
+                    at,
+                    flow,
+                )
             }
             Event::SequenceEnd | Event::MappingEnd => builder.end(),
         };
@@ -151,6 +163,32 @@ pub(crate) fn parse(text: &str, problems: &mut Problems) -> Option<Node> {
 }
 
 impl Builder<'_> {
+    /// Reports a syntax error at the parser's position, with two hints the parser does not give:
+    /// a tab is reported where it is (the parser points at the scalar before it), and an open
+    /// flow bracket is named (an unclosed `[` is only noticed lines later).
+    fn syntax_error(&mut self, text: &str, marker: &Marker, info: &str) {
+        let mut at = span_of(marker);
+        let mut message = format!("YAML syntax error: {info}");
+        if info.contains("tab") {
+            if let Some(tab) = position_of_char(text, marker.index(), '\t') {
+                at = tab;
+            }
+            message += " (YAML does not allow tabs for indentation; use spaces)";
+        }
+        if let Some(frame) = self.stack.iter().rev().find(|f| f.flow.is_some()) {
+            let (open, close) = if frame.flow == Some('[') {
+                ('[', ']')
+            } else {
+                ('{', '}')
+            };
+            message += &format!(
+                "; the `{open}` opened at line {}, column {} may lack its `{close}`",
+                frame.at.line, frame.at.column
+            );
+        }
+        self.problems.error(at, message);
+    }
+
     /// Counts `n` more values against [`MAX_VALUES`]; false (with an error) when over.
     fn spend(&mut self, n: usize, at: Span) -> bool {
         self.values += n;
@@ -244,7 +282,15 @@ impl Builder<'_> {
         resolved
     }
 
-    fn start(&mut self, open: Open, anchor: usize, tag: Option<Cow<'_, Tag>>, core: &str, at: Span) -> bool {
+    fn start(
+        &mut self,
+        open: Open,
+        anchor: usize,
+        tag: Option<Cow<'_, Tag>>,
+        core: &str,
+        at: Span,
+        flow: Option<char>,
+    ) -> bool {
         if let Some(tag) = tag
             && !(tag.is_yaml_core_schema() && tag.suffix == core)
         {
@@ -261,7 +307,12 @@ impl Builder<'_> {
         if !self.spend(1, at) {
             return false;
         }
-        self.stack.push(Frame { at, anchor, open });
+        self.stack.push(Frame {
+            at,
+            anchor,
+            open,
+            flow,
+        });
         true
     }
 
@@ -335,6 +386,23 @@ impl Builder<'_> {
 /// anchor's positions (the text they come from).
 fn relocate_top(node: &mut Node, at: Span) {
     node.at = at;
+}
+
+/// Position of the first `wanted` character at or after character index `from`.
+fn position_of_char(text: &str, from: usize, wanted: char) -> Option<Span> {
+    let (mut line, mut column) = (1, 1);
+    for (i, c) in text.chars().enumerate() {
+        if i >= from && c == wanted {
+            return Some(Span::new(line, column));
+        }
+        if c == '\n' {
+            line += 1;
+            column = 1;
+        } else {
+            column += 1;
+        }
+    }
+    None
 }
 
 /// Number of values in `node` (itself included).

@@ -22,12 +22,22 @@ fn valid_graph_resolves_with_defaults_consumers_and_order() {
     let source = graph.node("source").unwrap();
     assert_eq!(source.binary, "evseg-source");
     assert_eq!(source.machine, "local");
-    assert_eq!(json!(source.params), json!({ "kind": "synthetic", "seconds": 5, "seed": 7 }));
+    assert_eq!(
+        json!(source.params),
+        json!({ "kind": "synthetic", "seconds": 5, "seed": 7 })
+    );
     assert_eq!(source.span, Span::new(8, 5));
     assert_eq!(source.param_spans["seconds"], Span::new(10, 15));
     let events = source.output("events").unwrap();
     assert_eq!(events.schema, "evseg.EventPacket");
-    assert_eq!(events.consumers, [Consumer { node: "slicer".into(), port: "events".into(), feedback: false }]);
+    assert_eq!(
+        events.consumers,
+        [Consumer {
+            node: "slicer".into(),
+            port: "events".into(),
+            feedback: false
+        }]
+    );
     assert_eq!(source.output("truth").unwrap().consumers[0].port, "truth");
 
     let slicer = graph.node("slicer").unwrap();
@@ -36,27 +46,48 @@ fn valid_graph_resolves_with_defaults_consumers_and_order() {
     assert_eq!(
         slicer.outputs[0].consumers,
         [
-            Consumer { node: "sink".into(), port: "slices".into(), feedback: false },
-            Consumer { node: "tracker".into(), port: "slices".into(), feedback: false },
+            Consumer {
+                node: "sink".into(),
+                port: "slices".into(),
+                feedback: false
+            },
+            Consumer {
+                node: "tracker".into(),
+                port: "slices".into(),
+                feedback: false
+            },
         ]
     );
     assert_eq!(json!(slicer.params), json!({ "window_ms": 30.0, "imu": true }));
-    assert_eq!(slicer.inputs.iter().map(|i| i.port.as_str()).collect::<Vec<_>>(), ["events", "truth"]);
+    assert_eq!(
+        slicer.inputs.iter().map(|i| i.port.as_str()).collect::<Vec<_>>(),
+        ["events", "truth"]
+    );
     assert_eq!(slicer.inputs[0].span, Span::new(14, 7));
 
     let sink = graph.node("sink").unwrap();
-    assert_eq!(json!(sink.params), json!({ "path": "out.txt", "tags": [], "format": { "csv": true } }));
+    assert_eq!(
+        json!(sink.params),
+        json!({ "path": "out.txt", "tags": [], "format": { "csv": true } })
+    );
     assert!(sink.outputs.is_empty());
     assert_eq!(sink.restart.policy, Restart::Never);
 
     let tracker = graph.node("tracker").unwrap();
     let previous = tracker.input("previous").unwrap();
     assert!(previous.feedback);
-    assert_eq!((previous.from_node.as_str(), previous.from_output.as_str()), ("tracker", "tracks"));
+    assert_eq!(
+        (previous.from_node.as_str(), previous.from_output.as_str()),
+        ("tracker", "tracks")
+    );
     assert_eq!(previous.schema, "evseg.Tracks");
     assert_eq!(
         tracker.output("tracks").unwrap().consumers,
-        [Consumer { node: "tracker".into(), port: "previous".into(), feedback: true }]
+        [Consumer {
+            node: "tracker".into(),
+            port: "previous".into(),
+            feedback: true
+        }]
     );
     assert_eq!(tracker.restart.policy, Restart::OnFailure);
     assert_eq!(tracker.restart.max, 3);
@@ -67,7 +98,10 @@ fn valid_graph_resolves_with_defaults_consumers_and_order() {
 #[test]
 fn keys_machines_and_instance() {
     let graph = check(VALID).unwrap_or_else(|e| panic!("{e}"));
-    assert_eq!(graph.data_key("slicer", "slices").as_deref(), Some("evseg/demo/data/slicer/slices"));
+    assert_eq!(
+        graph.data_key("slicer", "slices").as_deref(),
+        Some("evseg/demo/data/slicer/slices")
+    );
     assert_eq!(graph.data_key("slicer", "truth"), None, "not published");
     assert_eq!(graph.data_key("nobody", "x"), None);
     let keys = graph.node_keys("tracker").unwrap();
@@ -80,7 +114,10 @@ fn keys_machines_and_instance() {
     assert!(graph.nodes_on("base").is_empty());
 
     let b = graph.clone().with_instance("demo-b").unwrap();
-    assert_eq!(b.data_key("source", "events").as_deref(), Some("evseg/demo-b/data/source/events"));
+    assert_eq!(
+        b.data_key("source", "events").as_deref(),
+        Some("evseg/demo-b/data/source/events")
+    );
     match graph.with_instance("a/b") {
         Err(GraphError::InvalidInstance { name }) => assert_eq!(name, "a/b"),
         other => panic!("accepted a bad instance name: {other:?}"),
@@ -149,7 +186,10 @@ fn canonical_json_ignores_layout_and_key_order() {
     assert_ne!(a.node("source").unwrap().span, b.node("source").unwrap().span);
     let dump: serde_json::Value = serde_json::from_str(&a.canonical_json()).unwrap();
     assert_eq!(dump["nodes"][0]["id"], "source");
-    assert_eq!(dump["nodes"][3]["restart"], json!({ "policy": "on-failure", "max": 3 }));
+    assert_eq!(
+        dump["nodes"][3]["restart"],
+        json!({ "policy": "on-failure", "max": 3 })
+    );
     assert_eq!(dump["mode"], "lockstep");
     assert!(dump["nodes"][0].get("span").is_none());
     assert!(dump.get("file").is_none());
@@ -187,7 +227,12 @@ fn feedback_cycle_accepted_and_the_same_cycle_unmarked_refused() {
         &unmarked,
         12,
         7,
-        &["cycle", "a -> b -> a", "feedback: true", "previous: { from: b/tracks, feedback: true }"],
+        &[
+            "cycle",
+            "a -> b -> a",
+            "feedback: true",
+            "previous: { from: b/tracks, feedback: true }",
+        ],
     );
 }
 
@@ -209,7 +254,10 @@ fn load_reads_files_and_reports_io_and_encoding_errors() {
     match evseg_graph::load(&path, &common::resolver) {
         Err(GraphError::Invalid(d)) => {
             assert_eq!((d.len(), d[0].line, d[0].column), (1, 2, 5), "{d:?}");
-            assert!(d[0].message.contains("not UTF-8") && d[0].message.contains("byte offset 13"), "{d:?}");
+            assert!(
+                d[0].message.contains("not UTF-8") && d[0].message.contains("byte offset 13"),
+                "{d:?}"
+            );
         }
         other => panic!("{other:?}"),
     }
@@ -219,5 +267,8 @@ fn load_reads_files_and_reports_io_and_encoding_errors() {
 fn error_display_lists_every_diagnostic() {
     let err = check_str("x.yaml", "name: [\n", &common::resolver).unwrap_err();
     let shown = err.to_string();
-    assert!(shown.starts_with("x.yaml:2:1: error: YAML syntax error"), "{shown}");
+    assert!(
+        shown.starts_with("x.yaml:2:1: error: YAML syntax error"),
+        "{shown}"
+    );
 }

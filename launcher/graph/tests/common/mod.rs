@@ -6,15 +6,28 @@ use evseg_schemas::describe::{InputPort, NodeDescription, OutputPort, Param};
 use serde_json::json;
 
 fn input(name: &str, schema: &str, optional: bool) -> InputPort {
-    InputPort { name: name.into(), schema: schema.into(), optional, doc: String::new() }
+    InputPort {
+        name: name.into(),
+        schema: schema.into(),
+        optional,
+        doc: String::new(),
+    }
 }
 
 fn output(name: &str, schema: &str) -> OutputPort {
-    OutputPort { name: name.into(), schema: schema.into(), doc: String::new() }
+    OutputPort {
+        name: name.into(),
+        schema: schema.into(),
+        doc: String::new(),
+    }
 }
 
 fn param(name: &str, default: serde_json::Value) -> Param {
-    Param { name: name.into(), default, doc: String::new() }
+    Param {
+        name: name.into(),
+        default,
+        doc: String::new(),
+    }
 }
 
 /// `evseg-source`, `evseg-slicer`, `evseg-sink`, `evseg-loop`; anything else is "not found".
@@ -22,27 +35,50 @@ pub fn resolver(binary: &str) -> Result<NodeDescription, String> {
     let (inputs, outputs, params) = match binary {
         "evseg-source" => (
             vec![],
-            vec![output("events", "evseg.EventPacket"), output("truth", "evseg.Truth")],
-            vec![param("kind", json!("synthetic")), param("seconds", json!(3)), param("seed", json!(7))],
+            vec![
+                output("events", "evseg.EventPacket"),
+                output("truth", "evseg.Truth"),
+            ],
+            vec![
+                param("kind", json!("synthetic")),
+                param("seconds", json!(3)),
+                param("seed", json!(7)),
+            ],
         ),
         "evseg-slicer" => (
-            vec![input("events", "evseg.EventPacket", false), input("truth", "evseg.Truth", true)],
+            vec![
+                input("events", "evseg.EventPacket", false),
+                input("truth", "evseg.Truth", true),
+            ],
             vec![output("slices", "evseg.Slice"), output("truth", "evseg.Truth")],
             vec![param("window_ms", json!(30.0)), param("imu", json!(true))],
         ),
         "evseg-sink" => (
             vec![input("slices", "evseg.Slice", false)],
             vec![],
-            vec![param("path", json!(null)), param("tags", json!([])), param("format", json!({"csv": true}))],
+            vec![
+                param("path", json!(null)),
+                param("tags", json!([])),
+                param("format", json!({"csv": true})),
+            ],
         ),
         "evseg-loop" => (
-            vec![input("slices", "evseg.Slice", false), input("previous", "evseg.Tracks", false)],
+            vec![
+                input("slices", "evseg.Slice", false),
+                input("previous", "evseg.Tracks", false),
+            ],
             vec![output("tracks", "evseg.Tracks")],
             vec![],
         ),
         other => return Err(format!("`{other}` not found next to the launcher or on PATH")),
     };
-    Ok(NodeDescription { binary: binary.into(), summary: String::new(), inputs, outputs, params })
+    Ok(NodeDescription {
+        binary: binary.into(),
+        summary: String::new(),
+        inputs,
+        outputs,
+        params,
+    })
 }
 
 /// The lines joined with newlines (line i of the slice is line i+1 of the file).
@@ -70,7 +106,11 @@ pub fn single_error(lines: &[&str], line: usize, column: usize, words: &[&str]) 
     let found = errors(lines);
     assert_eq!(found.len(), 1, "expected one error, got {found:#?}");
     let d = &found[0];
-    assert_eq!((d.file.as_str(), d.line, d.column), ("g.yaml", line, column), "wrong position: {d}");
+    assert_eq!(
+        (d.file.as_str(), d.line, d.column),
+        ("g.yaml", line, column),
+        "wrong position: {d}"
+    );
     for word in words {
         assert!(d.message.contains(word), "message {:?} lacks {word:?}", d.message);
     }
@@ -80,27 +120,27 @@ pub fn single_error(lines: &[&str], line: usize, column: usize, words: &[&str]) 
 /// A valid graph: source -> slicer -> sink and slicer -> tracker, with the tracker feeding back
 /// into itself. The sink comes first in the file on purpose (topological order must move it).
 pub const VALID: &[&str] = &[
-    "name: demo",                                           // 1
-    "mode: lockstep",                                       // 2
-    "nodes:",                                               // 3
-    "  - id: sink",                                         // 4
-    "    run: evseg-sink",                                  // 5
-    "    params: { path: out.txt }",                        // 6
-    "    inputs: { slices: slicer/slices }",                // 7
-    "  - id: source",                                       // 8
-    "    run: evseg-source",                                // 9
-    "    params: { seconds: 5 }",                           // 10
-    "  - id: slicer",                                       // 11
-    "    run: evseg-slicer",                                // 12
-    "    inputs:",                                          // 13
-    "      events: source/events",                          // 14
-    "      truth: source/truth",                            // 15
-    "    outputs: [slices]",                                // 16
-    "  - id: tracker",                                      // 17
-    "    run: evseg-loop",                                  // 18
-    "    restart: { policy: on-failure }",                  // 19
-    "    inputs:",                                          // 20
-    "      slices: slicer/slices",                          // 21
+    "name: demo",                                               // 1
+    "mode: lockstep",                                           // 2
+    "nodes:",                                                   // 3
+    "  - id: sink",                                             // 4
+    "    run: evseg-sink",                                      // 5
+    "    params: { path: out.txt }",                            // 6
+    "    inputs: { slices: slicer/slices }",                    // 7
+    "  - id: source",                                           // 8
+    "    run: evseg-source",                                    // 9
+    "    params: { seconds: 5 }",                               // 10
+    "  - id: slicer",                                           // 11
+    "    run: evseg-slicer",                                    // 12
+    "    inputs:",                                              // 13
+    "      events: source/events",                              // 14
+    "      truth: source/truth",                                // 15
+    "    outputs: [slices]",                                    // 16
+    "  - id: tracker",                                          // 17
+    "    run: evseg-loop",                                      // 18
+    "    restart: { policy: on-failure }",                      // 19
+    "    inputs:",                                              // 20
+    "      slices: slicer/slices",                              // 21
     "      previous: { from: tracker/tracks, feedback: true }", // 22
 ];
 
