@@ -113,6 +113,7 @@ pub(crate) fn parse(text: &str, problems: &mut Problems) -> Option<Node> {
     };
     let mut parser = Parser::new_from_str(text);
     let mut documents = 0usize;
+    let end = end_of(text);
     while let Some(next) = parser.next_event() {
         let (event, span) = match next {
             Ok(ok) => ok,
@@ -121,7 +122,9 @@ pub(crate) fn parse(text: &str, problems: &mut Problems) -> Option<Node> {
                 return None;
             }
         };
-        let at = span_of(&span.start);
+        // Empty values (`key:` with nothing after it) are placed at the next token, which can be
+        // the end of input after the last line; keep every position inside the text.
+        let at = span_of(&span.start).min(end);
         let ok = match event {
             Event::Nothing | Event::StreamStart | Event::DocumentEnd => true,
             Event::StreamEnd => break,
@@ -167,7 +170,8 @@ impl Builder<'_> {
     /// a tab is reported where it is (the parser points at the scalar before it), and an open
     /// flow bracket is named (an unclosed `[` is only noticed lines later).
     fn syntax_error(&mut self, text: &str, marker: &Marker, info: &str) {
-        let mut at = span_of(marker);
+        // The parser may place an end-of-input error after the last line; keep it in the text.
+        let mut at = span_of(marker).min(end_of(text));
         let mut message = format!("YAML syntax error: {info}");
         if info.contains("tab") {
             if let Some(tab) = position_of_char(text, marker.index(), '\t') {
@@ -403,6 +407,12 @@ fn position_of_char(text: &str, from: usize, wanted: char) -> Option<Span> {
         }
     }
     None
+}
+
+/// Position just after the last character of `text` (on its last line).
+fn end_of(text: &str) -> Span {
+    let last_line = text.rsplit('\n').next().unwrap_or("");
+    Span::new(text.matches('\n').count() + 1, last_line.chars().count() + 1)
 }
 
 /// Number of values in `node` (itself included).
