@@ -3,11 +3,11 @@
 
 use std::fmt;
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 /// A position in a source file. Both numbers are 1-based; the column counts characters (not
 /// bytes) from the start of the line.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Default, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Default, Serialize, Deserialize)]
 pub struct Span {
     /// Line number, 1-based.
     pub line: usize,
@@ -29,7 +29,7 @@ impl fmt::Display for Span {
 }
 
 /// One error found in a graph file.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Diagnostic {
     /// File name as given by the caller (usually the path of graph.yaml).
     pub file: String,

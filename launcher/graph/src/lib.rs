@@ -7,8 +7,7 @@
 //! either every problem found, as [`Diagnostic`]s (`file:line:column: error: message`), or the
 //! resolved [`Graph`]: defaults filled in, consumers of each output, nodes in topological order.
 //!
-//! Pure: no Zenoh, no processes. The format is documented in the `evseg` book and on
-//! [`check_str`].
+//! Pure: no Zenoh, no processes. The format is documented on [`check_str`].
 
 mod check;
 mod cycles;
@@ -115,6 +114,35 @@ pub fn load(path: &Path, resolver: Resolver<'_>) -> Result<Graph, GraphError> {
 ///       previous: { from: tracker/tracks, feedback: true }
 ///     outputs: [slices]    # default: every output of the binary
 ///     restart: { policy: on-failure, max: 3 }   # policy never (default) | on-failure
+/// ```
+///
+/// Example with an in-memory resolver (the launcher's runs `<binary> --describe`):
+///
+/// ```
+/// use evseg_schemas::describe::{NodeDescription, OutputPort};
+///
+/// let describe = |binary: &str| -> Result<NodeDescription, String> {
+///     match binary {
+///         "evseg-source" => Ok(NodeDescription {
+///             binary: binary.into(),
+///             summary: "makes events".into(),
+///             inputs: vec![],
+///             outputs: vec![OutputPort { name: "events".into(), schema: "evseg.EventPacket".into(), doc: "".into() }],
+///             params: vec![],
+///         }),
+///         _ => Err("not found".into()),
+///     }
+/// };
+/// let graph = evseg_graph::check_str("g.yaml", "name: demo\nnodes:\n  - { id: src, run: evseg-source }\n", &describe)
+///     .unwrap();
+/// assert_eq!(graph.data_key("src", "events").as_deref(), Some("evseg/demo/data/src/events"));
+///
+/// let err = evseg_graph::check_str("g.yaml", "name: demo\nnodes:\n  - { id: src, run: evseg-sorce }\n", &describe)
+///     .unwrap_err();
+/// assert_eq!(
+///     err.to_string(),
+///     "g.yaml:3:21: error: cannot get the description of binary `evseg-sorce`: not found"
+/// );
 /// ```
 pub fn check_str(file_name: &str, text: &str, resolver: Resolver<'_>) -> Result<Graph, GraphError> {
     let mut problems = Problems::new(file_name);

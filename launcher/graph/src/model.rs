@@ -2,18 +2,19 @@
 //!
 //! Serializing a [`Graph`] (serde) gives its canonical form: the same graph text gives the same
 //! JSON, whatever the key order in the YAML, and source positions are left out so that comments
-//! and layout do not change it. The launcher writes it to the run folder and hashes it.
+//! and layout do not change it. The launcher writes it to the run folder and hashes it. It reads
+//! back with serde (positions then default to 0:0 and `file` to empty).
 
 use std::collections::BTreeMap;
 
 use evseg_schemas::keys;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::GraphError;
 use crate::diagnostic::{Diagnostic, Span};
 
 /// How the nodes pace each other.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Mode {
     /// Lossless and deterministic: a producer keeps at most [`Graph::window`] messages in flight
@@ -35,7 +36,7 @@ impl Mode {
 }
 
 /// One machine of a distributed run and its Zenoh endpoints.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Machine {
     /// Machine name (`evseg run --machine NAME` starts this machine's nodes).
     pub name: String,
@@ -62,7 +63,7 @@ impl Machine {
 }
 
 /// When the launcher restarts a node whose process failed.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Restart {
     /// A failed node fails the run.
@@ -73,7 +74,7 @@ pub enum Restart {
 }
 
 /// A node's restart policy (`restart: { policy, max }`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub struct RestartPolicy {
     /// When to restart.
     pub policy: Restart,
@@ -102,7 +103,7 @@ impl Default for RestartPolicy {
 }
 
 /// One wired input port of a node.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct InputSpec {
     /// Port name (from the node's description).
     pub port: String,
@@ -121,7 +122,7 @@ pub struct InputSpec {
 }
 
 /// A node that consumes an output.
-#[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord, Serialize)]
+#[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize)]
 pub struct Consumer {
     /// Id of the consuming node.
     pub node: String,
@@ -132,7 +133,7 @@ pub struct Consumer {
 }
 
 /// One published output of a node.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct OutputSpec {
     /// Output name (from the node's description).
     pub name: String,
@@ -144,7 +145,7 @@ pub struct OutputSpec {
 }
 
 /// A checked node.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct NodeSpec {
     /// Node id, unique in the graph, a valid key chunk.
     pub id: String,
@@ -182,7 +183,7 @@ impl NodeSpec {
 }
 
 /// A port with the Zenoh key it uses in one graph instance.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 pub struct PortKey {
     /// Port name on the node.
     pub port: String,
@@ -195,7 +196,7 @@ pub struct PortKey {
 }
 
 /// Every data key one node reads and writes.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 pub struct NodeKeys {
     /// Inputs, in the node's input order.
     pub inputs: Vec<PortKey>,
@@ -204,7 +205,7 @@ pub struct NodeKeys {
 }
 
 /// A checked graph.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Graph {
     /// File it was read from, as given to the checker (not part of the canonical form).
     #[serde(skip)]

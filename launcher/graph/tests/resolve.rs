@@ -272,3 +272,11 @@ fn error_display_lists_every_diagnostic() {
         "{shown}"
     );
 }
+
+#[test]
+fn canonical_json_reads_back() {
+    let graph = check(VALID).unwrap_or_else(|e| panic!("{e}"));
+    let back: evseg_graph::Graph = serde_json::from_str(&graph.canonical_json()).unwrap();
+    assert_eq!(back.canonical_json(), graph.canonical_json());
+    assert_eq!(back.nodes[0].span, Span::default());
+}
