@@ -60,26 +60,30 @@ pub(crate) fn check(raw: &RawGraph<'_>, resolver: Resolver<'_>, p: &mut Problems
         .nodes
         .iter()
         .map(|node| {
-            let description = node.run.as_ref().and_then(|run| match &descriptions[&run.value] {
-                Ok(d) => Some(d),
-                Err(message) => {
-                    p.error(run.at, message.clone());
-                    None
-                }
-            });
+            let description = node
+                .run
+                .as_ref()
+                .and_then(|run| match descriptions.get(&run.value)? {
+                    Ok(d) => Some(d),
+                    Err(message) => {
+                        p.error(run.at, message.clone());
+                        None
+                    }
+                });
             check_node(node, description, &machines, p)
         })
         .collect();
 
     let edges = wire(&raw.nodes, &mut work, &index_of, p);
+    let plain_edges: Vec<Edge> = edges.iter().map(|w| w.edge).collect();
     for (i, node) in raw.nodes.iter().enumerate() {
         report_missing_inputs(i, node, &raw.nodes, &work, p);
     }
-    for cycle in cycles::find_cycles(raw.nodes.len(), &edges.iter().map(|w| w.edge).collect::<Vec<_>>()) {
+    for cycle in cycles::find_cycles(raw.nodes.len(), &plain_edges) {
         let closing = &edges[cycle.closing_edge];
         let input = &raw.nodes[closing.edge.to].inputs[closing.input];
         let mut names: Vec<String> = cycle.nodes.iter().map(|&i| node_name(&raw.nodes[i])).collect();
-        names.push(names[0].clone());
+        names.extend(names.first().cloned());
         p.error(
             input.port.at,
             format!(
@@ -95,7 +99,7 @@ pub(crate) fn check(raw: &RawGraph<'_>, resolver: Resolver<'_>, p: &mut Problems
         return None;
     }
     let name = raw.name.as_ref()?.value.clone();
-    let order = cycles::topological_order(raw.nodes.len(), &edges.iter().map(|w| w.edge).collect::<Vec<_>>());
+    let order = cycles::topological_order(raw.nodes.len(), &plain_edges);
     Some(Graph {
         file: p.file().to_string(),
         name,

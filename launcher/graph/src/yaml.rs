@@ -174,7 +174,9 @@ impl Builder<'_> {
         let mut at = span_of(marker).min(end_of(text));
         let mut message = format!("YAML syntax error: {info}");
         if info.contains("tab") {
-            if let Some(tab) = position_of_char(text, marker.index(), '\t') {
+            // From the start of the error's line: the parser may point just after the tab.
+            let line_start = marker.index().saturating_sub(marker.col());
+            if let Some(tab) = position_of_char(text, line_start, '\t') {
                 at = tab;
             }
             message += " (YAML does not allow tabs for indentation; use spaces)";
@@ -570,7 +572,7 @@ mod tests {
     #[test]
     fn syntax_errors_have_positions() {
         let e = errors("name: x\nnodes:\n\t- id: a\n");
-        assert_eq!((e[0].0, e[0].1), (3, 2));
+        assert_eq!((e[0].0, e[0].1), (3, 1));
         assert!(e[0].2.contains("tabs"), "{e:?}");
         let e = errors("nodes: [a, b\n");
         assert_eq!(e.len(), 1);
