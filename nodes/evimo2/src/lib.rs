@@ -9,8 +9,10 @@ pub mod pylit;
 pub mod reader;
 pub mod writer;
 
-pub use meta::{FrameTruth, MetaOptions, EVIMO2_IMU_TIME_OFFSET_S, EVIMO2_IMU_TO_CAMERA};
+pub use meta::{EVIMO2_IMU_TIME_OFFSET_S, EVIMO2_IMU_TO_CAMERA, FrameTruth, MetaOptions};
 pub use reader::{DepthFrame, DepthReader, EventReader, FrameEntry, MaskReader, ReadOptions, Sequence};
-pub use writer::{write_sequence, write_sequence_with, MetaForm, SequenceData, WriteOptions, DEFAULT_IMU_TOPIC};
+pub use writer::{
+    DEFAULT_IMU_TOPIC, MetaForm, SequenceData, WriteOptions, write_sequence, write_sequence_with,
+};
 
 pub use error::{Evimo2Error, Result};

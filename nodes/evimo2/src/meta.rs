@@ -32,9 +32,14 @@ pub fn meta_from_npy(arr: &NpyArray, file: &str) -> Result<PyValue> {
     match arr.header.dtype {
         DType::Object => meta_from_pickle(&arr.data, arr.header.data_offset, file),
         DType::Unicode(_) => {
-            let text = npy::decode_unicode(arr.header.dtype, arr.header.big_endian, &arr.data).map_err(|at| {
-                Evimo2Error::format(file, arr.header.data_offset + at as u64, "invalid code point in string")
-            })?;
+            let text =
+                npy::decode_unicode(arr.header.dtype, arr.header.big_endian, &arr.data).map_err(|at| {
+                    Evimo2Error::format(
+                        file,
+                        arr.header.data_offset + at as u64,
+                        "invalid code point in string",
+                    )
+                })?;
             pylit::parse(&text).map_err(|e| {
                 Evimo2Error::format(
                     file,
@@ -45,7 +50,10 @@ pub fn meta_from_npy(arr: &NpyArray, file: &str) -> Result<PyValue> {
         }
         _ => Err(Evimo2Error::invalid(
             file,
-            format!("meta has dtype '{}'; expected '|O' (pickled dict) or '<U..' (dict literal)", arr.header.descr),
+            format!(
+                "meta has dtype '{}'; expected '|O' (pickled dict) or '<U..' (dict literal)",
+                arr.header.descr
+            ),
         )),
     }
 }
@@ -72,7 +80,10 @@ fn meta_from_pickle(data: &[u8], data_offset: u64, file: &str) -> Result<PyValue
             return Err(Evimo2Error::format(
                 file,
                 data_offset,
-                format!("meta pickle holds {}, not a dict or an object array", pickle_type_name(&other)),
+                format!(
+                    "meta pickle holds {}, not a dict or an object array",
+                    pickle_type_name(&other)
+                ),
             ));
         }
     };
@@ -118,9 +129,11 @@ pub fn from_pickle(v: serde_pickle::Value) -> PyValue {
         V::Set(items) | V::FrozenSet(items) => {
             PyValue::List(items.into_iter().map(|h| from_pickle(h.into_value())).collect())
         }
-        V::Dict(map) => {
-            PyValue::Dict(map.into_iter().map(|(k, v)| (from_pickle(k.into_value()), from_pickle(v))).collect())
-        }
+        V::Dict(map) => PyValue::Dict(
+            map.into_iter()
+                .map(|(k, v)| (from_pickle(k.into_value()), from_pickle(v)))
+                .collect(),
+        ),
     }
 }
 
@@ -133,18 +146,27 @@ struct Field<'a> {
 
 impl<'a> Field<'a> {
     fn err(&self, message: impl Into<String>) -> Evimo2Error {
-        Evimo2Error::Meta { file: self.file.to_string(), path: self.path.clone(), message: message.into() }
+        Evimo2Error::Meta {
+            file: self.file.to_string(),
+            path: self.path.clone(),
+            message: message.into(),
+        }
     }
 
     fn key(&self, key: &str) -> Result<Field<'a>> {
-        self.opt(key)?.ok_or_else(|| self.err(format!("missing key '{key}'")))
+        self.opt(key)?
+            .ok_or_else(|| self.err(format!("missing key '{key}'")))
     }
 
     fn opt(&self, key: &str) -> Result<Option<Field<'a>>> {
         if !matches!(self.value, PyValue::Dict(_)) {
             return Err(self.err(format!("expected a dict, found {}", self.value.type_name())));
         }
-        Ok(self.value.get(key).map(|value| Field { file: self.file, path: format!("{}['{key}']", self.path), value }))
+        Ok(self.value.get(key).map(|value| Field {
+            file: self.file,
+            path: format!("{}['{key}']", self.path),
+            value,
+        }))
     }
 
     fn f64(&self) -> Result<f64> {
@@ -166,20 +188,30 @@ impl<'a> Field<'a> {
     }
 
     fn int(&self) -> Result<i128> {
-        self.value.as_i128().ok_or_else(|| self.err(format!("expected an integer, found {}", self.value.type_name())))
+        self.value
+            .as_i128()
+            .ok_or_else(|| self.err(format!("expected an integer, found {}", self.value.type_name())))
     }
 
     fn str(&self) -> Result<&'a str> {
-        self.value.as_str().ok_or_else(|| self.err(format!("expected a string, found {}", self.value.type_name())))
+        self.value
+            .as_str()
+            .ok_or_else(|| self.err(format!("expected a string, found {}", self.value.type_name())))
     }
 
     fn seq(&self) -> Result<Vec<Field<'a>>> {
-        let items =
-            self.value.as_seq().ok_or_else(|| self.err(format!("expected a list, found {}", self.value.type_name())))?;
+        let items = self
+            .value
+            .as_seq()
+            .ok_or_else(|| self.err(format!("expected a list, found {}", self.value.type_name())))?;
         Ok(items
             .iter()
             .enumerate()
-            .map(|(i, value)| Field { file: self.file, path: format!("{}[{i}]", self.path), value })
+            .map(|(i, value)| Field {
+                file: self.file,
+                path: format!("{}[{i}]", self.path),
+                value,
+            })
             .collect())
     }
 
@@ -192,7 +224,14 @@ impl<'a> Field<'a> {
                         PyValue::Str(s) => format!("{}['{s}']", self.path),
                         other => format!("{}[{other}]", self.path),
                     };
-                    (k, Field { file: self.file, path, value })
+                    (
+                        k,
+                        Field {
+                            file: self.file,
+                            path,
+                            value,
+                        },
+                    )
                 })
                 .collect()),
             other => Err(self.err(format!("expected a dict, found {}", other.type_name()))),
@@ -267,7 +306,11 @@ pub struct MetaContents {
 
 /// Converts the meta dict. `t0` = absolute time of the first event, seconds on the EVIMO2 clock.
 pub fn convert(meta: &PyValue, t0: f64, opts: &MetaOptions, file: &str) -> Result<MetaContents> {
-    let root = Field { file, path: String::new(), value: meta };
+    let root = Field {
+        file,
+        path: String::new(),
+        value: meta,
+    };
     let m = root.key("meta")?;
     let camera = camera_info(&m, t0, opts)?;
     let ros_time_offset_s = m.opt("ros_time_offset")?.map(|f| f.f64()).transpose()?;
@@ -291,7 +334,15 @@ pub fn convert(meta: &PyValue, t0: f64, opts: &MetaOptions, file: &str) -> Resul
             .collect::<Result<Vec<_>>>()?,
         None => frames.iter().filter_map(|f| f.camera).collect(),
     };
-    Ok(MetaContents { camera, ros_time_offset_s, imu_topics, imu_topic, imu, camera_poses, frames })
+    Ok(MetaContents {
+        camera,
+        ros_time_offset_s,
+        imu_topics,
+        imu_topic,
+        imu,
+        camera_poses,
+        frames,
+    })
 }
 
 fn camera_info(m: &Field<'_>, t0: f64, opts: &MetaOptions) -> Result<CameraInfo> {
@@ -308,12 +359,21 @@ fn camera_info(m: &Field<'_>, t0: f64, opts: &MetaOptions) -> Result<CameraInfo>
     let has_coefficients = ["k1", "k2", "p1", "p2"].iter().any(|k| m.value.get(k).is_some());
     let distortion = match model.as_deref() {
         Some("radtan" | "plumb_bob" | "pinhole") | None if model.is_some() || has_coefficients => {
-            Distortion::RadTan { k1: coef("k1")?, k2: coef("k2")?, p1: coef("p1")?, p2: coef("p2")?, k3: coef("k3")? }
+            Distortion::RadTan {
+                k1: coef("k1")?,
+                k2: coef("k2")?,
+                p1: coef("p1")?,
+                p2: coef("p2")?,
+                k3: coef("k3")?,
+            }
         }
         None => Distortion::None,
-        Some("equidistant" | "fisheye") => {
-            Distortion::Equidistant { k1: coef("k1")?, k2: coef("k2")?, k3: coef("k3")?, k4: coef("k4")? }
-        }
+        Some("equidistant" | "fisheye") => Distortion::Equidistant {
+            k1: coef("k1")?,
+            k2: coef("k2")?,
+            k3: coef("k3")?,
+            k4: coef("k4")?,
+        },
         Some("none") => Distortion::None,
         Some(other) => {
             return Err(m.key("dist_model")?.err(format!(
@@ -375,7 +435,10 @@ fn imu_samples(root: &Field<'_>, t0: f64, opts: &MetaOptions) -> Result<ImuParts
         };
     };
     let items = imu.dict_items()?;
-    let mut topics: Vec<String> = items.iter().filter_map(|(k, _)| k.as_str().map(str::to_string)).collect();
+    let mut topics: Vec<String> = items
+        .iter()
+        .filter_map(|(k, _)| k.as_str().map(str::to_string))
+        .collect();
     topics.sort();
     let wanted = match &opts.imu_topic {
         Some(w) => w.clone(),
@@ -388,7 +451,11 @@ fn imu_samples(root: &Field<'_>, t0: f64, opts: &MetaOptions) -> Result<ImuParts
         return Err(Evimo2Error::ImuTopic {
             file: root.file.to_string(),
             wanted,
-            available: if topics.is_empty() { "none".into() } else { topics.join(", ") },
+            available: if topics.is_empty() {
+                "none".into()
+            } else {
+                topics.join(", ")
+            },
         });
     };
     let samples = list
@@ -407,10 +474,18 @@ fn imu_samples(root: &Field<'_>, t0: f64, opts: &MetaOptions) -> Result<ImuParts
 
 /// The `cam` pose of a frame or trajectory entry, `None` when the entry has no `cam`.
 fn camera_pose(entry: &Field<'_>, t0: f64) -> Result<Option<CameraMotion>> {
-    let Some(cam) = entry.opt("cam")? else { return Ok(None) };
+    let Some(cam) = entry.opt("cam")? else {
+        return Ok(None);
+    };
     let ts = entry.num("ts")?;
     let (position, orientation) = cam.pose()?;
-    Ok(Some(CameraMotion { t: ts - t0, position, orientation, linear_velocity: None, angular_velocity: None }))
+    Ok(Some(CameraMotion {
+        t: ts - t0,
+        position,
+        orientation,
+        linear_velocity: None,
+        angular_velocity: None,
+    }))
 }
 
 fn frame(entry: &Field<'_>, index: usize, t0: f64) -> Result<FrameTruth> {
@@ -426,7 +501,9 @@ fn frame(entry: &Field<'_>, index: usize, t0: f64) -> Result<FrameTruth> {
     let mut objects = Vec::new();
     for (key, value) in entry.dict_items()? {
         let id = match key {
-            PyValue::Str(s) if !s.is_empty() && s.bytes().all(|b| b.is_ascii_digit()) => s.parse::<u32>().ok(),
+            PyValue::Str(s) if !s.is_empty() && s.bytes().all(|b| b.is_ascii_digit()) => {
+                s.parse::<u32>().ok()
+            }
             PyValue::Int(i) => u32::try_from(*i).ok(),
             _ => None,
         };
@@ -436,10 +513,20 @@ fn frame(entry: &Field<'_>, index: usize, t0: f64) -> Result<FrameTruth> {
         }
         let (position, orientation) = value.pose()?;
         let t = value.opt("ts")?.map_or(Ok(ts), |f| f.f64())? - t0;
-        objects.push(ObjectPose { id, t, position, orientation });
+        objects.push(ObjectPose {
+            id,
+            t,
+            position,
+            orientation,
+        });
     }
     objects.sort_by_key(|o| o.id);
-    Ok(FrameTruth { id, t: ts - t0, camera, objects })
+    Ok(FrameTruth {
+        id,
+        t: ts - t0,
+        camera,
+        objects,
+    })
 }
 
 fn s(x: &str) -> PyValue {
@@ -447,7 +534,11 @@ fn s(x: &str) -> PyValue {
 }
 
 fn xyz(v: [f64; 3]) -> PyValue {
-    PyValue::Dict(vec![(s("x"), PyValue::Float(v[0])), (s("y"), PyValue::Float(v[1])), (s("z"), PyValue::Float(v[2]))])
+    PyValue::Dict(vec![
+        (s("x"), PyValue::Float(v[0])),
+        (s("y"), PyValue::Float(v[1])),
+        (s("z"), PyValue::Float(v[2])),
+    ])
 }
 
 fn pose(position: [f64; 3], q: [f64; 4], ts: f64) -> PyValue {
@@ -458,7 +549,10 @@ fn pose(position: [f64; 3], q: [f64; 4], ts: f64) -> PyValue {
         (s("z"), PyValue::Float(q[2])),
     ]);
     PyValue::Dict(vec![
-        (s("pos"), PyValue::Dict(vec![(s("q"), q), (s("t"), xyz(position))])),
+        (
+            s("pos"),
+            PyValue::Dict(vec![(s("q"), q), (s("t"), xyz(position))]),
+        ),
         (s("ts"), PyValue::Float(ts)),
     ])
 }
@@ -495,7 +589,10 @@ pub fn build(
         (s("p2"), f(p2)),
         (s("res_x"), PyValue::Int(i128::from(camera.width))),
         (s("res_y"), PyValue::Int(i128::from(camera.height))),
-        (s(KEY_IMU_TO_CAMERA), PyValue::List(camera.imu_to_camera.iter().map(|v| f(*v)).collect())),
+        (
+            s(KEY_IMU_TO_CAMERA),
+            PyValue::List(camera.imu_to_camera.iter().map(|v| f(*v)).collect()),
+        ),
         (s(KEY_IMU_TIME_OFFSET), f(camera.imu_time_offset_s)),
         (s(KEY_SENSOR), s(&camera.sensor)),
     ]);
@@ -506,7 +603,10 @@ pub fn build(
                 let ts = fr.t + t_start;
                 let mut items = Vec::new();
                 for o in &fr.objects {
-                    items.push((s(&o.id.to_string()), pose(o.position, o.orientation, o.t + t_start)));
+                    items.push((
+                        s(&o.id.to_string()),
+                        pose(o.position, o.orientation, o.t + t_start),
+                    ));
                 }
                 if let Some(c) = &fr.camera {
                     items.push((s("cam"), pose(c.position, c.orientation, ts)));

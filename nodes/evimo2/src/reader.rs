@@ -55,18 +55,31 @@ impl Column {
         let mut file = File::open(path).map_err(|e| Evimo2Error::io(&name, e))?;
         let header = npy::read_header(&mut std::io::BufReader::new(&mut file), &name)?;
         if !accept(header.dtype) {
-            return Err(Evimo2Error::invalid(&name, format!("dtype '{}' is not {want}", header.descr)));
+            return Err(Evimo2Error::invalid(
+                &name,
+                format!("dtype '{}' is not {want}", header.descr),
+            ));
         }
         let rows = match header.shape.as_slice() {
             [n] if width == 1 => *n as u64,
             [n, w] if *w == width => *n as u64,
             other => {
-                let expected = if width == 1 { "(N,) or (N, 1)".to_string() } else { format!("(N, {width})") };
-                return Err(Evimo2Error::invalid(&name, format!("shape {other:?} is not {expected}")));
+                let expected = if width == 1 {
+                    "(N,) or (N, 1)".to_string()
+                } else {
+                    format!("(N, {width})")
+                };
+                return Err(Evimo2Error::invalid(
+                    &name,
+                    format!("shape {other:?} is not {expected}"),
+                ));
             }
         };
         if header.fortran_order && width > 1 {
-            return Err(Evimo2Error::invalid(&name, "Fortran-order (column-major) arrays are not supported"));
+            return Err(Evimo2Error::invalid(
+                &name,
+                "Fortran-order (column-major) arrays are not supported",
+            ));
         }
         let row_bytes = header.dtype.item_size() * width;
         let need = header.data_offset + rows * row_bytes as u64;
@@ -75,20 +88,34 @@ impl Column {
             return Err(Evimo2Error::format(
                 &name,
                 have,
-                format!("truncated: header announces {rows} rows ({need} bytes in all) but the file has {have} bytes"),
+                format!(
+                    "truncated: header announces {rows} rows ({need} bytes in all) but the file has {have} bytes"
+                ),
             ));
         }
-        Ok(Self { file, name, header, row_bytes, rows })
+        Ok(Self {
+            file,
+            name,
+            header,
+            row_bytes,
+            rows,
+        })
     }
 
     /// Reads rows `start..start + count` as raw bytes into `buf`.
     fn read_rows(&mut self, start: u64, count: usize, buf: &mut Vec<u8>) -> Result<()> {
         let offset = self.header.data_offset + start * self.row_bytes as u64;
         buf.resize(count * self.row_bytes, 0);
-        self.file.seek(SeekFrom::Start(offset)).map_err(|e| Evimo2Error::io(&self.name, e))?;
+        self.file
+            .seek(SeekFrom::Start(offset))
+            .map_err(|e| Evimo2Error::io(&self.name, e))?;
         self.file.read_exact(buf).map_err(|e| {
             if e.kind() == std::io::ErrorKind::UnexpectedEof {
-                Evimo2Error::format(&self.name, offset, "file ended while reading events (truncated since opened?)")
+                Evimo2Error::format(
+                    &self.name,
+                    offset,
+                    "file ended while reading events (truncated since opened?)",
+                )
             } else {
                 Evimo2Error::io(&self.name, e)
             }
@@ -140,7 +167,12 @@ impl EventReader {
     pub fn open(folder: &Path) -> Result<Self> {
         let t = Column::open(&folder.join(EVENTS_T), 1, "float64/float32", is_float)?;
         let xy = Column::open(&folder.join(EVENTS_XY), 2, "an integer type", DType::is_integer)?;
-        let p = Column::open(&folder.join(EVENTS_P), 1, "an integer or bool type", DType::is_integer)?;
+        let p = Column::open(
+            &folder.join(EVENTS_P),
+            1,
+            "an integer or bool type",
+            DType::is_integer,
+        )?;
         if t.rows != xy.rows || t.rows != p.rows {
             return Err(Evimo2Error::invalid(
                 format!("{}, {}, {}", t.name, xy.name, p.name),
@@ -352,8 +384,12 @@ impl FrameArrayReader {
         let npz = NpzReader::open(path)?;
         let mut entries = Vec::new();
         for member in npz.member_names() {
-            let Some(digits) = member.strip_prefix(prefix).and_then(|m| m.strip_prefix('_')) else { continue };
-            let Some(digits) = digits.strip_suffix(".npy") else { continue };
+            let Some(digits) = member.strip_prefix(prefix).and_then(|m| m.strip_prefix('_')) else {
+                continue;
+            };
+            let Some(digits) = digits.strip_suffix(".npy") else {
+                continue;
+            };
             let Ok(id) = digits.parse::<u64>() else { continue };
             let Some(frame) = frames.iter().find(|f| f.id == id) else {
                 return Err(Evimo2Error::invalid(
@@ -361,10 +397,19 @@ impl FrameArrayReader {
                     format!("no frame with id {id} in meta['frames'] to give this {prefix} a time"),
                 ));
             };
-            entries.push(FrameEntry { id, t: frame.t, member });
+            entries.push(FrameEntry {
+                id,
+                t: frame.t,
+                member,
+            });
         }
         entries.sort_by_key(|e| e.id);
-        Ok(Self { npz, entries, width, height })
+        Ok(Self {
+            npz,
+            entries,
+            width,
+            height,
+        })
     }
 
     /// The frames in the archive, sorted by id.
@@ -396,14 +441,24 @@ impl FrameArrayReader {
         if h.shape != [self.height as usize, self.width as usize] {
             return Err(Evimo2Error::invalid(
                 &label,
-                format!("shape {:?} differs from the camera's (res_y, res_x) = ({}, {})", h.shape, self.height, self.width),
+                format!(
+                    "shape {:?} differs from the camera's (res_y, res_x) = ({}, {})",
+                    h.shape, self.height, self.width
+                ),
             ));
         }
         if h.fortran_order {
-            return Err(Evimo2Error::invalid(&label, "Fortran-order (column-major) arrays are not supported"));
+            return Err(Evimo2Error::invalid(
+                &label,
+                "Fortran-order (column-major) arrays are not supported",
+            ));
         }
         let values = npy::decode_u16(h.dtype, h.big_endian, &arr.data).map_err(|bad| match bad {
-            Some(i) => Evimo2Error::format(&label, h.data_offset, format!("pixel {i}: value outside 0..=65535")),
+            Some(i) => Evimo2Error::format(
+                &label,
+                h.data_offset,
+                format!("pixel {i}: value outside 0..=65535"),
+            ),
             None => Evimo2Error::invalid(&label, format!("dtype '{}' is not an integer type", h.descr)),
         })?;
         Ok((entry, values))
@@ -439,7 +494,12 @@ impl MaskReader {
         for v in &mut values {
             *v /= MASK_ID_SCALE;
         }
-        Ok(Mask { t: entry.t, width: self.inner.width, height: self.inner.height, ids: values })
+        Ok(Mask {
+            t: entry.t,
+            width: self.inner.width,
+            height: self.inner.height,
+            ids: values,
+        })
     }
 
     /// Iterates over all masks in id order, reading each on demand.
@@ -473,7 +533,13 @@ impl DepthReader {
     /// Reads depth frame `index` (position in [`Self::entries`]).
     pub fn read(&mut self, index: usize) -> Result<DepthFrame> {
         let (entry, depth_mm) = self.inner.read_raw(index)?;
-        Ok(DepthFrame { id: entry.id, t: entry.t, width: self.inner.width, height: self.inner.height, depth_mm })
+        Ok(DepthFrame {
+            id: entry.id,
+            t: entry.t,
+            width: self.inner.width,
+            height: self.inner.height,
+            depth_mm,
+        })
     }
 }
 
@@ -555,12 +621,21 @@ impl Sequence {
         if !path.exists() {
             return Ok(None);
         }
-        let inner = FrameArrayReader::open(&path, "depth", &self.frames, self.camera.width, self.camera.height)?;
+        let inner = FrameArrayReader::open(
+            &path,
+            "depth",
+            &self.frames,
+            self.camera.width,
+            self.camera.height,
+        )?;
         Ok(Some(DepthReader { inner }))
     }
 
     /// Object poses of all frames, in frame order (object -> camera, relative times).
     pub fn object_poses(&self) -> Vec<evseg_schemas::ObjectPose> {
-        self.frames.iter().flat_map(|f| f.objects.iter().copied()).collect()
+        self.frames
+            .iter()
+            .flat_map(|f| f.objects.iter().copied())
+            .collect()
     }
 }

@@ -53,7 +53,12 @@ pub struct WriteOptions {
 
 impl Default for WriteOptions {
     fn default() -> Self {
-        Self { meta_form: MetaForm::Pickle, compress: true, discretization_s: 0.01, block_events: 1 << 16 }
+        Self {
+            meta_form: MetaForm::Pickle,
+            compress: true,
+            discretization_s: 0.01,
+            block_events: 1 << 16,
+        }
     }
 }
 
@@ -100,15 +105,24 @@ pub fn write_sequence_with(folder: &Path, data: &SequenceData, options: &WriteOp
 }
 
 fn validate(folder: &Path, data: &SequenceData, options: &WriteOptions) -> Result<()> {
-    let bad = |file: &str, message: String| Evimo2Error::BadInput { file: folder.join(file).display().to_string(), message };
+    let bad = |file: &str, message: String| Evimo2Error::BadInput {
+        file: folder.join(file).display().to_string(),
+        message,
+    };
     if !data.events.is_consistent() {
         return Err(bad(EVENTS_T, "event columns have different lengths".into()));
     }
-    if !(options.discretization_s > 0.0) {
-        return Err(bad(INFO_NPZ, format!("discretization {} s is not positive", options.discretization_s)));
+    if options.discretization_s.is_nan() || options.discretization_s <= 0.0 {
+        return Err(bad(
+            INFO_NPZ,
+            format!("discretization {} s is not positive", options.discretization_s),
+        ));
     }
     if data.masks.len() != data.frames.len() {
-        return Err(bad(MASK_NPZ, format!("{} masks for {} frames", data.masks.len(), data.frames.len())));
+        return Err(bad(
+            MASK_NPZ,
+            format!("{} masks for {} frames", data.masks.len(), data.frames.len()),
+        ));
     }
     let pixels = data.camera.width as usize * data.camera.height as usize;
     let max_id = u16::MAX / MASK_ID_SCALE;
@@ -127,7 +141,10 @@ fn validate(folder: &Path, data: &SequenceData, options: &WriteOptions) -> Resul
             ));
         }
         if let Some(id) = mask.ids.iter().find(|&&id| id > max_id) {
-            return Err(bad(MASK_NPZ, format!("mask {i}: object id {id} * 1000 does not fit uint16 (max id {max_id})")));
+            return Err(bad(
+                MASK_NPZ,
+                format!("mask {i}: object id {id} * 1000 does not fit uint16 (max id {max_id})"),
+            ));
         }
         if data.frames[..i].iter().any(|f| f.id == frame.id) {
             return Err(bad(MASK_NPZ, format!("frame id {} appears twice", frame.id)));
@@ -135,10 +152,19 @@ fn validate(folder: &Path, data: &SequenceData, options: &WriteOptions) -> Resul
     }
     if let Some(depth) = &data.depth_mm {
         if depth.len() != data.frames.len() {
-            return Err(bad(DEPTH_NPZ, format!("{} depth frames for {} frames", depth.len(), data.frames.len())));
+            return Err(bad(
+                DEPTH_NPZ,
+                format!("{} depth frames for {} frames", depth.len(), data.frames.len()),
+            ));
         }
         if let Some(i) = depth.iter().position(|d| d.len() != pixels) {
-            return Err(bad(DEPTH_NPZ, format!("depth frame {i} has {} values, camera has {pixels} pixels", depth[i].len())));
+            return Err(bad(
+                DEPTH_NPZ,
+                format!(
+                    "depth frame {i} has {} values, camera has {pixels} pixels",
+                    depth[i].len()
+                ),
+            ));
         }
     }
     Ok(())
@@ -156,7 +182,8 @@ fn write_column<T: Copy>(
     let name = path.display().to_string();
     let f = File::create(path).map_err(|e| Evimo2Error::io(&name, e))?;
     let mut w = BufWriter::new(f);
-    w.write_all(&npy::encode_header(descr, false, shape)).map_err(|e| Evimo2Error::io(&name, e))?;
+    w.write_all(&npy::encode_header(descr, false, shape))
+        .map_err(|e| Evimo2Error::io(&name, e))?;
     let mut buf = Vec::new();
     for chunk in values.chunks(block.max(1)) {
         buf.clear();
@@ -177,11 +204,20 @@ fn write_events(folder: &Path, data: &SequenceData, options: &WriteOptions) -> R
         b.extend_from_slice(&(t + start).to_le_bytes())
     })?;
     let xy: Vec<(u16, u16)> = ev.x.iter().copied().zip(ev.y.iter().copied()).collect();
-    write_column(&folder.join(EVENTS_XY), "<u2", &[n, 2], &xy, block, |(x, y), b| {
-        b.extend_from_slice(&x.to_le_bytes());
-        b.extend_from_slice(&y.to_le_bytes());
-    })?;
-    write_column(&folder.join(EVENTS_P), "|u1", &[n], &ev.p, block, |p, b| b.push(p))
+    write_column(
+        &folder.join(EVENTS_XY),
+        "<u2",
+        &[n, 2],
+        &xy,
+        block,
+        |(x, y), b| {
+            b.extend_from_slice(&x.to_le_bytes());
+            b.extend_from_slice(&y.to_le_bytes());
+        },
+    )?;
+    write_column(&folder.join(EVENTS_P), "|u1", &[n], &ev.p, block, |p, b| {
+        b.push(p)
+    })
 }
 
 fn u16_image(width: u16, height: u16, values: impl Iterator<Item = u16>) -> Vec<u8> {
@@ -200,7 +236,10 @@ fn write_frames(folder: &Path, data: &SequenceData, options: &WriteOptions) -> R
     if let Some(depth) = &data.depth_mm {
         let mut npz = NpzWriter::create(&folder.join(DEPTH_NPZ), options.compress)?;
         for (frame, d) in data.frames.iter().zip(depth) {
-            npz.add(&format!("depth_{:010}", frame.id), &u16_image(w, h, d.iter().copied()))?;
+            npz.add(
+                &format!("depth_{:010}", frame.id),
+                &u16_image(w, h, d.iter().copied()),
+            )?;
         }
         npz.finish()?;
     }
@@ -243,7 +282,11 @@ fn write_info(folder: &Path, data: &SequenceData, options: &WriteOptions) -> Res
     }
     let mut npz = NpzWriter::create(&path, options.compress)?;
     let start = data.t_start_s;
-    let index = event_index(data.events.t.iter().map(|t| t + start), data.events.len(), options.discretization_s);
+    let index = event_index(
+        data.events.t.iter().map(|t| t + start),
+        data.events.len(),
+        options.discretization_s,
+    );
     let index_bytes: Vec<u8> = index.iter().flat_map(|v| v.to_le_bytes()).collect();
     npz.add("index", &npy::encode_array("<u4", &[index.len()], &index_bytes))?;
     npz.add("discretization", &f64_array(&[], &[options.discretization_s]))?;
@@ -255,7 +298,14 @@ fn write_info(folder: &Path, data: &SequenceData, options: &WriteOptions) -> Res
         Distortion::Equidistant { k1, k2, k3, k4 } => [k1, k2, k3, k4],
     };
     npz.add("D", &f64_array(&[4], &d))?;
-    let value = meta::build(cam, &data.imu_topic, &data.imu, &data.camera_poses, &data.frames, start);
+    let value = meta::build(
+        cam,
+        &data.imu_topic,
+        &data.imu,
+        &data.camera_poses,
+        &data.frames,
+        start,
+    );
     let meta_npy = match options.meta_form {
         MetaForm::Pickle => {
             let mut out = npy::encode_header("|O", false, &[]);

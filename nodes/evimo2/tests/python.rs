@@ -7,7 +7,7 @@ mod common;
 use std::path::Path;
 use std::process::Command;
 
-use evseg_evimo2::{write_sequence_with, MetaForm, ReadOptions, Sequence, WriteOptions};
+use evseg_evimo2::{MetaForm, ReadOptions, Sequence, WriteOptions, write_sequence_with};
 use evseg_schemas::Distortion;
 use serde_json::Value;
 
@@ -20,7 +20,10 @@ fn python() -> Option<String> {
             "python3".to_string()
         }
     });
-    let ok = Command::new(&exe).args(["-c", "import numpy"]).output().is_ok_and(|o| o.status.success());
+    let ok = Command::new(&exe)
+        .args(["-c", "import numpy"])
+        .output()
+        .is_ok_and(|o| o.status.success());
     if ok {
         return Some(exe);
     }
@@ -32,7 +35,12 @@ fn python() -> Option<String> {
 }
 
 fn run(py: &str, script: &str, args: &[&str]) -> String {
-    let out = Command::new(py).arg("-c").arg(script).args(args).output().expect("python runs");
+    let out = Command::new(py)
+        .arg("-c")
+        .arg(script)
+        .args(args)
+        .output()
+        .expect("python runs");
     assert!(
         out.status.success(),
         "python failed:\n{}\n{}",
@@ -93,7 +101,11 @@ fn floats(v: &Value) -> Vec<f64> {
 }
 
 fn ints(v: &Value) -> Vec<i64> {
-    v.as_array().expect("array").iter().map(|x| x.as_i64().expect("int")).collect()
+    v.as_array()
+        .expect("array")
+        .iter()
+        .map(|x| x.as_i64().expect("int"))
+        .collect()
 }
 
 #[test]
@@ -102,11 +114,23 @@ fn numpy_reads_what_we_write() {
     for form in [MetaForm::Pickle, MetaForm::Literal] {
         let dir = tempfile::tempdir().unwrap();
         let data = common::sequence();
-        write_sequence_with(dir.path(), &data, &WriteOptions { meta_form: form, ..WriteOptions::default() }).unwrap();
-        let out: Value = serde_json::from_str(&run(&py, READ_SCRIPT, &[dir.path().to_str().unwrap()])).unwrap();
+        write_sequence_with(
+            dir.path(),
+            &data,
+            &WriteOptions {
+                meta_form: form,
+                ..WriteOptions::default()
+            },
+        )
+        .unwrap();
+        let out: Value =
+            serde_json::from_str(&run(&py, READ_SCRIPT, &[dir.path().to_str().unwrap()])).unwrap();
         let ev = &data.events;
         let n = ev.len();
-        assert_eq!(out["meta_dtype"], if form == MetaForm::Pickle { "ob" } else { "<U" });
+        assert_eq!(
+            out["meta_dtype"],
+            if form == MetaForm::Pickle { "ob" } else { "<U" }
+        );
         assert_eq!(out["n"], n);
         assert_eq!(out["t_dtype"], "float64");
         assert_eq!(out["xy_dtype"], "uint16");
@@ -115,25 +139,55 @@ fn numpy_reads_what_we_write() {
         assert_eq!(ints(&out["p_shape"]), vec![n as i64]);
         let t: Vec<f64> = ev.t.iter().step_by(97).map(|t| t + common::T_START).collect();
         assert_eq!(floats(&out["t_sample"]), t);
-        assert_eq!(ints(&out["x_sample"]), ev.x.iter().step_by(89).map(|&v| i64::from(v)).collect::<Vec<_>>());
-        assert_eq!(ints(&out["y_sample"]), ev.y.iter().step_by(89).map(|&v| i64::from(v)).collect::<Vec<_>>());
+        assert_eq!(
+            ints(&out["x_sample"]),
+            ev.x.iter().step_by(89).map(|&v| i64::from(v)).collect::<Vec<_>>()
+        );
+        assert_eq!(
+            ints(&out["y_sample"]),
+            ev.y.iter().step_by(89).map(|&v| i64::from(v)).collect::<Vec<_>>()
+        );
         assert_eq!(out["p_sum"], ev.p.iter().map(|&p| u64::from(p)).sum::<u64>());
 
-        let keys: Vec<&str> = out["mask_keys"].as_array().unwrap().iter().map(|v| v.as_str().unwrap()).collect();
-        assert_eq!(keys, vec!["mask_0000000000", "mask_0000000001", "mask_0000000002"]);
-        assert_eq!(out["mask_values"], serde_json::json!([[0, 1000, 2000], [0, 1000], [0, 1000, 2000]]));
+        let keys: Vec<&str> = out["mask_keys"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_str().unwrap())
+            .collect();
+        assert_eq!(
+            keys,
+            vec!["mask_0000000000", "mask_0000000001", "mask_0000000002"]
+        );
+        assert_eq!(
+            out["mask_values"],
+            serde_json::json!([[0, 1000, 2000], [0, 1000], [0, 1000, 2000]])
+        );
         for (i, mask) in data.masks.iter().enumerate() {
-            let counts: Vec<i64> = (0..3).map(|id| mask.ids.iter().filter(|&&v| v == id).count() as i64).collect();
+            let counts: Vec<i64> = (0..3)
+                .map(|id| mask.ids.iter().filter(|&&v| v == id).count() as i64)
+                .collect();
             assert_eq!(ints(&out["mask_count"][i]), counts);
         }
-        assert_eq!(ints(&out["mask_shape"]), vec![common::HEIGHT as i64, common::WIDTH as i64]);
+        assert_eq!(
+            ints(&out["mask_shape"]),
+            vec![common::HEIGHT as i64, common::WIDTH as i64]
+        );
         assert_eq!(out["mask_dtype"], "uint16");
 
         let cam = &data.camera;
-        assert_eq!(out["K"], serde_json::json!([[cam.fx, 0.0, cam.cx], [0.0, cam.fy, cam.cy], [0.0, 0.0, 1.0]]));
-        let Distortion::RadTan { k1, k2, p1, p2, k3 } = cam.distortion else { panic!() };
+        assert_eq!(
+            out["K"],
+            serde_json::json!([[cam.fx, 0.0, cam.cx], [0.0, cam.fy, cam.cy], [0.0, 0.0, 1.0]])
+        );
+        let Distortion::RadTan { k1, k2, p1, p2, k3 } = cam.distortion else {
+            panic!()
+        };
         assert_eq!(floats(&out["D"]), vec![k1, k2, k3, 0.0]);
-        assert_eq!(floats(&out["intr"]), vec![cam.fx, cam.fy, cam.cx, cam.cy, k1, k2, k3, 0.0, p1, p2]);
+        assert_eq!(
+            floats(&out["intr"]),
+            vec![cam.fx, cam.fy, cam.cx, cam.cy, k1, k2, k3, 0.0, p1, p2]
+        );
         assert_eq!(ints(&out["res"]), vec![cam.width as i64, cam.height as i64]);
         assert_eq!(out["dist_model"], "radtan");
         assert_eq!(out["sensor"], cam.sensor.as_str());
@@ -141,9 +195,15 @@ fn numpy_reads_what_we_write() {
         assert_eq!(ints(&out["index_first_last"]), vec![0, n as i64 - 1]);
         let span = ev.t[n - 1] - ev.t[0];
         let index_len = out["index_len"].as_i64().unwrap() as f64;
-        assert!((index_len - (span / 0.01 + 2.0)).abs() <= 1.0, "index length {index_len} for span {span}");
+        assert!(
+            (index_len - (span / 0.01 + 2.0)).abs() <= 1.0,
+            "index length {index_len} for span {span}"
+        );
         assert_eq!(f(&out["discretization"]), 0.01);
-        assert_eq!(out["meta_keys"], serde_json::json!(["frames", "full_trajectory", "imu", "meta"]));
+        assert_eq!(
+            out["meta_keys"],
+            serde_json::json!(["frames", "full_trajectory", "imu", "meta"])
+        );
 
         let frames = out["frames"].as_array().unwrap();
         assert_eq!(frames.len(), 3);
@@ -158,7 +218,15 @@ fn numpy_reads_what_we_write() {
         assert_eq!(out["traj_len"], data.camera_poses.len());
         assert_eq!(out["traj_id"].as_u64(), Some(u64::MAX));
         let c3 = &data.camera_poses[3];
-        assert_eq!(floats(&out["traj3"]), vec![c3.t + common::T_START, c3.position[0], c3.position[1], c3.position[2]]);
+        assert_eq!(
+            floats(&out["traj3"]),
+            vec![
+                c3.t + common::T_START,
+                c3.position[0],
+                c3.position[1],
+                c3.position[2]
+            ]
+        );
         assert_eq!(out["imu_topics"], serde_json::json!(["/prophesee/left/imu"]));
         assert_eq!(out["imu_len"], data.imu.len());
         let s = &data.imu[5];
@@ -227,16 +295,32 @@ fn we_read_what_numpy_writes() {
         let dir = tempfile::tempdir().unwrap();
         let dtype = run(&py, WRITE_SCRIPT, &[dir.path().to_str().unwrap(), form]);
         let dtype = dtype.trim();
-        assert!(if form == "pickle" { dtype == "object" } else { dtype.starts_with("<U") }, "{form}: {dtype}");
+        assert!(
+            if form == "pickle" {
+                dtype == "object"
+            } else {
+                dtype.starts_with("<U")
+            },
+            "{form}: {dtype}"
+        );
         let seq = Sequence::open(dir.path(), &ReadOptions::default()).unwrap();
 
         assert_eq!(seq.t0_s, 100.0);
         let cam = &seq.camera;
         assert_eq!((cam.width, cam.height), (640, 480));
-        assert_eq!((cam.fx, cam.fy, cam.cx, cam.cy), (519.638, 519.377, 319.5, 239.25));
+        assert_eq!(
+            (cam.fx, cam.fy, cam.cx, cam.cy),
+            (519.638, 519.377, 319.5, 239.25)
+        );
         assert_eq!(
             cam.distortion,
-            Distortion::RadTan { k1: 0.108537, k2: -0.231774, p1: -0.000183, p2: 0.000435, k3: 0.0 }
+            Distortion::RadTan {
+                k1: 0.108537,
+                k2: -0.231774,
+                p1: -0.000183,
+                p2: 0.000435,
+                k3: 0.0
+            }
         );
         assert_eq!(cam.imu_to_camera, evseg_evimo2::EVIMO2_IMU_TO_CAMERA);
         assert_eq!(cam.imu_time_offset_s, -0.02);
@@ -252,7 +336,10 @@ fn we_read_what_numpy_writes() {
             for k in 0..c.len() {
                 let i = n + k;
                 assert_eq!(c.t[k], (100.0 + i as f64 * 1e-4) - 100.0, "t of event {i}");
-                assert_eq!((c.x[k] as usize, c.y[k] as usize, c.p[k] as usize), ((i * 7) % 640, (i * 13) % 480, i % 2));
+                assert_eq!(
+                    (c.x[k] as usize, c.y[k] as usize, c.p[k] as usize),
+                    ((i * 7) % 640, (i * 13) % 480, i % 2)
+                );
             }
             n += c.len();
         }
@@ -260,14 +347,20 @@ fn we_read_what_numpy_writes() {
         assert_eq!(r.non_monotonic(), 0);
 
         // IMU: the first sorted topic is the left one (offset 0 in the script).
-        assert_eq!(seq.imu_topics, vec!["/prophesee/left/imu", "/prophesee/right/imu"]);
+        assert_eq!(
+            seq.imu_topics,
+            vec!["/prophesee/left/imu", "/prophesee/right/imu"]
+        );
         assert_eq!(seq.imu_topic.as_deref(), Some("/prophesee/left/imu"));
         assert_eq!(seq.imu.len(), 200);
         let s = seq.imu[7];
         assert_eq!(s.t, (100.0 + 0.001 * 7.0) - 100.0);
         assert_eq!(s.gyro, [0.01 * 7.0, -0.5, 2e-3]);
         assert_eq!(s.accel, [9.81, 0.1 * 7.0, -0.0]);
-        let right = ReadOptions { imu_topic: Some("/prophesee/right/imu".into()), ..ReadOptions::default() };
+        let right = ReadOptions {
+            imu_topic: Some("/prophesee/right/imu".into()),
+            ..ReadOptions::default()
+        };
         let seq_r = Sequence::open(seq.folder.as_path(), &right).unwrap();
         assert_eq!(seq_r.imu[7].gyro[0], 0.01 * 7.0 + 1.0);
 
@@ -277,7 +370,10 @@ fn we_read_what_numpy_writes() {
         assert_eq!(c.t, (100.0 + 0.005 * 4.0) - 100.0);
         assert_eq!(c.position, [0.5 * 4.0, -1.25e-3, 1.5]);
         assert_eq!(c.orientation, [0.1 * 4.0, -0.2, 0.3, 1.0 - 0.01 * 4.0]);
-        assert_eq!(seq.frames.iter().map(|f| f.id).collect::<Vec<_>>(), vec![10, 11, 12]);
+        assert_eq!(
+            seq.frames.iter().map(|f| f.id).collect::<Vec<_>>(),
+            vec![10, 11, 12]
+        );
         let f2 = &seq.frames[2];
         assert_eq!(f2.t, (100.05 + 0.1 * 2.0) - 100.0);
         assert_eq!(f2.objects.iter().map(|o| o.id).collect::<Vec<_>>(), vec![5, 23]);
@@ -286,18 +382,30 @@ fn we_read_what_numpy_writes() {
 
         // Masks: frame ids 10..12 map to frame times; values / 1000 are the object ids.
         let mut masks = seq.masks().unwrap();
-        assert_eq!(masks.entries().iter().map(|e| e.id).collect::<Vec<_>>(), vec![10, 11, 12]);
+        assert_eq!(
+            masks.entries().iter().map(|e| e.id).collect::<Vec<_>>(),
+            vec![10, 11, 12]
+        );
         for (k, mask) in masks.iter().enumerate() {
             let mask = mask.unwrap();
             assert_eq!(mask.t, seq.frames[k].t);
             assert_eq!(mask.ids.iter().filter(|&&v| v == 5).count(), 200);
-            assert_eq!(mask.ids.iter().filter(|&&v| v == 23).count(), if k == 1 { 0 } else { 3000 });
+            assert_eq!(
+                mask.ids.iter().filter(|&&v| v == 23).count(),
+                if k == 1 { 0 } else { 3000 }
+            );
             assert_eq!(mask.ids[15 * 640 + 40], 5);
-            assert_eq!(mask.ids.iter().filter(|&&v| v != 0 && v != 5 && v != 23).count(), 0);
+            assert_eq!(
+                mask.ids.iter().filter(|&&v| v != 0 && v != 5 && v != 23).count(),
+                0
+            );
         }
         assert!(seq.depth().unwrap().is_none());
         seqs.push(seq);
     }
     let (a, b) = (&seqs[0], &seqs[1]);
-    assert_eq!((&a.camera, &a.imu, &a.camera_poses, &a.frames), (&b.camera, &b.imu, &b.camera_poses, &b.frames));
+    assert_eq!(
+        (&a.camera, &a.imu, &a.camera_poses, &a.frames),
+        (&b.camera, &b.imu, &b.camera_poses, &b.frames)
+    );
 }

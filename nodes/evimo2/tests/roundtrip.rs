@@ -3,14 +3,18 @@
 mod common;
 
 use evseg_evimo2::{
-    write_sequence, write_sequence_with, MetaForm, ReadOptions, Sequence, SequenceData, WriteOptions,
+    MetaForm, ReadOptions, Sequence, SequenceData, WriteOptions, write_sequence, write_sequence_with,
 };
 use evseg_schemas::Events;
 
 fn written(form: MetaForm, compress: bool) -> (tempfile::TempDir, SequenceData) {
     let dir = tempfile::tempdir().unwrap();
     let data = common::sequence();
-    let opts = WriteOptions { meta_form: form, compress, ..WriteOptions::default() };
+    let opts = WriteOptions {
+        meta_form: form,
+        compress,
+        ..WriteOptions::default()
+    };
     write_sequence_with(dir.path(), &data, &opts).unwrap();
     (dir, data)
 }
@@ -43,10 +47,11 @@ fn round_trip_is_exact() {
 
     let mut depth = seq.depth().unwrap().expect("depth written");
     let expected = data.depth_mm.as_ref().unwrap();
-    for i in 0..depth.len() {
+    assert_eq!(depth.len(), expected.len());
+    for (i, want) in expected.iter().enumerate() {
         let d = depth.read(i).unwrap();
         assert_eq!(d.t, data.frames[i].t);
-        assert_eq!(&d.depth_mm, &expected[i]);
+        assert_eq!(&d.depth_mm, want);
     }
 }
 
@@ -56,7 +61,13 @@ fn both_meta_forms_and_compressions_read_the_same() {
     let (literal, _) = written(MetaForm::Literal, true);
     let a = Sequence::open(pickled.path(), &ReadOptions::default()).unwrap();
     let b = Sequence::open(literal.path(), &ReadOptions::default()).unwrap();
-    assert_eq!(Sequence { folder: b.folder.clone(), ..a.clone() }, b);
+    assert_eq!(
+        Sequence {
+            folder: b.folder.clone(),
+            ..a.clone()
+        },
+        b
+    );
     let ma: Vec<_> = a.masks().unwrap().iter().collect::<Result<_, _>>().unwrap();
     let mb: Vec<_> = b.masks().unwrap().iter().collect::<Result<_, _>>().unwrap();
     assert_eq!(ma, mb);
@@ -111,7 +122,10 @@ fn chunked_reading_equals_one_read() {
     while r.position() < r.len() {
         t_end += 0.01;
         let w = r.read_until(t_end).unwrap();
-        assert!(w.t.iter().all(|&t| t < t_end && t >= t_end - 0.01 - 1e-12), "window ending {t_end}");
+        assert!(
+            w.t.iter().all(|&t| t < t_end && t >= t_end - 0.01 - 1e-12),
+            "window ending {t_end}"
+        );
         parts.push(w);
         windows += 1;
         if windows % 10 == 0 {
@@ -153,5 +167,8 @@ fn index_matches_pydvs_definition() {
     // Reference: the pydvs get_index loop run by python3 on the same floats (float rounding moves
     // some entries by one from an exact-decimal reasoning).
     assert_eq!(idx, vec![0, 3, 6, 8, 10, 13, 16, 18, 21, 23, 25, 25]);
-    assert_eq!(evseg_evimo2::writer::event_index([1.0].into_iter(), 1, 0.01), vec![0]);
+    assert_eq!(
+        evseg_evimo2::writer::event_index([1.0].into_iter(), 1, 0.01),
+        vec![0]
+    );
 }

@@ -1,7 +1,9 @@
 //! A small synthetic EVIMO2 sequence shared by the integration tests.
 #![allow(dead_code)]
 
-use evseg_evimo2::{FrameTruth, SequenceData, DEFAULT_IMU_TOPIC, EVIMO2_IMU_TIME_OFFSET_S, EVIMO2_IMU_TO_CAMERA};
+use evseg_evimo2::{
+    DEFAULT_IMU_TOPIC, EVIMO2_IMU_TIME_OFFSET_S, EVIMO2_IMU_TO_CAMERA, FrameTruth, SequenceData,
+};
 use evseg_schemas::{CameraInfo, CameraMotion, Distortion, Events, ImuSample, Mask, ObjectPose};
 
 /// Absolute start time. Event, frame, pose and IMU times below are multiples of 2^-20 s and
@@ -15,7 +17,10 @@ pub const N_EVENTS: usize = 5000;
 pub struct Lcg(pub u64);
 impl Lcg {
     pub fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        self.0 = self
+            .0
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
         self.0 >> 33
     }
 }
@@ -28,7 +33,13 @@ pub fn camera() -> CameraInfo {
         fy: 51.25,
         cx: 31.5,
         cy: 23.75,
-        distortion: Distortion::RadTan { k1: -0.117189, k2: 0.069793, p1: -0.000327, p2: 0.005909, k3: 0.0125 },
+        distortion: Distortion::RadTan {
+            k1: -0.117189,
+            k2: 0.069793,
+            p1: -0.000327,
+            p2: 0.005909,
+            k3: 0.0125,
+        },
         imu_to_camera: EVIMO2_IMU_TO_CAMERA,
         imu_time_offset_s: EVIMO2_IMU_TIME_OFFSET_S,
         time_origin_us: 8_000_000,
@@ -41,7 +52,12 @@ pub fn events() -> Events {
     let mut ev = Events::with_capacity(N_EVENTS);
     let mut tick: u64 = 0;
     for _ in 0..N_EVENTS {
-        ev.push(tick as f64 / (1u64 << 20) as f64, (rng.next() % WIDTH as u64) as u16, (rng.next() % HEIGHT as u64) as u16, (rng.next() % 2) as u8);
+        ev.push(
+            tick as f64 / (1u64 << 20) as f64,
+            (rng.next() % WIDTH as u64) as u16,
+            (rng.next() % HEIGHT as u64) as u16,
+            (rng.next() % 2) as u8,
+        );
         tick += rng.next() % 200; // mean 100 ticks ≈ 95 µs, so ~0.48 s in all; some ties
     }
     ev
@@ -56,7 +72,12 @@ fn rect_mask(t: f64, rects: &[(u16, u16, u16, u16, u16)]) -> Mask {
             }
         }
     }
-    Mask { t, width: WIDTH, height: HEIGHT, ids }
+    Mask {
+        t,
+        width: WIDTH,
+        height: HEIGHT,
+        ids,
+    }
 }
 
 /// Dyadic quaternion components (exact in binary and in decimal text); not normalised — the
@@ -71,10 +92,20 @@ pub fn sequence() -> SequenceData {
     let mut frames = Vec::new();
     let mut masks = Vec::new();
     for (i, &t) in frame_t.iter().enumerate() {
-        let mut objects = vec![ObjectPose { id: 1, t, position: [0.25 * i as f64, -0.5, 1.5], orientation: quat(i) }];
+        let mut objects = vec![ObjectPose {
+            id: 1,
+            t,
+            position: [0.25 * i as f64, -0.5, 1.5],
+            orientation: quat(i),
+        }];
         let mut rects = vec![(1u16, 4 + 4 * i as u16, 5, 20 + 4 * i as u16, 17)];
         if i != 1 {
-            objects.push(ObjectPose { id: 2, t, position: [-0.75, 0.125, 2.0 + i as f64], orientation: quat(i + 3) });
+            objects.push(ObjectPose {
+                id: 2,
+                t,
+                position: [-0.75, 0.125, 2.0 + i as f64],
+                orientation: quat(i + 3),
+            });
             rects.push((2, 40, 30, 60, 46));
         }
         frames.push(FrameTruth {
@@ -94,7 +125,11 @@ pub fn sequence() -> SequenceData {
     let imu = (0..120)
         .map(|k| {
             let t = k as f64 / 256.0;
-            ImuSample { t, gyro: [0.5 - t, 0.25 * t, -1.0 + t * t], accel: [9.75, -0.125 * t, 0.03125] }
+            ImuSample {
+                t,
+                gyro: [0.5 - t, 0.25 * t, -1.0 + t * t],
+                accel: [9.75, -0.125 * t, 0.03125],
+            }
         })
         .collect();
     let camera_poses = (0..60)
@@ -109,7 +144,15 @@ pub fn sequence() -> SequenceData {
             }
         })
         .collect();
-    let depth = masks.iter().map(|m| m.ids.iter().map(|&id| if id == 0 { 0 } else { 1000 + 17 * id }).collect()).collect();
+    let depth = masks
+        .iter()
+        .map(|m| {
+            m.ids
+                .iter()
+                .map(|&id| if id == 0 { 0 } else { 1000 + 17 * id })
+                .collect()
+        })
+        .collect();
     SequenceData {
         events: events(),
         t_start_s: T_START,
