@@ -90,3 +90,12 @@ pub fn decode_file(path: &std::path::Path, max_events: usize) -> Result<Decoded,
     let mut decoder = evseg_formats::open(path, &OpenOptions::default())?;
     Ok(decode_all(decoder.as_mut(), max_events))
 }
+
+/// Like [`decode_file`], but an error at open (a fault before any event) becomes
+/// `Decoded { events: [], error }`.
+pub fn decode_file_lenient(path: &std::path::Path, max_events: usize) -> Decoded {
+    decode_file(path, max_events).unwrap_or_else(|error| Decoded {
+        error: Some(error),
+        ..Decoded::default()
+    })
+}
