@@ -1,0 +1,416 @@
+//! `evseg run`: check a graph, start a Zenoh router, start this machine's nodes, watch them.
+
+use std::collections::BTreeMap;
+use std::io::{IsTerminal, Write};
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, bail};
+use evseg_graph::{Graph, NodeSpec};
+use evseg_runtime::config::{ConsumerRef, InputBinding, NodeConfig, OutputBinding, ZenohSettings};
+use evseg_runtime::progress::Stats;
+use evseg_runtime::{Mode, signals};
+use evseg_schemas::keys;
+use zenoh::Wait;
+
+use crate::resolve::BinaryResolver;
+use crate::supervise::{Fleet, NodeProcess, describe_status, stop_all};
+
+/// Lines of a crashed node's log shown in the report.
+pub const CRASH_LOG_LINES: usize = 20;
+
+/// What `evseg run` was asked to do.
+#[derive(Debug, Clone, Default)]
+pub struct RunOptions {
+    /// Graph file.
+    pub graph: PathBuf,
+    /// Start only the nodes of this machine (and use its endpoints).
+    pub machine: Option<String>,
+    /// Instance name (default: the graph's `name`).
+    pub instance: Option<String>,
+    /// Run folder (default: a new one under `runs/`).
+    pub out: Option<PathBuf>,
+    /// Router endpoints to listen on, replacing the machine's.
+    pub listen: Vec<String>,
+    /// Router endpoints to connect to, replacing the machine's.
+    pub connect: Vec<String>,
+    /// Parameter overrides `node.param=value` (value parsed as JSON, else taken as a string).
+    pub set: Vec<String>,
+    /// No progress display.
+    pub quiet: bool,
+}
+
+/// How a run ended.
+#[derive(Debug)]
+pub struct RunOutcome {
+    /// The run folder.
+    pub dir: PathBuf,
+    /// Final statistics per node (as last published).
+    pub stats: BTreeMap<String, Stats>,
+    /// Wall time, seconds.
+    pub seconds: f64,
+}
+
+/// Loads and checks `path`, asking each binary for its description.
+pub fn load_graph(path: &Path, resolver: &BinaryResolver) -> anyhow::Result<Graph> {
+    let describe = |b: &str| resolver.describe(b).map(|(_, d)| d);
+    evseg_graph::load(path, &describe).map_err(|e| anyhow::anyhow!("{e}"))
+}
+
+/// Applies `node.param=value` overrides, checking node and parameter exist.
+fn apply_overrides(graph: &mut Graph, sets: &[String]) -> anyhow::Result<()> {
+    for s in sets {
+        let (lhs, value) = s
+            .split_once('=')
+            .with_context(|| format!("--set `{s}`: expected node.param=value"))?;
+        let (node, param) = lhs
+            .split_once('.')
+            .with_context(|| format!("--set `{s}`: expected node.param=value"))?;
+        let spec = graph
+            .nodes
+            .iter_mut()
+            .find(|n| n.id == node)
+            .with_context(|| format!("--set `{s}`: the graph has no node `{node}`"))?;
+        let old = spec.params.get(param).with_context(|| {
+            let known: Vec<&String> = spec.params.keys().collect();
+            format!("--set `{s}`: node `{node}` has no parameter `{param}` (known: {known:?})")
+        })?;
+        let new =
+            serde_json::from_str(value).unwrap_or_else(|_| serde_json::Value::String(value.to_string()));
+        let same_kind = std::mem::discriminant(old) == std::mem::discriminant(&new) || old.is_null();
+        if !same_kind {
+            bail!("--set `{s}`: parameter `{param}` of `{node}` takes values like {old}, got {new}");
+        }
+        spec.params.insert(param.to_string(), new);
+    }
+    Ok(())
+}
+
+/// The endpoint a node on this machine uses to reach the router listening on `listen`.
+fn local_endpoint(listen: &str) -> String {
+    listen
+        .replace("/0.0.0.0:", "/127.0.0.1:")
+        .replace("/[::]:", "/[::1]:")
+}
+
+/// Builds the config a node gets.
+pub fn node_config(graph: &Graph, node: &NodeSpec, router: &[String], run_dir: &Path) -> NodeConfig {
+    let instance = &graph.name;
+    NodeConfig {
+        instance: instance.clone(),
+        node: node.id.clone(),
+        mode: match graph.mode {
+            evseg_graph::Mode::Lockstep => Mode::Lockstep,
+            evseg_graph::Mode::Live => Mode::Live,
+        },
+        window: u64::from(graph.window),
+        queue: graph.queue as usize,
+        zenoh: ZenohSettings {
+            mode: "client".into(),
+            connect: router.iter().map(|e| local_endpoint(e)).collect(),
+            listen: vec![],
+        },
+        params: node.params.clone(),
+        inputs: node
+            .inputs
+            .iter()
+            .map(|i| InputBinding {
+                port: i.port.clone(),
+                key: keys::data(instance, &i.from_node, &i.from_output),
+                schema: i.schema.clone(),
+                feedback: i.feedback,
+                producer: i.from_node.clone(),
+            })
+            .collect(),
+        outputs: node
+            .outputs
+            .iter()
+            .map(|o| OutputBinding {
+                port: o.name.clone(),
+                key: keys::data(instance, &node.id, &o.name),
+                schema: o.schema.clone(),
+                consumers: o
+                    .consumers
+                    .iter()
+                    .map(|c| ConsumerRef {
+                        node: c.node.clone(),
+                        port: c.port.clone(),
+                        feedback: c.feedback,
+                        ack_key: keys::ack(instance, &c.node),
+                    })
+                    .collect(),
+            })
+            .collect(),
+        ack_key: keys::ack(instance, &node.id),
+        live_key: keys::live(instance, &node.id),
+        stats_key: keys::stats(instance, &node.id),
+        run_dir: run_dir.to_path_buf(),
+    }
+}
+
+fn open_router(listen: &[String], connect: &[String]) -> anyhow::Result<zenoh::Session> {
+    let settings = ZenohSettings {
+        mode: "router".into(),
+        connect: connect.to_vec(),
+        listen: listen.to_vec(),
+    };
+    let mut config = zenoh::Config::default();
+    let list = |v: &[String]| serde_json::to_string(v).unwrap_or_else(|_| "[]".into());
+    let set = |c: &mut zenoh::Config, k: &str, v: &str| {
+        c.insert_json5(k, v)
+            .map_err(|e| anyhow::anyhow!("zenoh config {k}: {e}"))
+    };
+    set(&mut config, "mode", "\"router\"")?;
+    set(&mut config, "scouting/multicast/enabled", "false")?;
+    set(&mut config, "listen/endpoints", &list(&settings.listen))?;
+    set(&mut config, "connect/endpoints", &list(&settings.connect))?;
+    // Another launcher of the graph may start later: keep trying to reach it.
+    set(&mut config, "connect/exit_on_failure", "false")?;
+    set(&mut config, "connect/timeout_ms", "-1")?;
+    set(&mut config, "listen/exit_on_failure", "true")?;
+    zenoh::open(config).wait().map_err(|e| {
+        anyhow::anyhow!("cannot start the Zenoh router (listen {listen:?}, connect {connect:?}): {e}; is another run using the port? Set zenoh.machines in graph.yaml or --listen")
+    })
+}
+
+/// Progress display on the terminal.
+struct Display {
+    tty: bool,
+    quiet: bool,
+    last: Instant,
+    drawn: bool,
+}
+
+impl Display {
+    fn update(&mut self, elapsed: f64, order: &[String], stats: &BTreeMap<String, Stats>, force: bool) {
+        if self.quiet {
+            return;
+        }
+        let every = if self.tty {
+            Duration::from_millis(250)
+        } else {
+            Duration::from_secs(5)
+        };
+        if !force && self.last.elapsed() < every {
+            return;
+        }
+        self.last = Instant::now();
+        let mut line = format!("[{elapsed:6.1}s]");
+        let (mut dropped, mut refused) = (0, 0);
+        for id in order {
+            match stats.get(id) {
+                Some(s) => {
+                    let mark = if s.finished { "✓" } else { "" };
+                    line.push_str(&format!(" {id}:{}{mark}", s.processed));
+                    dropped += s.dropped;
+                    refused += s.refused;
+                }
+                None => line.push_str(&format!(" {id}:-")),
+            }
+        }
+        if dropped + refused > 0 {
+            line.push_str(&format!("  dropped {dropped} refused {refused}"));
+        }
+        let mut err = std::io::stderr();
+        if self.tty {
+            let _ = write!(err, "\r\x1b[2K{line}");
+            self.drawn = true;
+        } else {
+            let _ = writeln!(err, "{line}");
+        }
+        let _ = err.flush();
+    }
+
+    fn clear(&mut self) {
+        if self.drawn {
+            let _ = writeln!(std::io::stderr());
+            self.drawn = false;
+        }
+    }
+}
+
+/// Runs a graph until its nodes on this machine have finished, one fails, or a stop signal.
+pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
+    signals::install();
+    let graph_dir = opts.graph.parent().map(Path::to_path_buf).unwrap_or_default();
+    let resolver = BinaryResolver::new(&graph_dir);
+    let mut graph = load_graph(&opts.graph, &resolver)?;
+    if let Some(name) = &opts.instance {
+        graph = graph.with_instance(name)?;
+    }
+    apply_overrides(&mut graph, &opts.set)?;
+    let machine = match &opts.machine {
+        Some(m) => graph.machine(m).cloned().with_context(|| {
+            let names: Vec<&str> = graph.machines.iter().map(|m| m.name.as_str()).collect();
+            format!("{}: no machine `{m}` (declared: {names:?})", opts.graph.display())
+        })?,
+        None => graph.machines[0].clone(),
+    };
+    let nodes: Vec<NodeSpec> = match &opts.machine {
+        Some(m) => graph.nodes_on(m).into_iter().cloned().collect(),
+        None => graph.nodes.clone(),
+    };
+    let listen = if opts.listen.is_empty() {
+        machine.listen.clone()
+    } else {
+        opts.listen.clone()
+    };
+    let connect = if opts.connect.is_empty() {
+        machine.connect.clone()
+    } else {
+        opts.connect.clone()
+    };
+    if listen.is_empty() {
+        bail!(
+            "machine `{}` has no listen endpoint; nodes need a router to connect to",
+            machine.name
+        );
+    }
+    let dir = crate::rundir::create(opts.out.as_deref(), &graph.name, opts.machine.as_deref())?;
+    std::fs::write(
+        dir.join("graph.resolved.json"),
+        serde_json::to_string_pretty(&graph)?,
+    )?;
+    if let Ok(text) = std::fs::read(&opts.graph) {
+        std::fs::write(dir.join("graph.yaml"), text)?;
+    }
+
+    let session = open_router(&listen, &connect)?;
+    let stats: Arc<Mutex<BTreeMap<String, Stats>>> = Arc::default();
+    let sink = stats.clone();
+    let _stats_sub = session
+        .declare_subscriber(keys::stats_all(&graph.name))
+        .callback(move |sample| {
+            if let Ok(s) = serde_json::from_slice::<Stats>(&sample.payload().to_bytes())
+                && let Ok(mut map) = sink.lock()
+            {
+                map.insert(s.node.clone(), s);
+            }
+        })
+        .wait()
+        .map_err(|e| anyhow::anyhow!("zenoh: {e}"))?;
+
+    tracing::info!(graph = %opts.graph.display(), instance = %graph.name, machine = %machine.name, nodes = nodes.len(), dir = %dir.display(), "starting");
+    let mut fleet = Fleet(Vec::new());
+    // Consumers first, so producers find them quickly.
+    for node in nodes.iter().rev() {
+        let (binary, _) = resolver
+            .describe(&node.binary)
+            .map_err(|e| anyhow::anyhow!("node `{}`: {e}", node.id))?;
+        let cfg = node_config(&graph, node, &listen, &dir);
+        let cfg_path = dir.join("config").join(format!("{}.json", node.id));
+        std::fs::write(&cfg_path, serde_json::to_string_pretty(&cfg)?)?;
+        let log = dir.join("logs").join(format!("{}.log", node.id));
+        let origin = format!("{}:{}:{}", opts.graph.display(), node.span.line, node.span.column);
+        let p = NodeProcess::spawn(&node.id, &binary, &cfg_path, &log, origin)
+            .with_context(|| format!("cannot start node `{}` ({})", node.id, binary.display()))?;
+        fleet.0.push(p);
+    }
+    let order: Vec<String> = nodes.iter().map(|n| n.id.clone()).collect();
+    let mut display = Display {
+        tty: std::io::stderr().is_terminal(),
+        quiet: opts.quiet,
+        last: Instant::now(),
+        drawn: false,
+    };
+    let start = Instant::now();
+    let policies: BTreeMap<String, evseg_graph::RestartPolicy> =
+        nodes.iter().map(|n| (n.id.clone(), n.restart.clone())).collect();
+    loop {
+        if signals::stop_requested() {
+            display.clear();
+            eprintln!("stopping: signal received");
+            stop_all(&mut fleet.0);
+            bail!("run stopped by signal; logs in {}", dir.join("logs").display());
+        }
+        let mut failed = None;
+        for p in fleet.0.iter_mut() {
+            if let Some(status) = p.poll()
+                && !status.success()
+            {
+                let policy = &policies[&p.id];
+                if policy.allows_restart(p.restarts) {
+                    tracing::warn!(node = %p.id, status = %describe_status(&status), restart = p.restarts + 1, "node failed; restarting");
+                    eprintln!(
+                        "node `{}` failed ({}); restart {} of {}",
+                        p.id,
+                        describe_status(&status),
+                        p.restarts + 1,
+                        policy.max
+                    );
+                    p.restart()
+                        .with_context(|| format!("cannot restart node `{}`", p.id))?;
+                } else {
+                    failed = Some((
+                        p.id.clone(),
+                        status,
+                        p.origin.clone(),
+                        p.log.clone(),
+                        p.log_tail(CRASH_LOG_LINES),
+                    ));
+                    break;
+                }
+            }
+        }
+        if let Some((id, status, origin, log, tail)) = failed {
+            display.clear();
+            stop_all(&mut fleet.0);
+            bail!(
+                "node `{id}` ({origin}) failed with {}\nlast lines of {}:\n{}",
+                describe_status(&status),
+                log.display(),
+                indent(&tail)
+            );
+        }
+        let snapshot = stats.lock().map(|m| m.clone()).unwrap_or_default();
+        if fleet.0.iter_mut().all(|p| p.poll().is_some_and(|s| s.success())) {
+            display.update(start.elapsed().as_secs_f64(), &order, &snapshot, true);
+            display.clear();
+            break;
+        }
+        display.update(start.elapsed().as_secs_f64(), &order, &snapshot, false);
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let seconds = start.elapsed().as_secs_f64();
+    let final_stats = stats.lock().map(|m| m.clone()).unwrap_or_default();
+    let _ = session.close().wait();
+    Ok(RunOutcome {
+        dir,
+        stats: final_stats,
+        seconds,
+    })
+}
+
+fn indent(text: &str) -> String {
+    text.lines()
+        .map(|l| format!("    {l}"))
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
+/// A per-node summary table of a finished run.
+pub fn summary(outcome: &RunOutcome, order: &[String]) -> String {
+    let mut s = String::from("node                 processed  published  dropped  refused   busy s\n");
+    for id in order {
+        if let Some(st) = outcome.stats.get(id) {
+            s.push_str(&format!(
+                "{id:<20} {:>9}  {:>9}  {:>7}  {:>7}  {:>7.2}\n",
+                st.processed, st.published, st.dropped, st.refused, st.busy_s
+            ));
+        }
+    }
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn wildcard_listen_becomes_loopback_for_local_nodes() {
+        assert_eq!(local_endpoint("tcp/0.0.0.0:7447"), "tcp/127.0.0.1:7447");
+        assert_eq!(local_endpoint("tcp/[::]:7447"), "tcp/[::1]:7447");
+        assert_eq!(local_endpoint("tcp/127.0.0.1:9"), "tcp/127.0.0.1:9");
+    }
+}

@@ -1,0 +1,201 @@
+//! Starting node processes and keeping watch over them.
+//!
+//! Every child gets `PR_SET_PDEATHSIG = SIGKILL` (so it dies with the launcher, even when the
+//! launcher is killed with SIGKILL) and its own process group (so a Ctrl-C on the terminal
+//! reaches the launcher only, which then stops the nodes in order). Output goes to one log file
+//! per node.
+
+use std::fs::File;
+use std::io::{Read, Seek, SeekFrom};
+use std::os::unix::process::{CommandExt, ExitStatusExt};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, ExitStatus, Stdio};
+use std::time::{Duration, Instant};
+
+/// How long nodes get to stop after SIGTERM before they are killed.
+pub const STOP_GRACE: Duration = Duration::from_secs(3);
+
+/// A running (or finished) node process.
+pub struct NodeProcess {
+    /// Node id.
+    pub id: String,
+    /// Binary path.
+    pub binary: PathBuf,
+    /// Config file handed to it.
+    pub config: PathBuf,
+    /// Its log file.
+    pub log: PathBuf,
+    /// Where the node is declared in the graph file (`file:line:column`).
+    pub origin: String,
+    /// The process, while it runs.
+    child: Option<Child>,
+    /// How it ended.
+    pub status: Option<ExitStatus>,
+    /// Restarts done so far.
+    pub restarts: u32,
+}
+
+/// Describes an exit status for people: `exit code 3` or `signal 9 (SIGKILL)`.
+pub fn describe_status(s: &ExitStatus) -> String {
+    if let Some(code) = s.code() {
+        return format!("exit code {code}");
+    }
+    match s.signal() {
+        Some(sig) => {
+            let name = match sig {
+                libc::SIGKILL => " (SIGKILL)",
+                libc::SIGSEGV => " (SIGSEGV)",
+                libc::SIGABRT => " (SIGABRT)",
+                libc::SIGTERM => " (SIGTERM)",
+                libc::SIGINT => " (SIGINT)",
+                _ => "",
+            };
+            format!("signal {sig}{name}")
+        }
+        None => "unknown status".into(),
+    }
+}
+
+impl NodeProcess {
+    /// Starts `binary --config config`, output appended to `log`.
+    pub fn spawn(
+        id: &str,
+        binary: &Path,
+        config: &Path,
+        log: &Path,
+        origin: String,
+    ) -> std::io::Result<Self> {
+        let mut p = Self {
+            id: id.to_string(),
+            binary: binary.to_path_buf(),
+            config: config.to_path_buf(),
+            log: log.to_path_buf(),
+            origin,
+            child: None,
+            status: None,
+            restarts: 0,
+        };
+        p.start()?;
+        Ok(p)
+    }
+
+    fn start(&mut self) -> std::io::Result<()> {
+        let out = File::options().create(true).append(true).open(&self.log)?;
+        let err = out.try_clone()?;
+        let parent = std::process::id() as libc::pid_t;
+        let mut cmd = Command::new(&self.binary);
+        cmd.arg("--config")
+            .arg(&self.config)
+            .stdin(Stdio::null())
+            .stdout(out)
+            .stderr(err);
+        // SAFETY: only async-signal-safe calls between fork and exec.
+        unsafe {
+            cmd.pre_exec(move || {
+                if libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGKILL as libc::c_ulong, 0, 0, 0) != 0 {
+                    return Err(std::io::Error::last_os_error());
+                }
+                // The launcher may have died between fork and prctl.
+                if libc::getppid() != parent {
+                    libc::_exit(1);
+                }
+                libc::setpgid(0, 0);
+                Ok(())
+            });
+        }
+        self.child = Some(cmd.spawn()?);
+        self.status = None;
+        Ok(())
+    }
+
+    /// Starts the node again after a failure.
+    pub fn restart(&mut self) -> std::io::Result<()> {
+        self.restarts += 1;
+        self.start()
+    }
+
+    /// Polls the process; returns its status once it has ended.
+    pub fn poll(&mut self) -> Option<ExitStatus> {
+        if let Some(s) = self.status {
+            return Some(s);
+        }
+        let child = self.child.as_mut()?;
+        match child.try_wait() {
+            Ok(Some(s)) => {
+                self.status = Some(s);
+                self.child = None;
+                Some(s)
+            }
+            _ => None,
+        }
+    }
+
+    /// Process id while running.
+    pub fn pid(&self) -> Option<u32> {
+        self.child.as_ref().map(Child::id)
+    }
+
+    fn signal(&self, sig: libc::c_int) {
+        if let Some(pid) = self.pid() {
+            // SAFETY: plain kill(2) on our own child.
+            unsafe {
+                libc::kill(pid as libc::pid_t, sig);
+            }
+        }
+    }
+
+    /// The last `n` lines of the node's log.
+    pub fn log_tail(&self, n: usize) -> String {
+        tail(&self.log, n)
+    }
+}
+
+/// The last `n` lines of a text file (at most the last 64 KiB are read).
+pub fn tail(path: &Path, n: usize) -> String {
+    let Ok(mut f) = File::open(path) else {
+        return String::new();
+    };
+    let len = f.metadata().map(|m| m.len()).unwrap_or(0);
+    let start = len.saturating_sub(64 * 1024);
+    if f.seek(SeekFrom::Start(start)).is_err() {
+        return String::new();
+    }
+    let mut buf = Vec::new();
+    let _ = f.read_to_end(&mut buf);
+    let text = String::from_utf8_lossy(&buf);
+    let lines: Vec<&str> = text.lines().collect();
+    lines[lines.len().saturating_sub(n)..].join("\n")
+}
+
+/// Stops every running process: SIGTERM, then SIGKILL after [`STOP_GRACE`].
+pub fn stop_all(procs: &mut [NodeProcess]) {
+    for p in procs.iter() {
+        p.signal(libc::SIGTERM);
+    }
+    let start = Instant::now();
+    while start.elapsed() < STOP_GRACE {
+        if procs.iter_mut().all(|p| p.poll().is_some() || p.pid().is_none()) {
+            return;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    for p in procs.iter_mut() {
+        if p.poll().is_none() {
+            p.signal(libc::SIGKILL);
+            if let Some(c) = p.child.as_mut() {
+                let _ = c.wait();
+            }
+        }
+    }
+}
+
+/// Owns the node processes; kills whatever still runs when dropped (errors, panics).
+pub struct Fleet(pub Vec<NodeProcess>);
+
+impl Drop for Fleet {
+    fn drop(&mut self) {
+        if self.0.iter_mut().any(|p| p.poll().is_none() && p.pid().is_some()) {
+            stop_all(&mut self.0);
+        }
+    }
+}
