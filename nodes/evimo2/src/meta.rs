@@ -358,7 +358,7 @@ fn camera_info(m: &Field<'_>, t0: f64, opts: &MetaOptions) -> Result<CameraInfo>
     };
     let has_coefficients = ["k1", "k2", "p1", "p2"].iter().any(|k| m.value.get(k).is_some());
     let distortion = match model.as_deref() {
-        Some("radtan" | "plumb_bob" | "pinhole") | None if model.is_some() || has_coefficients => {
+        Some("radtan" | "plumb_bob") | None if model.is_some() || has_coefficients => {
             Distortion::RadTan {
                 k1: coef("k1")?,
                 k2: coef("k2")?,

@@ -299,27 +299,27 @@ pub fn encode_header(descr: &str, fortran_order: bool, shape: &[usize]) -> Vec<u
     };
     let fortran = if fortran_order { "True" } else { "False" };
     let dict = format!("{{'descr': '{descr}', 'fortran_order': {fortran}, 'shape': {shape_text}, }}");
-    for (major, len_size) in [(1u8, 2usize), (2, 4)] {
-        let unpadded = 8 + len_size + dict.len() + 1;
-        let total = unpadded.div_ceil(64) * 64;
-        let header_len = total - 8 - len_size;
-        if len_size == 2 && header_len > u16::MAX as usize {
-            continue;
-        }
-        let mut out = Vec::with_capacity(total);
-        out.extend_from_slice(MAGIC);
-        out.extend_from_slice(&[major, 0]);
-        if len_size == 2 {
-            out.extend_from_slice(&(header_len as u16).to_le_bytes());
-        } else {
-            out.extend_from_slice(&(header_len as u32).to_le_bytes());
-        }
-        out.extend_from_slice(dict.as_bytes());
-        out.resize(total - 1, b' ');
-        out.push(b'\n');
-        return out;
+    // Version 1.0 (u16 header length) unless the header is too long for it, then 2.0 (u32).
+    let v1_total = (8 + 2 + dict.len() + 1).div_ceil(64) * 64;
+    let (major, len_size) = if v1_total - 10 <= u16::MAX as usize {
+        (1u8, 2usize)
+    } else {
+        (2, 4)
+    };
+    let total = (8 + len_size + dict.len() + 1).div_ceil(64) * 64;
+    let header_len = total - 8 - len_size;
+    let mut out = Vec::with_capacity(total);
+    out.extend_from_slice(MAGIC);
+    out.extend_from_slice(&[major, 0]);
+    if len_size == 2 {
+        out.extend_from_slice(&(header_len as u16).to_le_bytes());
+    } else {
+        out.extend_from_slice(&(header_len as u32).to_le_bytes());
     }
-    unreachable!("a version 2.0 header holds any shape text below 4 GiB")
+    out.extend_from_slice(dict.as_bytes());
+    out.resize(total - 1, b' ');
+    out.push(b'\n');
+    out
 }
 
 /// A whole array in memory (used for npz members and small files).
@@ -508,6 +508,16 @@ mod tests {
             assert_eq!(parsed.dtype, DType::U2);
             assert_eq!(parsed.data_offset as usize, h.len());
         }
+    }
+
+    #[test]
+    fn long_header_switches_to_version_2() {
+        let shape = vec![1usize; 25_000];
+        let h = encode_header("<u1", false, &shape);
+        assert_eq!((h[6], h.len() % 64), (2, 0));
+        let parsed = read_header(&mut &h[..], "long.npy").unwrap();
+        assert_eq!(parsed.shape.len(), 25_000);
+        assert_eq!(parsed.data_offset as usize, h.len());
     }
 
     #[test]

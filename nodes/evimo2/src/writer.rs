@@ -170,12 +170,12 @@ fn validate(folder: &Path, data: &SequenceData, options: &WriteOptions) -> Resul
     Ok(())
 }
 
-/// Streams one column file: header then little-endian rows, `block` rows at a time.
-fn write_column<T: Copy>(
+/// Streams one column file: header then `n` rows from `values`, encoded `block` rows at a time.
+fn write_column<T>(
     path: &Path,
     descr: &str,
     shape: &[usize],
-    values: &[T],
+    values: impl Iterator<Item = T>,
     block: usize,
     encode: impl Fn(T, &mut Vec<u8>),
 ) -> Result<()> {
@@ -185,13 +185,16 @@ fn write_column<T: Copy>(
     w.write_all(&npy::encode_header(descr, false, shape))
         .map_err(|e| Evimo2Error::io(&name, e))?;
     let mut buf = Vec::new();
-    for chunk in values.chunks(block.max(1)) {
-        buf.clear();
-        for &v in chunk {
-            encode(v, &mut buf);
+    let mut rows = 0;
+    for v in values {
+        encode(v, &mut buf);
+        rows += 1;
+        if rows % block.max(1) == 0 {
+            w.write_all(&buf).map_err(|e| Evimo2Error::io(&name, e))?;
+            buf.clear();
         }
-        w.write_all(&buf).map_err(|e| Evimo2Error::io(&name, e))?;
     }
+    w.write_all(&buf).map_err(|e| Evimo2Error::io(&name, e))?;
     w.flush().map_err(|e| Evimo2Error::io(&name, e))
 }
 
@@ -200,23 +203,22 @@ fn write_events(folder: &Path, data: &SequenceData, options: &WriteOptions) -> R
     let n = ev.len();
     let start = data.t_start_s;
     let block = options.block_events;
-    write_column(&folder.join(EVENTS_T), "<f8", &[n], &ev.t, block, |t, b| {
+    write_column(&folder.join(EVENTS_T), "<f8", &[n], ev.t.iter(), block, |t, b| {
         b.extend_from_slice(&(t + start).to_le_bytes())
     })?;
-    let xy: Vec<(u16, u16)> = ev.x.iter().copied().zip(ev.y.iter().copied()).collect();
     write_column(
         &folder.join(EVENTS_XY),
         "<u2",
         &[n, 2],
-        &xy,
+        ev.x.iter().zip(&ev.y),
         block,
         |(x, y), b| {
             b.extend_from_slice(&x.to_le_bytes());
             b.extend_from_slice(&y.to_le_bytes());
         },
     )?;
-    write_column(&folder.join(EVENTS_P), "|u1", &[n], &ev.p, block, |p, b| {
-        b.push(p)
+    write_column(&folder.join(EVENTS_P), "|u1", &[n], ev.p.iter(), block, |p, b| {
+        b.push(*p)
     })
 }
 
