@@ -358,15 +358,13 @@ fn camera_info(m: &Field<'_>, t0: f64, opts: &MetaOptions) -> Result<CameraInfo>
     };
     let has_coefficients = ["k1", "k2", "p1", "p2"].iter().any(|k| m.value.get(k).is_some());
     let distortion = match model.as_deref() {
-        Some("radtan" | "plumb_bob") | None if model.is_some() || has_coefficients => {
-            Distortion::RadTan {
-                k1: coef("k1")?,
-                k2: coef("k2")?,
-                p1: coef("p1")?,
-                p2: coef("p2")?,
-                k3: coef("k3")?,
-            }
-        }
+        Some("radtan" | "plumb_bob") | None if model.is_some() || has_coefficients => Distortion::RadTan {
+            k1: coef("k1")?,
+            k2: coef("k2")?,
+            p1: coef("p1")?,
+            p2: coef("p2")?,
+            k3: coef("k3")?,
+        },
         None => Distortion::None,
         Some("equidistant" | "fisheye") => Distortion::Equidistant {
             k1: coef("k1")?,
@@ -447,7 +445,11 @@ fn imu_samples(root: &Field<'_>, t0: f64, opts: &MetaOptions) -> Result<ImuParts
             None => return Ok((topics, None, Vec::new())),
         },
     };
-    let Some((_, list)) = items.iter().find(|(k, _)| k.as_str() == Some(wanted.as_str())) else {
+    let Some((_, list)) = items
+        .iter()
+        .rev()
+        .find(|(k, _)| k.as_str() == Some(wanted.as_str()))
+    else {
         return Err(Evimo2Error::ImuTopic {
             file: root.file.to_string(),
             wanted,
@@ -513,6 +515,8 @@ fn frame(entry: &Field<'_>, index: usize, t0: f64) -> Result<FrameTruth> {
         }
         let (position, orientation) = value.pose()?;
         let t = value.opt("ts")?.map_or(Ok(ts), |f| f.f64())? - t0;
+        // A key repeated in a literal: the last one wins, as in Python.
+        objects.retain(|o: &ObjectPose| o.id != id);
         objects.push(ObjectPose {
             id,
             t,
@@ -649,4 +653,132 @@ pub fn build(
         (s("imu"), PyValue::Dict(vec![(s(imu_topic), imu_v)])),
         (s("meta"), meta),
     ])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn convert_text(text: &str, t0: f64) -> Result<MetaContents> {
+        convert(&pylit::parse(text).unwrap(), t0, &MetaOptions::default(), "m")
+    }
+
+    const CAM: &str = "'fx': 2.0, 'fy': 3.0, 'cx': 4.0, 'cy': 5.0, 'res_x': 8, 'res_y': 6";
+
+    #[test]
+    fn frames_without_ids_use_positions_and_poses_fall_back_to_frames() {
+        let pos =
+            "{'pos': {'t': {'x': 1.0, 'y': 2.0, 'z': 3.0}, 'q': {'x': 0.0, 'y': 0.0, 'z': 0.0, 'w': 1.0}}}";
+        let text = format!(
+            "{{'meta': {{{CAM}}}, 'frames': [{{'ts': 10.5, 'cam': {pos}, '7': {pos}}}, {{'ts': 10.75, 'cam': {pos}}}]}}"
+        );
+        let m = convert_text(&text, 10.0).unwrap();
+        assert_eq!(
+            m.frames.iter().map(|f| (f.id, f.t)).collect::<Vec<_>>(),
+            vec![(0, 0.5), (1, 0.75)]
+        );
+        assert_eq!(m.frames[0].objects.len(), 1);
+        assert_eq!(m.frames[0].objects[0].id, 7);
+        assert_eq!(m.frames[0].objects[0].t, 0.5);
+        assert_eq!(
+            m.camera_poses.iter().map(|c| c.t).collect::<Vec<_>>(),
+            vec![0.5, 0.75]
+        );
+        assert_eq!(m.camera_poses[0].position, [1.0, 2.0, 3.0]);
+        // No 'imu' key: no samples, no topic.
+        assert!(m.imu.is_empty() && m.imu_topic.is_none());
+        // No distortion keys at all: ideal pinhole.
+        assert_eq!(m.camera.distortion, Distortion::None);
+        assert_eq!(m.camera.time_origin_us, 10_000_000);
+    }
+
+    #[test]
+    fn distortion_models() {
+        let d = |extra: &str| {
+            convert_text(&format!("{{'meta': {{{CAM}, {extra}}}}}"), 0.0).map(|m| m.camera.distortion)
+        };
+        assert_eq!(
+            d("'dist_model': 'equidistant', 'k1': 0.5, 'k2': 0.25, 'k3': 0.125, 'k4': 1e-3, 'p1': 9.0")
+                .unwrap(),
+            Distortion::Equidistant {
+                k1: 0.5,
+                k2: 0.25,
+                k3: 0.125,
+                k4: 1e-3
+            }
+        );
+        // radtan takes p1, p2 from meta (not D's k3/k4 positions); k3 from meta, k4 ignored.
+        assert_eq!(
+            d("'dist_model': 'radtan', 'k1': 0.5, 'k2': 0.25, 'k3': 0.0, 'k4': 7.0, 'p1': 0.01, 'p2': 0.02")
+                .unwrap(),
+            Distortion::RadTan {
+                k1: 0.5,
+                k2: 0.25,
+                p1: 0.01,
+                p2: 0.02,
+                k3: 0.0
+            }
+        );
+        // EVIMO (v1) style: coefficients without a model name are radtan.
+        assert_eq!(
+            d("'k1': 0.5, 'k2': 0.25, 'p1': 0.01, 'p2': 0.02").unwrap(),
+            Distortion::RadTan {
+                k1: 0.5,
+                k2: 0.25,
+                p1: 0.01,
+                p2: 0.02,
+                k3: 0.0
+            }
+        );
+        assert_eq!(d("'dist_model': 'none'").unwrap(), Distortion::None);
+        let e = d("'dist_model': 'mei'").unwrap_err().to_string();
+        assert!(e.contains("['meta']['dist_model']") && e.contains("'mei'"), "{e}");
+        let e = d("'res_x': 70000").unwrap_err().to_string();
+        assert!(e.contains("out of range"), "{e}");
+    }
+
+    #[test]
+    fn build_then_convert_is_identity_for_each_distortion() {
+        for distortion in [
+            Distortion::None,
+            Distortion::RadTan {
+                k1: 0.5,
+                k2: -0.25,
+                p1: 0.01,
+                p2: 0.02,
+                k3: 0.125,
+            },
+            Distortion::Equidistant {
+                k1: 0.5,
+                k2: 0.25,
+                k3: 0.125,
+                k4: 1e-3,
+            },
+        ] {
+            let camera = CameraInfo {
+                width: 8,
+                height: 6,
+                fx: 2.0,
+                fy: 3.0,
+                cx: 4.0,
+                cy: 5.0,
+                distortion,
+                imu_to_camera: CameraInfo::IDENTITY,
+                imu_time_offset_s: 0.001,
+                time_origin_us: 2_000_000,
+                sensor: "s".into(),
+            };
+            let v = build(&camera, "/imu", &[], &[], &[], 2.0);
+            let m = convert(&v, 2.0, &MetaOptions::default(), "m").unwrap();
+            assert_eq!(m.camera, camera);
+            let lit = convert(
+                &pylit::parse(&v.to_string()).unwrap(),
+                2.0,
+                &MetaOptions::default(),
+                "m",
+            )
+            .unwrap();
+            assert_eq!(lit.camera, camera);
+        }
+    }
 }

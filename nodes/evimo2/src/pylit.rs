@@ -33,10 +33,11 @@ pub enum PyValue {
 }
 
 impl PyValue {
-    /// Looks up a string key in a dict; `None` for a missing key or a non-dict.
+    /// Looks up a string key in a dict; `None` for a missing key or a non-dict. A key written twice
+    /// in a literal gives the last value, as in Python.
     pub fn get(&self, key: &str) -> Option<&PyValue> {
         match self {
-            PyValue::Dict(items) => items.iter().find_map(|(k, v)| match k {
+            PyValue::Dict(items) => items.iter().rev().find_map(|(k, v)| match k {
                 PyValue::Str(s) if s == key => Some(v),
                 _ => None,
             }),
