@@ -1,0 +1,299 @@
+//! Ray casting of the scene at one instant: per pixel the nearest surface, its object id, its
+//! depth and its log intensity.
+//!
+//! Anti-aliasing: textures are filtered analytically (trilinear mip-mapping, see `texture`).
+//! Geometric edges (object silhouettes, wall seams, box creases) are anti-aliased by 2x2
+//! supersampling of only those pixels whose centre surface differs from a 4-neighbour's; the
+//! four sub-samples at (+-1/4, +-1/4) px are averaged in linear intensity. This keeps the cost
+//! near one ray per pixel while an edge sweeping over a pixel changes its intensity in several
+//! steps instead of one jump.
+
+use crate::camera::CameraConfig;
+use crate::math::{self, V3};
+use crate::scene::{BoxPose, RelativeMotion, Scene};
+use crate::trajectory::RigidState;
+
+/// Texture coordinate offsets (m) that make the six faces of a box show different parts of its
+/// texture.
+const FACE_OFFSET: [[f32; 2]; 6] = [[0.0, 0.0], [0.37, 0.11], [0.71, 0.53], [0.13, 0.91], [0.59, 0.29], [0.97, 0.77]];
+/// Smallest cosine of incidence used for the texture footprint (caps the blur at grazing view).
+const MIN_COS: f32 = 0.25;
+
+/// Result of casting one ray.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Hit {
+    /// Log intensity.
+    pub l: f32,
+    /// Surface key (plane index, or box face key); `u16::MAX` when nothing was hit.
+    pub key: u16,
+    /// Object id (0 = background).
+    pub id: u16,
+    /// Depth along the optical axis, m (infinite when nothing was hit).
+    pub z: f32,
+}
+
+#[derive(Debug, Clone)]
+struct PlaneGeom {
+    /// Camera-frame normal divided by the signed plane offset: inverse depth = a . d.
+    a: [f32; 3],
+    /// Camera-frame unit normal.
+    n: [f32; 3],
+    e1: [f32; 3],
+    off1: f32,
+    e2: [f32; 3],
+    off2: f32,
+    ln_shade: f32,
+    tex: usize,
+    key: u16,
+}
+
+#[derive(Debug, Clone)]
+struct BoxGeom {
+    /// Camera -> box rotation, rows.
+    r_bc: [[f32; 3]; 3],
+    /// Camera origin in box coordinates.
+    o_b: [f32; 3],
+    half: [f32; 3],
+    ln_shade: [f32; 6],
+    tex: usize,
+    key_base: u16,
+    id: u16,
+    /// Pixel bounding box `[u0, v0, u1, v1]` (inclusive) of the projection, with margin.
+    bbox: [i32; 4],
+    /// Index of the box's motion in [`FrameGeom::motions`].
+    motion: usize,
+}
+
+/// Everything needed to cast rays at one instant, in the camera frame.
+#[derive(Debug, Clone)]
+pub struct FrameGeom {
+    /// Time, s.
+    pub t: f64,
+    /// Camera state (world).
+    pub cam: RigidState,
+    planes: Vec<PlaneGeom>,
+    boxes: Vec<BoxGeom>,
+    inv_f: f32,
+    /// Relative motion of the background (index 0) and of every box (index 1 + box index).
+    pub motions: Vec<RelativeMotion>,
+    /// Camera-frame pose of every box.
+    pub box_poses: Vec<BoxPose>,
+}
+
+fn f3(v: V3) -> [f32; 3] {
+    [v[0] as f32, v[1] as f32, v[2] as f32]
+}
+
+#[inline]
+fn dot3(a: &[f32; 3], x: f32, y: f32) -> f32 {
+    a[0] * x + a[1] * y + a[2]
+}
+
+impl FrameGeom {
+    /// The scene at time `t` (s) seen by camera `cam`.
+    pub fn new(scene: &Scene, cam: &CameraConfig, t: f64) -> Self {
+        let cs = scene.camera_state(t);
+        let r_cw = math::transpose(&cs.rotation);
+        let mut planes = Vec::with_capacity(scene.planes.len());
+        for (i, p) in scene.planes.iter().enumerate() {
+            let n_w = math::cross(p.axis_u, p.axis_v);
+            let n_c = math::mul_mv(&r_cw, n_w);
+            let rel = math::sub(cs.position, p.origin);
+            // Plane: n_c . X + rel . n_w = 0 -> X = s d with s = h / (n_c . d), h = -rel . n_w.
+            let h = -math::dot(rel, n_w);
+            let h = if h.abs() < 1e-9 { 1e-9_f64.copysign(h) } else { h };
+            planes.push(PlaneGeom {
+                a: f3(math::scale(n_c, 1.0 / h)),
+                n: f3(n_c),
+                e1: f3(math::mul_mv(&r_cw, p.axis_u)),
+                off1: math::dot(rel, p.axis_u) as f32,
+                e2: f3(math::mul_mv(&r_cw, p.axis_v)),
+                off2: math::dot(rel, p.axis_v) as f32,
+                ln_shade: scene.lighting.ln_shade(n_w) as f32,
+                tex: scene.plane_texture[i],
+                key: i as u16,
+            });
+        }
+        let mut motions = vec![RelativeMotion::new(&cs, None)];
+        let mut boxes = Vec::with_capacity(scene.boxes.len());
+        let mut box_poses = Vec::with_capacity(scene.boxes.len());
+        for (j, b) in scene.boxes.iter().enumerate() {
+            let bs = b.trajectory.state(t);
+            motions.push(RelativeMotion::new(&cs, Some(&bs)));
+            let pose = BoxPose::new(&cs, &bs);
+            box_poses.push(pose);
+            let r_bc = math::transpose(&pose.r_cb);
+            let o_b = math::scale(math::mul_mv(&r_bc, pose.center), -1.0);
+            let mut ln_shade = [0.0f32; 6];
+            for (face, s) in ln_shade.iter_mut().enumerate() {
+                let mut n = [0.0; 3];
+                n[face / 2] = if face % 2 == 0 { -1.0 } else { 1.0 };
+                *s = scene.lighting.ln_shade(math::mul_mv(&bs.rotation, n)) as f32;
+            }
+            let Some(bbox) = box_bbox(cam, &pose, b.half) else { continue };
+            boxes.push(BoxGeom {
+                r_bc: [f3(r_bc[0]), f3(r_bc[1]), f3(r_bc[2])],
+                o_b: f3(o_b),
+                half: f3(b.half),
+                ln_shade,
+                tex: b.texture,
+                key_base: b.key_base,
+                id: b.id,
+                bbox,
+                motion: j + 1,
+            });
+        }
+        let inv_f = (2.0 / (cam.fx + cam.fy)) as f32;
+        Self { t, cam: cs, planes, boxes, inv_f, motions, box_poses }
+    }
+
+    /// Pixel bounding boxes `[u0, v0, u1, v1]` of the visible moving objects, with their ids.
+    pub fn object_bboxes(&self) -> impl Iterator<Item = (u16, [i32; 4])> + '_ {
+        self.boxes.iter().filter(|b| b.id != 0).map(|b| (b.id, b.bbox))
+    }
+
+    /// Casts the ray through undistorted normalized `(x, y)` of pixel `(px, py)`; `only` limits
+    /// the search to surfaces of one object id (background planes and boxes for 0).
+    #[inline]
+    pub fn cast(&self, scene: &Scene, x: f32, y: f32, px: i32, py: i32, only: Option<u16>) -> Hit {
+        let mut best_inv = 0.0f32;
+        let mut best_plane = usize::MAX;
+        if only.is_none_or(|id| id == 0) {
+            for (i, p) in self.planes.iter().enumerate() {
+                let inv = dot3(&p.a, x, y);
+                if inv > best_inv {
+                    best_inv = inv;
+                    best_plane = i;
+                }
+            }
+        }
+        let mut s = if best_plane == usize::MAX { f32::INFINITY } else { 1.0 / best_inv };
+        let mut best_box = usize::MAX;
+        let mut box_face = 0usize;
+        let mut box_db = [0.0f32; 3];
+        for (j, b) in self.boxes.iter().enumerate() {
+            if px < b.bbox[0] || px > b.bbox[2] || py < b.bbox[1] || py > b.bbox[3] {
+                continue;
+            }
+            if only.is_some_and(|id| id != b.id) {
+                continue;
+            }
+            let db = [dot3(&b.r_bc[0], x, y), dot3(&b.r_bc[1], x, y), dot3(&b.r_bc[2], x, y)];
+            let mut t_in = f32::NEG_INFINITY;
+            let mut t_out = f32::INFINITY;
+            let mut axis = 0usize;
+            for k in 0..3 {
+                let inv = 1.0 / db[k];
+                let t1 = (-b.half[k] - b.o_b[k]) * inv;
+                let t2 = (b.half[k] - b.o_b[k]) * inv;
+                let (lo, hi) = if t1 < t2 { (t1, t2) } else { (t2, t1) };
+                if lo > t_in {
+                    t_in = lo;
+                    axis = k;
+                }
+                t_out = t_out.min(hi);
+            }
+            if t_in <= t_out && t_in > 0.0 && t_in < s {
+                s = t_in;
+                best_box = j;
+                box_face = 2 * axis + usize::from(db[axis] < 0.0);
+                box_db = db;
+            }
+        }
+        let dn = (x * x + y * y + 1.0).sqrt();
+        if best_box != usize::MAX {
+            let b = &self.boxes[best_box];
+            let axis = box_face / 2;
+            let hp = [b.o_b[0] + s * box_db[0], b.o_b[1] + s * box_db[1], b.o_b[2] + s * box_db[2]];
+            let (j, k) = ((axis + 1) % 3, (axis + 2) % 3);
+            let cos = (box_db[axis].abs() / dn).max(MIN_COS);
+            let footprint = s * self.inv_f / cos;
+            let off = FACE_OFFSET[box_face];
+            let l = scene.textures[b.tex].sample(hp[j] + off[0], hp[k] + off[1], footprint) + b.ln_shade[box_face];
+            return Hit { l, key: b.key_base + box_face as u16, id: b.id, z: s };
+        }
+        if best_plane == usize::MAX {
+            return Hit { l: 0.0, key: u16::MAX, id: 0, z: f32::INFINITY };
+        }
+        let p = &self.planes[best_plane];
+        let u = s * dot3(&p.e1, x, y) + p.off1;
+        let v = s * dot3(&p.e2, x, y) + p.off2;
+        let cos = (dot3(&p.n, x, y).abs() / dn).max(MIN_COS);
+        let footprint = s * self.inv_f / cos;
+        let l = scene.textures[p.tex].sample(u, v, footprint) + p.ln_shade;
+        Hit { l, key: p.key, id: 0, z: s }
+    }
+
+    /// Log intensity of pixel `(px, py)` from 2x2 sub-samples averaged in linear intensity;
+    /// `(x, y)` is the pixel centre's normalized ray and `du`, `dv` its change per pixel.
+    pub fn supersample(&self, scene: &Scene, x: f32, y: f32, du: [f32; 2], dv: [f32; 2], px: i32, py: i32) -> f32 {
+        let mut acc = 0.0f32;
+        for (ou, ov) in [(-0.25f32, -0.25f32), (0.25, -0.25), (-0.25, 0.25), (0.25, 0.25)] {
+            let sx = x + ou * du[0] + ov * dv[0];
+            let sy = y + ou * du[1] + ov * dv[1];
+            acc += self.cast(scene, sx, sy, px, py, None).l.exp();
+        }
+        (0.25 * acc).ln()
+    }
+
+    /// True optical flow (px/s) at pixel `(px, py)` with normalized ray `(x, y)` of the surface of
+    /// object `id` (background for 0); `None` when that surface is not on the ray.
+    pub fn flow(&self, scene: &Scene, cam: &CameraConfig, x: f32, y: f32, px: i32, py: i32, id: u16) -> Option<(f64, f64)> {
+        let hit = self.cast(scene, x, y, px, py, Some(id));
+        if !hit.z.is_finite() || hit.key == u16::MAX {
+            return None;
+        }
+        let motion = if id == 0 {
+            // Background boxes do not move, but use their motion for generality.
+            match self.boxes.iter().find(|b| b.id == 0 && (b.key_base..b.key_base + 6).contains(&hit.key)) {
+                Some(b) => &self.motions[b.motion],
+                None => &self.motions[0],
+            }
+        } else {
+            let b = self.boxes.iter().find(|b| b.id == id)?;
+            &self.motions[b.motion]
+        };
+        let z = hit.z as f64;
+        let p = [x as f64 * z, y as f64 * z, z];
+        let (ux, uy) = motion.normalized_flow(p);
+        Some(cam.pixel_flow(x as f64, y as f64, ux, uy))
+    }
+}
+
+/// Pixel bounding box of a box's projection (edges sampled, so lens distortion is covered),
+/// with a 2 px margin; the whole image when the box reaches behind the camera; `None` when the
+/// box is entirely behind the camera or off-image.
+fn box_bbox(cam: &CameraConfig, pose: &BoxPose, half: V3) -> Option<[i32; 4]> {
+    let corners = pose.corners(half);
+    if corners.iter().all(|c| c[2] <= 0.0) {
+        return None;
+    }
+    let (w, h) = (cam.width as i32, cam.height as i32);
+    if corners.iter().any(|c| c[2] <= 0.05) {
+        return Some([0, 0, w - 1, h - 1]);
+    }
+    let (mut u0, mut v0, mut u1, mut v1) = (f64::MAX, f64::MAX, f64::MIN, f64::MIN);
+    for a in 0..8 {
+        for bit in [1usize, 2, 4] {
+            let b = a | bit;
+            if b == a {
+                continue;
+            }
+            for s in 0..=8 {
+                let f = s as f64 / 8.0;
+                let p = math::add(math::scale(corners[a], 1.0 - f), math::scale(corners[b], f));
+                if let Some((u, v)) = cam.project(p) {
+                    u0 = u0.min(u);
+                    v0 = v0.min(v);
+                    u1 = u1.max(u);
+                    v1 = v1.max(v);
+                }
+            }
+        }
+    }
+    let bb = [(u0 - 2.0).floor() as i32, (v0 - 2.0).floor() as i32, (u1 + 2.0).ceil() as i32, (v1 + 2.0).ceil() as i32];
+    if bb[2] < 0 || bb[3] < 0 || bb[0] >= w || bb[1] >= h {
+        return None;
+    }
+    Some([bb[0].max(0), bb[1].max(0), bb[2].min(w - 1), bb[3].min(h - 1)])
+}

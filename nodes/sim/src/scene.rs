@@ -1,0 +1,354 @@
+//! Scene description (textured planes and boxes, moving objects, lighting) and its state at a
+//! given time.
+//!
+//! World frame: z up, metres. Camera frame: x right, y down, z forward (optical axis).
+
+use serde::{Deserialize, Serialize};
+
+use crate::SimError;
+use crate::math::{self, M3, V3};
+use crate::texture::{Texture, TextureConfig};
+use crate::trajectory::{RigidState, RigidTrajectory};
+
+/// An infinite textured plane of the background (a room wall, floor or ceiling). The camera sees
+/// the nearest plane along each ray, so a set of planes around the camera forms a closed room.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PlaneConfig {
+    /// A point of the plane (texture origin), world, m.
+    pub origin: V3,
+    /// Texture u axis, world, unit.
+    pub axis_u: V3,
+    /// Texture v axis, world, unit, orthogonal to `axis_u`; `axis_u x axis_v` is the normal
+    /// used for shading and should point into the room.
+    pub axis_v: V3,
+    /// Appearance.
+    pub texture: TextureConfig,
+}
+
+/// A textured box (six faces). Background furniture and panels are boxes that do not move;
+/// moving objects are boxes with their own trajectory (a plate is a thin box).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct BoxConfig {
+    /// Half sizes along the box's own x, y, z axes, m.
+    pub half_extents: V3,
+    /// Pose of the box centre and axes over time (world frame).
+    pub trajectory: RigidTrajectory,
+    /// Appearance (each face uses a different part of the texture).
+    pub texture: TextureConfig,
+}
+
+/// An independently moving object.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ObjectConfig {
+    /// Id in masks and per-event truth, 1..=255, unique.
+    pub id: u16,
+    /// Shape, appearance and motion.
+    pub shape: BoxConfig,
+}
+
+/// A directional light plus ambient term: a surface with unit normal `n` has brightness factor
+/// `ambient + (1 - ambient) * max(0, n . direction)` (so rotating objects change brightness).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Lighting {
+    /// Direction towards the light, world (normalized on use).
+    pub direction: V3,
+    /// Ambient share in (0, 1].
+    pub ambient: f64,
+}
+
+impl Lighting {
+    /// Natural log of the brightness factor of a surface with world normal `n` (unit).
+    pub fn ln_shade(&self, n: V3) -> f64 {
+        let l = math::normalize(self.direction);
+        (self.ambient + (1.0 - self.ambient) * math::dot(n, l).max(0.0)).ln()
+    }
+}
+
+/// The static and moving content of the scene.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SceneContent {
+    /// Background planes (id 0).
+    pub planes: Vec<PlaneConfig>,
+    /// Background boxes (id 0), normally with fixed trajectories.
+    pub boxes: Vec<BoxConfig>,
+    /// Moving objects (ids 1..).
+    pub objects: Vec<ObjectConfig>,
+    /// Lighting.
+    pub lighting: Lighting,
+}
+
+impl SceneContent {
+    /// Checks the values.
+    pub fn validate(&self) -> Result<(), SimError> {
+        if self.planes.is_empty() && self.boxes.is_empty() {
+            return Err(SimError::Config("scene has no background planes or boxes".into()));
+        }
+        for (i, p) in self.planes.iter().enumerate() {
+            let what = format!("scene.planes[{i}]");
+            let (u, v) = (p.axis_u, p.axis_v);
+            if (math::norm(u) - 1.0).abs() > 1e-6 || (math::norm(v) - 1.0).abs() > 1e-6 || math::dot(u, v).abs() > 1e-6
+            {
+                return Err(SimError::Config(format!("{what}: axis_u and axis_v must be orthonormal")));
+            }
+            p.texture.validate(&what)?;
+        }
+        let check_box = |b: &BoxConfig, what: &str| -> Result<(), SimError> {
+            if b.half_extents.iter().any(|h| !(h.is_finite() && *h > 0.0)) {
+                return Err(SimError::Config(format!("{what}: half_extents must be > 0")));
+            }
+            b.texture.validate(what)
+        };
+        for (i, b) in self.boxes.iter().enumerate() {
+            check_box(b, &format!("scene.boxes[{i}]"))?;
+        }
+        for (i, o) in self.objects.iter().enumerate() {
+            let what = format!("scene.objects[{i}]");
+            if o.id == 0 || o.id > 255 {
+                return Err(SimError::Config(format!("{what}: id {} must be in 1..=255", o.id)));
+            }
+            if self.objects[..i].iter().any(|p| p.id == o.id) {
+                return Err(SimError::Config(format!("{what}: id {} used twice", o.id)));
+            }
+            check_box(&o.shape, &what)?;
+        }
+        if !(self.lighting.ambient > 0.0 && self.lighting.ambient <= 1.0) {
+            return Err(SimError::Config("scene.lighting.ambient must be in (0, 1]".into()));
+        }
+        Ok(())
+    }
+}
+
+/// One box of the scene at runtime, with its baked texture.
+#[derive(Debug, Clone)]
+pub struct SceneBox {
+    /// Object id (0 = background).
+    pub id: u16,
+    /// Half sizes, m.
+    pub half: V3,
+    /// Motion.
+    pub trajectory: RigidTrajectory,
+    /// Index into [`Scene::textures`].
+    pub texture: usize,
+    /// First surface key of its six faces.
+    pub key_base: u16,
+}
+
+/// The scene at runtime: content with baked textures, and the camera trajectory.
+#[derive(Debug, Clone)]
+pub struct Scene {
+    /// Background planes.
+    pub planes: Vec<PlaneConfig>,
+    /// Texture index of each plane.
+    pub plane_texture: Vec<usize>,
+    /// All boxes: background first, then objects.
+    pub boxes: Vec<SceneBox>,
+    /// Baked textures.
+    pub textures: Vec<Texture>,
+    /// Lighting.
+    pub lighting: Lighting,
+    /// Camera trajectory (camera -> world).
+    pub camera: RigidTrajectory,
+    /// Object id of every surface key (planes, then six faces per box).
+    pub key_id: Vec<u16>,
+}
+
+impl Scene {
+    /// Bakes the textures of `content` for `seed`.
+    pub fn new(content: &SceneContent, camera: RigidTrajectory, seed: u64, eps: f64) -> Self {
+        let mut textures = Vec::new();
+        let mut key_id = Vec::new();
+        let mut plane_texture = Vec::new();
+        for (i, p) in content.planes.iter().enumerate() {
+            textures.push(Texture::bake(&p.texture, seed ^ (i as u64 + 1) << 20, eps));
+            plane_texture.push(textures.len() - 1);
+            key_id.push(0);
+        }
+        let mut boxes = Vec::new();
+        let all = content.boxes.iter().map(|b| (0u16, b)).chain(content.objects.iter().map(|o| (o.id, &o.shape)));
+        for (j, (id, b)) in all.enumerate() {
+            textures.push(Texture::bake(&b.texture, seed ^ (j as u64 + 101) << 20, eps));
+            boxes.push(SceneBox {
+                id,
+                half: b.half_extents,
+                trajectory: b.trajectory.clone(),
+                texture: textures.len() - 1,
+                key_base: key_id.len() as u16,
+            });
+            key_id.extend([id; 6]);
+        }
+        Self { planes: content.planes.clone(), plane_texture, boxes, textures, lighting: content.lighting.clone(), camera, key_id }
+    }
+
+    /// Camera state at `t` (s).
+    pub fn camera_state(&self, t: f64) -> RigidState {
+        self.camera.state(t)
+    }
+}
+
+/// A rigid velocity field in the camera frame: a point `P` (camera frame, m) of the body moves
+/// relative to the camera with `V(P) = linear + angular x P` (m/s).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RelativeMotion {
+    /// m/s, camera frame.
+    pub linear: V3,
+    /// rad/s, camera frame.
+    pub angular: V3,
+}
+
+impl RelativeMotion {
+    /// Relative motion of a body with world state `body` (or the static world for `None`) seen
+    /// from a camera with world state `cam`.
+    pub fn new(cam: &RigidState, body: Option<&RigidState>) -> Self {
+        let r_cw = math::transpose(&cam.rotation);
+        let w_c = cam.omega_body;
+        match body {
+            None => Self { linear: math::scale(math::mul_mv(&r_cw, cam.velocity), -1.0), angular: math::scale(w_c, -1.0) },
+            Some(b) => {
+                let w_o = b.omega_world();
+                let v = math::add(b.velocity, math::cross(w_o, math::sub(cam.position, b.position)));
+                Self {
+                    linear: math::mul_mv(&r_cw, math::sub(v, cam.velocity)),
+                    angular: math::sub(math::mul_mv(&r_cw, w_o), w_c),
+                }
+            }
+        }
+    }
+
+    /// Velocity of the camera-frame point `p` relative to the camera, m/s.
+    pub fn velocity(&self, p: V3) -> V3 {
+        math::add(self.linear, math::cross(self.angular, p))
+    }
+
+    /// Normalized image flow (1/s) of the camera-frame point `p` (needs `p.z > 0`).
+    pub fn normalized_flow(&self, p: V3) -> (f64, f64) {
+        let v = self.velocity(p);
+        let (x, y) = (p[0] / p[2], p[1] / p[2]);
+        ((v[0] - x * v[2]) / p[2], (v[1] - y * v[2]) / p[2])
+    }
+
+    /// Upper bound of the normalized image speed (1/s) of this body's points within `radius`
+    /// (m) of the camera-frame point `center`, at depth `z >= z_min`, seen at image radius
+    /// `sqrt(x^2 + y^2) <= r_max` (normalized).
+    pub fn speed_bound_ball(&self, center: V3, radius: f64, z_min: f64, r_max: f64) -> f64 {
+        // |u| = |[[1, 0, -x], [0, 1, -y]] V| / Z <= sqrt(1 + r^2) |V| / Z, and
+        // |V(P)| <= |V(center)| + |angular| |P - center|.
+        let v = math::norm(self.velocity(center)) + math::norm(self.angular) * radius;
+        (1.0 + r_max * r_max).sqrt() * v / z_min
+    }
+
+    /// Rotational (depth-independent) and translational (times depth) parts of the normalized
+    /// flow magnitude at normalized `(x, y)`: `|flow| <= rot + trans / Z`.
+    pub fn flow_parts(&self, x: f64, y: f64) -> (f64, f64) {
+        let d = [x, y, 1.0];
+        let c = math::cross(self.angular, d);
+        let v = self.linear;
+        let rot = (c[0] - x * c[2]).hypot(c[1] - y * c[2]);
+        let trans = (v[0] - x * v[2]).hypot(v[1] - y * v[2]);
+        (rot, trans)
+    }
+
+    /// Upper bound of the normalized image speed (1/s) of this body's points that lie in front of
+    /// the camera at depth `z >= z_min` and inside `|x| <= max_x`, `|y| <= max_y`.
+    pub fn speed_bound(&self, z_min: f64, max_x: f64, max_y: f64) -> f64 {
+        let v = self.linear;
+        let w = self.angular;
+        // V(P) = v + w x P with P = Z (x, y, 1): flow = (v_xy - x v_z) / Z + B(x) w-like term.
+        let trans = (v[0].abs() + v[1].abs() + (max_x + max_y) * v[2].abs()) / z_min;
+        let mut rot: f64 = 0.0;
+        for &(x, y) in &[(max_x, max_y), (max_x, -max_y), (-max_x, max_y), (-max_x, -max_y), (0.0, 0.0)] {
+            let c = math::cross(w, [x, y, 1.0]);
+            let fx = c[0] - x * c[2];
+            let fy = c[1] - y * c[2];
+            rot = rot.max(fx.abs() + fy.abs());
+        }
+        // The rotational flow is quadratic in (x, y); the corners bound it up to the mixed terms,
+        // which the 1-norm above over-estimates anyway.
+        trans + rot
+    }
+}
+
+/// Camera-frame pose of a box at one instant.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BoxPose {
+    /// Box -> camera rotation.
+    pub r_cb: M3,
+    /// Box centre in the camera frame, m.
+    pub center: V3,
+}
+
+impl BoxPose {
+    /// Pose of a box with world state `b` seen from a camera with world state `cam`.
+    pub fn new(cam: &RigidState, b: &RigidState) -> Self {
+        let r_cw = math::transpose(&cam.rotation);
+        Self { r_cb: math::mul_mm(&r_cw, &b.rotation), center: math::mul_mv(&r_cw, math::sub(b.position, cam.position)) }
+    }
+
+    /// The 8 corners in the camera frame.
+    pub fn corners(&self, half: V3) -> [V3; 8] {
+        let mut out = [[0.0; 3]; 8];
+        for (k, c) in out.iter_mut().enumerate() {
+            let s = [
+                if k & 1 == 0 { -half[0] } else { half[0] },
+                if k & 2 == 0 { -half[1] } else { half[1] },
+                if k & 4 == 0 { -half[2] } else { half[2] },
+            ];
+            *c = math::add(self.center, math::mul_mv(&self.r_cb, s));
+        }
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::trajectory::Signal;
+
+    #[test]
+    fn relative_motion_of_static_world_is_minus_camera_motion() {
+        let cam = RigidTrajectory {
+            position: [Signal::linear(0.0, 0.5), Signal::constant(0.0), Signal::constant(1.0)],
+            base_rotation: math::IDENTITY,
+            axes: [2, 1, 0],
+            angles: [Signal::linear(0.0, 0.3), Signal::default(), Signal::default()],
+        }
+        .state(0.0);
+        let m = RelativeMotion::new(&cam, None);
+        assert!((m.linear[0] + 0.5).abs() < 1e-12 && (m.angular[2] + 0.3).abs() < 1e-12);
+        // A body moving exactly with the camera has no relative motion.
+        let same = RelativeMotion::new(&cam, Some(&cam));
+        assert!(math::norm(same.linear) < 1e-12 && math::norm(same.angular) < 1e-12);
+    }
+
+    #[test]
+    fn ball_bound_covers_points_of_a_tumbling_body() {
+        let m = RelativeMotion { linear: [0.8, -0.3, 0.2], angular: [1.0, 0.5, -0.7] };
+        let c = [0.3, -0.1, 2.0];
+        let b = m.speed_bound_ball(c, 0.3, 1.7, 0.8);
+        for i in 0..1000 {
+            let a = i as f64 * 0.731;
+            let off = [0.17 * a.sin(), 0.17 * (1.3 * a).cos(), 0.2 * (0.7 * a).sin()];
+            let p = math::add(c, off);
+            let (fx, fy) = m.normalized_flow(p);
+            assert!((fx * fx + fy * fy).sqrt() <= b);
+        }
+    }
+
+    #[test]
+    fn speed_bound_covers_sampled_points() {
+        let m = RelativeMotion { linear: [0.3, -0.2, 0.5], angular: [0.4, -0.7, 0.2] };
+        let b = m.speed_bound(1.5, 0.6, 0.45);
+        for i in 0..50 {
+            let x = -0.6 + 1.2 * (i as f64 / 49.0);
+            for j in 0..50 {
+                let y = -0.45 + 0.9 * (j as f64 / 49.0);
+                for z in [1.5, 2.0, 7.0] {
+                    let (fx, fy) = m.normalized_flow([x * z, y * z, z]);
+                    let speed = (fx * fx + fy * fy).sqrt();
+                    assert!(speed <= b + 1e-9);
+                    let (rot, trans) = m.flow_parts(x, y);
+                    assert!(speed <= rot + trans / z + 1e-9);
+                }
+            }
+        }
+    }
+}

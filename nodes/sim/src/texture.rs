@@ -1,0 +1,379 @@
+//! Procedural textures, baked once into a mip-mapped log-intensity image per surface.
+//!
+//! Anti-aliasing of the texture itself is done by analytic filtering: every sample looks up a
+//! trilinear (mip-mapped) value at the level whose texel size matches the pixel footprint on the
+//! surface, so texture detail finer than a pixel is averaged rather than aliased into flicker
+//! (and spurious events). Hard pattern edges are baked with a one-texel linear ramp. Geometric
+//! edges (silhouettes, creases) are anti-aliased by the renderer (see `render`).
+//!
+//! Textures are periodic (they tile), so they can cover planes of any size; the period is
+//! `size * texel_m` metres.
+
+use serde::{Deserialize, Serialize};
+
+use crate::SimError;
+use crate::rng::Rng;
+
+/// The pattern of a texture, before the value-noise layer is mixed in.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub enum Pattern {
+    /// Multi-octave value noise only.
+    Noise,
+    /// A checkerboard with the given square size (m, rounded so the texture tiles).
+    Checker {
+        /// Square side, m.
+        square_m: f64,
+    },
+    /// Random discs and rectangles of random grey levels on a mid-grey ground ("clutter",
+    /// posters, objects on a wall).
+    Blobs {
+        /// Number of shapes per square metre.
+        per_m2: f64,
+        /// Typical shape radius / half-size, m (actual sizes vary from 0.3x to 1.5x).
+        radius_m: f64,
+    },
+    /// Parallel stripes along the texture's v axis.
+    Stripes {
+        /// Stripe period, m (rounded so the texture tiles).
+        period_m: f64,
+    },
+}
+
+/// How one surface looks. The log intensity is `ln(eps + albedo)` with
+/// `albedo = mean_albedo * exp(contrast * z)`, `z` in [-1, 1] the pattern value.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TextureConfig {
+    /// Pattern.
+    pub pattern: Pattern,
+    /// Texels per side (power of two, 16..=4096).
+    pub size: u32,
+    /// Texel size, m.
+    pub texel_m: f64,
+    /// Mean albedo in (0, 1].
+    pub mean_albedo: f64,
+    /// Log-intensity amplitude of the pattern (natural-log units; 1 = factor e either way).
+    pub contrast: f64,
+    /// Weight of the value-noise layer mixed into the pattern, 0..=1.
+    pub noise_weight: f64,
+    /// Wavelength of the coarsest noise octave, m (finer octaves halve it down to 8 texels).
+    pub noise_feature_m: f64,
+    /// Texture seed (mixed with the scene seed).
+    pub seed: u64,
+}
+
+impl TextureConfig {
+    /// Checks the values; `what` names the surface in errors.
+    pub fn validate(&self, what: &str) -> Result<(), SimError> {
+        let bad = |m: String| Err(SimError::Config(format!("{what}.texture: {m}")));
+        if !self.size.is_power_of_two() || !(16..=4096).contains(&self.size) {
+            return bad(format!("size {} must be a power of two in 16..=4096", self.size));
+        }
+        if !(self.texel_m.is_finite() && self.texel_m > 0.0) {
+            return bad(format!("texel_m {} must be > 0", self.texel_m));
+        }
+        if !(self.mean_albedo > 0.0 && self.mean_albedo <= 1.0) {
+            return bad(format!("mean_albedo {} must be in (0, 1]", self.mean_albedo));
+        }
+        if !(self.contrast.is_finite() && (0.0..=5.0).contains(&self.contrast)) {
+            return bad(format!("contrast {} must be in [0, 5]", self.contrast));
+        }
+        if !(0.0..=1.0).contains(&self.noise_weight) {
+            return bad(format!("noise_weight {} must be in [0, 1]", self.noise_weight));
+        }
+        if !(self.noise_feature_m.is_finite() && self.noise_feature_m > 0.0) {
+            return bad(format!("noise_feature_m {} must be > 0", self.noise_feature_m));
+        }
+        let positive = |v: f64| v.is_finite() && v > 0.0;
+        let ok = match self.pattern {
+            Pattern::Noise => true,
+            Pattern::Checker { square_m } => positive(square_m),
+            Pattern::Blobs { per_m2, radius_m } => positive(per_m2) && per_m2 < 1e4 && positive(radius_m),
+            Pattern::Stripes { period_m } => positive(period_m),
+        };
+        if !ok {
+            return bad(format!("pattern {:?} needs positive finite sizes", self.pattern));
+        }
+        Ok(())
+    }
+}
+
+/// A baked, mip-mapped texture of log intensities.
+#[derive(Debug, Clone)]
+pub struct Texture {
+    levels: Vec<Vec<f32>>,
+    sizes: Vec<u32>,
+    /// Texels per metre of each level.
+    scales: Vec<f32>,
+    inv_texel: f32,
+    max_level: f32,
+}
+
+/// `floor` without a libm call (valid for |x| < 2^31).
+#[inline]
+fn floor_fast(x: f32) -> f32 {
+    let t = x as i32 as f32;
+    if t > x { t - 1.0 } else { t }
+}
+
+/// Approximate log2 of a positive number: exact at powers of two, linear in between
+/// (continuous and monotone, which is what level selection needs).
+#[inline]
+pub fn fast_log2(x: f32) -> f32 {
+    let bits = x.to_bits();
+    let e = ((bits >> 23) & 255) as i32 - 127;
+    let m = f32::from_bits((bits & 0x007f_ffff) | 0x3f80_0000);
+    e as f32 + (m - 1.0)
+}
+
+fn smooth5(t: f64) -> f64 {
+    t * t * t * (t * (t * 6.0 - 15.0) + 10.0)
+}
+
+/// A periodic square wave of amplitude 1 and the given period (texels), with edges ramped
+/// linearly over one texel.
+fn square_wave(x: f64, period: f64) -> f64 {
+    let f = x.rem_euclid(period);
+    let half = period / 2.0;
+    let e = f.min((f - half).abs()).min(period - f);
+    let sign = if f < half { 1.0 } else { -1.0 };
+    sign * (e / 0.5).min(1.0)
+}
+
+impl Texture {
+    /// Bakes `cfg` with scene seed `seed`; `eps` is the log offset of `ln(eps + albedo)`.
+    pub fn bake(cfg: &TextureConfig, seed: u64, eps: f64) -> Self {
+        let n = cfg.size as usize;
+        let mut rng = Rng::new(seed ^ cfg.seed.wrapping_mul(0x9E37_79B9), 0x7e57);
+        let extent = n as f64 * cfg.texel_m;
+        let pattern = Self::pattern(cfg, n, extent, &mut rng);
+        let noise = Self::value_noise(cfg, n, extent, &mut rng);
+        let w = cfg.noise_weight;
+        let level0: Vec<f32> = pattern
+            .iter()
+            .zip(&noise)
+            .map(|(p, q)| {
+                let z = ((1.0 - w) * p + w * q).clamp(-1.0, 1.0);
+                let albedo = (cfg.mean_albedo * (cfg.contrast * z).exp()).clamp(1e-3, 1.0);
+                (eps + albedo).ln() as f32
+            })
+            .collect();
+        let mut levels = vec![level0];
+        let mut sizes = vec![cfg.size];
+        while *sizes.last().unwrap_or(&1) > 8 && levels.len() < 8 {
+            let (prev, m) = (&levels[levels.len() - 1], sizes[sizes.len() - 1] as usize);
+            let h = m / 2;
+            let mut next = vec![0.0f32; h * h];
+            for y in 0..h {
+                for x in 0..h {
+                    let a = prev[2 * y * m + 2 * x] + prev[2 * y * m + 2 * x + 1];
+                    let b = prev[(2 * y + 1) * m + 2 * x] + prev[(2 * y + 1) * m + 2 * x + 1];
+                    next[y * h + x] = 0.25 * (a + b);
+                }
+            }
+            levels.push(next);
+            sizes.push(h as u32);
+        }
+        let max_level = (levels.len() - 1) as f32;
+        let inv_texel = (1.0 / cfg.texel_m) as f32;
+        let scales = (0..levels.len()).map(|k| inv_texel / (1u32 << k) as f32).collect();
+        Self { levels, sizes, scales, inv_texel, max_level }
+    }
+
+    fn pattern(cfg: &TextureConfig, n: usize, extent: f64, rng: &mut Rng) -> Vec<f64> {
+        let tiled = |p: f64| extent / (extent / p).round().max(1.0) / cfg.texel_m;
+        match cfg.pattern {
+            Pattern::Noise => vec![0.0; n * n],
+            Pattern::Checker { square_m } => {
+                let period = tiled(2.0 * square_m);
+                let mut out = vec![0.0; n * n];
+                for y in 0..n {
+                    let sy = square_wave(y as f64 + 0.5, period);
+                    for x in 0..n {
+                        out[y * n + x] = square_wave(x as f64 + 0.5, period) * sy;
+                    }
+                }
+                out
+            }
+            Pattern::Stripes { period_m } => {
+                let period = tiled(period_m);
+                let row: Vec<f64> = (0..n).map(|x| square_wave(x as f64 + 0.5, period)).collect();
+                (0..n * n).map(|i| row[i % n]).collect()
+            }
+            Pattern::Blobs { per_m2, radius_m } => {
+                let mut out = vec![0.0; n * n];
+                let count = (per_m2 * extent * extent).round() as usize;
+                for _ in 0..count {
+                    let level = rng.range(-1.0, 1.0);
+                    let cx = rng.range(0.0, n as f64);
+                    let cy = rng.range(0.0, n as f64);
+                    let r = radius_m * rng.range(0.3, 1.5) / cfg.texel_m;
+                    let aspect = rng.range(0.5, 2.0);
+                    let (rx, ry) = (r * aspect.sqrt(), r / aspect.sqrt());
+                    let disc = rng.uniform() < 0.5;
+                    let (ex, ey) = (rx.ceil() as i64 + 2, ry.ceil() as i64 + 2);
+                    for dy in -ey..=ey {
+                        for dx in -ex..=ex {
+                            let px = (cx.floor() as i64 + dx).rem_euclid(n as i64) as usize;
+                            let py = (cy.floor() as i64 + dy).rem_euclid(n as i64) as usize;
+                            let ox = cx.floor() + dx as f64 + 0.5 - cx;
+                            let oy = cy.floor() + dy as f64 + 0.5 - cy;
+                            // Signed distance to the shape's outline, texels (negative inside).
+                            let sd = if disc {
+                                let q = ((ox / rx).powi(2) + (oy / ry).powi(2)).sqrt();
+                                (q - 1.0) * rx.min(ry)
+                            } else {
+                                (ox.abs() - rx).max(oy.abs() - ry)
+                            };
+                            let a = (0.5 - sd).clamp(0.0, 1.0);
+                            let v = &mut out[py * n + px];
+                            *v = *v * (1.0 - a) + level * a;
+                        }
+                    }
+                }
+                out
+            }
+        }
+    }
+
+    fn value_noise(cfg: &TextureConfig, n: usize, extent: f64, rng: &mut Rng) -> Vec<f64> {
+        let mut out = vec![0.0; n * n];
+        if cfg.noise_weight <= 0.0 {
+            return out;
+        }
+        let mut cells = ((extent / cfg.noise_feature_m).round().max(1.0) as usize).next_power_of_two().min(n);
+        let mut amp = 1.0;
+        let mut total = 0.0;
+        while cells <= n / 8 {
+            let lattice: Vec<f64> = (0..cells * cells).map(|_| rng.range(-1.0, 1.0)).collect();
+            let per = n as f64 / cells as f64;
+            for y in 0..n {
+                let fy = (y as f64 + 0.5) / per;
+                let iy = fy.floor() as usize;
+                let ty = smooth5(fy - iy as f64);
+                let (y0, y1) = (iy % cells, (iy + 1) % cells);
+                for x in 0..n {
+                    let fx = (x as f64 + 0.5) / per;
+                    let ix = fx.floor() as usize;
+                    let tx = smooth5(fx - ix as f64);
+                    let (x0, x1) = (ix % cells, (ix + 1) % cells);
+                    let a = lattice[y0 * cells + x0] * (1.0 - tx) + lattice[y0 * cells + x1] * tx;
+                    let b = lattice[y1 * cells + x0] * (1.0 - tx) + lattice[y1 * cells + x1] * tx;
+                    out[y * n + x] += amp * (a * (1.0 - ty) + b * ty);
+                }
+            }
+            total += amp;
+            amp *= 0.5;
+            cells *= 2;
+        }
+        if total > 0.0 {
+            // Value noise rarely reaches its bounds; stretch so that it spans about [-1, 1].
+            for v in &mut out {
+                *v = (*v / total * 1.8).clamp(-1.0, 1.0);
+            }
+        }
+        out
+    }
+
+    #[inline]
+    fn bilinear(&self, level: usize, u: f32, v: f32) -> f32 {
+        let size = self.sizes[level];
+        let mask = size - 1;
+        let scale = self.scales[level];
+        let fu = u * scale - 0.5;
+        let fv = v * scale - 0.5;
+        let iu = floor_fast(fu);
+        let iv = floor_fast(fv);
+        let (a, b) = (fu - iu, fv - iv);
+        let x0 = (iu as i32 as u32) & mask;
+        let y0 = (iv as i32 as u32) & mask;
+        let x1 = (x0 + 1) & mask;
+        let y1 = (y0 + 1) & mask;
+        let d = &self.levels[level];
+        let (r0, r1) = ((y0 * size) as usize, (y1 * size) as usize);
+        let top = d[r0 + x0 as usize] + a * (d[r0 + x1 as usize] - d[r0 + x0 as usize]);
+        let bot = d[r1 + x0 as usize] + a * (d[r1 + x1 as usize] - d[r1 + x0 as usize]);
+        top + b * (bot - top)
+    }
+
+    /// Log intensity at surface coordinates `(u, v)` (m) for a pixel footprint of
+    /// `footprint_m` metres on the surface (trilinear mip-mapping).
+    #[inline]
+    pub fn sample(&self, u: f32, v: f32, footprint_m: f32) -> f32 {
+        let lod = fast_log2((footprint_m * self.inv_texel).max(1e-6)).clamp(0.0, self.max_level);
+        if lod <= 0.0 {
+            return self.bilinear(0, u, v);
+        }
+        let l0 = floor_fast(lod);
+        let f = lod - l0;
+        let a = self.bilinear(l0 as usize, u, v);
+        if f <= 0.0 || l0 >= self.max_level {
+            return a;
+        }
+        let b = self.bilinear(l0 as usize + 1, u, v);
+        a + f * (b - a)
+    }
+
+    /// The coarsest level's mean, i.e. the texture's average log intensity.
+    pub fn mean(&self) -> f32 {
+        let last = &self.levels[self.levels.len() - 1];
+        last.iter().sum::<f32>() / last.len() as f32
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn cfg(pattern: Pattern) -> TextureConfig {
+        TextureConfig {
+            pattern,
+            size: 64,
+            texel_m: 0.01,
+            mean_albedo: 0.4,
+            contrast: 1.0,
+            noise_weight: 0.3,
+            noise_feature_m: 0.16,
+            seed: 3,
+        }
+    }
+
+    #[test]
+    fn fast_log2_is_exact_at_powers_and_monotone() {
+        assert_eq!(fast_log2(8.0), 3.0);
+        assert_eq!(fast_log2(0.25), -2.0);
+        let mut prev = fast_log2(0.1);
+        for i in 1..1000 {
+            let v = fast_log2(0.1 + i as f32 * 0.01);
+            assert!(v >= prev);
+            prev = v;
+        }
+    }
+
+    #[test]
+    fn textures_tile_and_filter_towards_the_mean() {
+        for p in [
+            Pattern::Noise,
+            Pattern::Checker { square_m: 0.08 },
+            Pattern::Blobs { per_m2: 30.0, radius_m: 0.05 },
+            Pattern::Stripes { period_m: 0.1 },
+        ] {
+            let c = cfg(p);
+            c.validate("t").unwrap();
+            let t = Texture::bake(&c, 1, 0.01);
+            let period = 0.64f32;
+            let a = t.sample(0.123, 0.456, 0.001);
+            let b = t.sample(0.123 + period, 0.456 - period, 0.001);
+            assert!((a - b).abs() < 1e-4, "{p:?}: {a} vs {b}");
+            // A huge footprint returns the coarsest level, close to the mean everywhere.
+            let m = t.mean();
+            assert!((t.sample(0.3, 0.1, 10.0) - m).abs() < 0.5, "{p:?}");
+            // Contrast: level 0 spans a real range.
+            let lo = t.levels[0].iter().cloned().fold(f32::MAX, f32::min);
+            let hi = t.levels[0].iter().cloned().fold(f32::MIN, f32::max);
+            assert!(hi - lo > 0.3, "{p:?}: range {lo}..{hi}");
+        }
+        let mut bad = cfg(Pattern::Noise);
+        bad.size = 100;
+        assert!(bad.validate("wall").unwrap_err().to_string().contains("wall.texture"));
+    }
+}
