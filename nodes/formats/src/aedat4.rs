@@ -104,8 +104,11 @@ fn read_full(file: &mut impl Read, buf: &mut [u8]) -> std::io::Result<usize> {
     Ok(n)
 }
 
+/// The streams of a file: (stream id, kind) pairs.
+type Streams = Vec<(i32, StreamKind)>;
+
 /// Stream ids, kinds and the event sensor size from the header's XML description.
-fn parse_description(xml: &str) -> Result<(Vec<(i32, StreamKind)>, Option<(u16, u16)>), String> {
+fn parse_description(xml: &str) -> Result<(Streams, Option<(u16, u16)>), String> {
     let document = roxmltree::Document::parse(xml).map_err(|e| format!("header XML: {e}"))?;
     let out_info = document
         .descendants()

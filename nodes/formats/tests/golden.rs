@@ -185,7 +185,7 @@ fn davis346_imu_matches_golden_values() {
     {
         assert!(close(got, want, 1e-6), "first accel {got} vs {want}");
     }
-    let sum = |f: &dyn Fn(&(i64, [f64; 3], [f64; 3])) -> f64| imu.iter().map(f).sum::<f64>();
+    let sum = |f: &dyn Fn(&common::AbsImu) -> f64| imu.iter().map(f).sum::<f64>();
     assert!(close(sum(&|s| s.1[0] * deg), 1747.0245, 1e-3));
     assert!(close(sum(&|s| s.1[1] * deg), -1164.3829, 1e-3));
     assert!(close(sum(&|s| s.1[2] * deg), 269.1040, 1e-3));

@@ -31,12 +31,15 @@ pub fn real_data_dir() -> Option<PathBuf> {
 /// One event with its absolute time in µs.
 pub type AbsEvent = (i64, u16, u16, u8);
 
+/// One IMU sample: (t µs absolute, gyro rad/s, accel m/s²).
+pub type AbsImu = (i64, [f64; 3], [f64; 3]);
+
 /// Everything a decoder delivers, with absolute times.
 #[derive(Debug, Default)]
 pub struct Decoded {
     pub events: Vec<AbsEvent>,
-    /// IMU samples: (t µs absolute, gyro rad/s, accel m/s²).
-    pub imu: Vec<(i64, [f64; 3], [f64; 3])>,
+    /// IMU samples.
+    pub imu: Vec<AbsImu>,
     pub chunks: usize,
     pub error: Option<DecodeError>,
 }
