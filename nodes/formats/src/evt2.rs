@@ -68,7 +68,11 @@ impl State {
     /// Raises the current time to `time high + low` (never lowers it).
     #[inline]
     fn advance_time(&mut self, low: u32) {
-        let candidate = self.loops * TIME_LOOP_US + self.time_high + low as i64;
+        // Saturating: a crafted file could hold more time-high loops than an i64 of µs counts.
+        let candidate = self
+            .loops
+            .saturating_mul(TIME_LOOP_US)
+            .saturating_add(self.time_high + low as i64);
         if candidate >= self.t_us {
             self.t_us = candidate;
         } else {

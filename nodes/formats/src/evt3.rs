@@ -84,7 +84,12 @@ impl Evt3Decoder {
 impl State {
     #[inline]
     fn update_time(&mut self) {
-        let candidate = (self.loops * TIME_LOOP_US) | ((self.time_high as i64) << 12) | self.time_low as i64;
+        // Saturating: loops stay far below 2^39 (one per time-high word of a file), but a
+        // crafted stream must not overflow.
+        let candidate = self
+            .loops
+            .saturating_mul(TIME_LOOP_US)
+            .saturating_add(((self.time_high as i64) << 12) | self.time_low as i64);
         if candidate >= self.t_us {
             self.t_us = candidate;
             if let Some(origin) = self.clock.origin {
@@ -234,7 +239,8 @@ impl State {
 
 impl FormatDecoder for Evt3Decoder {
     fn fill(&mut self, out: &mut Chunk, target: usize) -> Result<bool, DecodeError> {
-        let room = target.saturating_sub(out.events.len()) + MAX_EVENTS_PER_RECORD;
+        // Reserve for the chunk asked for, capped: `target` may be "everything" (usize::MAX).
+        let room = target.saturating_sub(out.events.len()).min(1 << 20) + MAX_EVENTS_PER_RECORD;
         let e = &mut out.events;
         e.t.reserve(room);
         e.x.reserve(room);

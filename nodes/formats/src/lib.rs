@@ -22,6 +22,8 @@
 //! # Ok::<(), evseg_formats::DecodeError>(())
 //! ```
 
+#![deny(missing_docs)]
+
 mod aedat4;
 mod block_reader;
 pub mod camera_file;
@@ -257,7 +259,7 @@ pub fn detect_format(path: &Path) -> Result<Format, DecodeError> {
         return Ok(Format::EventStream);
     }
     if head.first() == Some(&b'%') {
-        match prophesee::version_from_head(&head) {
+        match prophesee::read_header(path)?.version {
             Some(prophesee::EvtVersion::Evt2) => return Ok(Format::Evt2),
             Some(prophesee::EvtVersion::Evt3) => return Ok(Format::Evt3),
             Some(prophesee::EvtVersion::Other(version)) => {

@@ -149,21 +149,6 @@ pub(crate) fn read_header(path: &Path) -> Result<PropheseeHeader, DecodeError> {
     Ok(header)
 }
 
-/// The event encoding named by the complete header lines within `head` (the first bytes of a
-/// file), if any.
-pub(crate) fn version_from_head(head: &[u8]) -> Option<EvtVersion> {
-    let mut header = PropheseeHeader::default();
-    let mut rest = head;
-    while rest.first() == Some(&b'%') {
-        let Some(end) = rest.iter().position(|&b| b == b'\n') else {
-            break;
-        };
-        header.parse_line(&rest[..end]);
-        rest = &rest[end + 1..];
-    }
-    header.version
-}
-
 /// Opens a `.raw` file: reads its header, checks that it names `expected` (or nothing), and
 /// picks the sensor size: the header's, else `options.geometry`, else `fallback`. Returns the
 /// header and the size.
@@ -230,14 +215,5 @@ mod tests {
         assert_eq!(h.version, Some(EvtVersion::Other("2.1".into())));
         let h = parse(&["% Date 2020-09-25 07:48:31\n"]);
         assert_eq!(h, PropheseeHeader::default());
-    }
-
-    #[test]
-    fn version_from_partial_head() {
-        assert_eq!(
-            version_from_head(b"% a b\n% evt 3.0\n\x00\x01"),
-            Some(EvtVersion::Evt3)
-        );
-        assert_eq!(version_from_head(b"% a b\n% evt 3."), None);
     }
 }

@@ -71,6 +71,11 @@ fn evt3_time_loops_vectors_and_rows() {
         ((1 << 24) + 9, 15, 2, 1),
     ];
     assert_eq!(decoded.events, expected);
+    // Asking for everything at once works too.
+    let mut decoder = evseg_formats::open(&path, &OpenOptions::default()).unwrap();
+    let chunk = decoder.next_chunk(usize::MAX).unwrap().unwrap();
+    assert_eq!(chunk.events.len(), 6);
+    assert!(decoder.next_chunk(usize::MAX).unwrap().is_none());
     let stats = decoder.stats();
     assert_eq!(stats.words_before_time_base, 2);
     assert_eq!(stats.out_of_range, 4 + 8);
@@ -215,6 +220,16 @@ fn raw_without_version_and_wrong_version() {
     let path = write(&dir, "i.raw", &evt2(b"% evt 2.1\n", &[0x8 << 28]));
     let error = evseg_formats::open(&path, &OpenOptions::default()).err().unwrap();
     assert!(error.to_string().contains("2.1"), "{error}");
+    // A header longer than the first 4 KiB still names the format.
+    let mut long = "% comment line that is long enough to fill a lot of bytes\n".repeat(200);
+    long.push_str("% evt 2.0\n");
+    let path = write(
+        &dir,
+        "long.raw",
+        &evt2(long.as_bytes(), &[0x8 << 28, cd(1, 0, 2, 3)]),
+    );
+    let decoded = decode_file_lenient(&path, 10);
+    assert_eq!(decoded.events, vec![(0, 2, 3, 1)]);
     // Forcing EVT 3.0 on a file whose header says EVT 2.0 is refused.
     let path = write(&dir, "j.raw", &evt2(b"% evt 2.0\n", &[0x8 << 28]));
     let options = OpenOptions {
