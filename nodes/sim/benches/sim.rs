@@ -15,7 +15,10 @@ const SIM_SECONDS: f64 = 0.1;
 
 fn bench(c: &mut Criterion) {
     let mut group = c.benchmark_group("simulate_0.1s_640x480");
-    group.sample_size(10).measurement_time(Duration::from_secs(20)).warm_up_time(Duration::from_secs(1));
+    group
+        .sample_size(10)
+        .measurement_time(Duration::from_secs(20))
+        .warm_up_time(Duration::from_secs(1));
     for name in ["camera-only", "one-object"] {
         let cfg = preset(name, 1).expect("preset exists");
         let fresh = Simulator::new(cfg).expect("valid preset");

@@ -27,14 +27,24 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let s = sim.stats();
     let px = 640.0 * 480.0;
     println!("preset {name} seed {seed}: {t:.2} s simulated in {wall:.2} s wall (setup {setup:.2} s)");
-    println!("  events {n} ({:.2} M/s sensor time), on share {:.2}, object share {:.3}", n as f64 / t / 1e6, on as f64 / n.max(1) as f64, obj as f64 / n.max(1) as f64);
-    println!("  sim-seconds per wall-second {:.3}, events per wall-second {:.2} M", t / wall, n as f64 / wall / 1e6);
     println!(
-        "  steps {} ({:.0}/s), keyframes {}, pixel renders per step {:.3} of the image, supersampled per step {:.0}, noise {}, skip violations {}",
+        "  events {n} ({:.2} M/s sensor time), on share {:.2}, object share {:.3}",
+        n as f64 / t / 1e6,
+        on as f64 / n.max(1) as f64,
+        obj as f64 / n.max(1) as f64
+    );
+    println!(
+        "  sim-seconds per wall-second {:.3}, events per wall-second {:.2} M",
+        t / wall,
+        n as f64 / wall / 1e6
+    );
+    println!(
+        "  steps {} ({:.0}/s), keyframes {}, rays per step {:.3} of the image, interpolated samples per step {:.3} of the image, supersampled per step {:.0}, noise {}, skip violations {}",
         s.steps,
         s.steps as f64 / t,
         s.keyframes,
         s.pixel_renders as f64 / s.steps as f64 / px,
+        s.interpolated_samples as f64 / s.steps as f64 / px,
         s.supersampled as f64 / s.steps as f64,
         s.noise_events,
         s.skip_violations

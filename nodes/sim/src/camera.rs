@@ -38,7 +38,9 @@ impl CameraConfig {
         }
         for (name, v) in [("fx", self.fx), ("fy", self.fy)] {
             if !(v.is_finite() && v > 1.0) {
-                return Err(SimError::Config(format!("camera.{name} = {v} must be a finite value > 1 px")));
+                return Err(SimError::Config(format!(
+                    "camera.{name} = {v} must be a finite value > 1 px"
+                )));
             }
         }
         for (name, v) in [("cx", self.cx), ("cy", self.cy)] {
@@ -49,13 +51,19 @@ impl CameraConfig {
         match self.distortion {
             Distortion::None => Ok(()),
             Distortion::RadTan { k1, k2, p1, p2, k3 } => {
-                if [k1, k2, p1, p2, k3].iter().any(|v| !v.is_finite() || v.abs() > 2.0) {
-                    return Err(SimError::Config("camera.distortion coefficients must be finite, |k| <= 2".into()));
+                if [k1, k2, p1, p2, k3]
+                    .iter()
+                    .any(|v| !v.is_finite() || v.abs() > 2.0)
+                {
+                    return Err(SimError::Config(
+                        "camera.distortion coefficients must be finite, |k| <= 2".into(),
+                    ));
                 }
                 Ok(())
             }
             Distortion::Equidistant { .. } => Err(SimError::Config(
-                "camera.distortion: Equidistant is not supported by the simulator (use None or RadTan)".into(),
+                "camera.distortion: Equidistant is not supported by the simulator (use None or RadTan)"
+                    .into(),
             )),
         }
     }
@@ -128,7 +136,10 @@ impl CameraConfig {
     /// Pixel flow (px/s) of a normalized flow `(ux, uy)` (1/s) at undistorted normalized `(x, y)`.
     pub fn pixel_flow(&self, x: f64, y: f64, ux: f64, uy: f64) -> (f64, f64) {
         let j = self.distortion_jacobian(x, y);
-        (self.fx * (j[0] * ux + j[1] * uy), self.fy * (j[2] * ux + j[3] * uy))
+        (
+            self.fx * (j[0] * ux + j[1] * uy),
+            self.fy * (j[2] * ux + j[3] * uy),
+        )
     }
 }
 
@@ -199,12 +210,26 @@ mod tests {
     use super::*;
 
     fn cam(d: Distortion) -> CameraConfig {
-        CameraConfig { width: 64, height: 48, fx: 50.0, fy: 52.0, cx: 31.5, cy: 23.5, distortion: d }
+        CameraConfig {
+            width: 64,
+            height: 48,
+            fx: 50.0,
+            fy: 52.0,
+            cx: 31.5,
+            cy: 23.5,
+            distortion: d,
+        }
     }
 
     #[test]
     fn undistort_inverts_distort_and_jacobian_matches() {
-        let c = cam(Distortion::RadTan { k1: -0.2, k2: 0.05, p1: 0.001, p2: -0.002, k3: 0.0 });
+        let c = cam(Distortion::RadTan {
+            k1: -0.2,
+            k2: 0.05,
+            p1: 0.001,
+            p2: -0.002,
+            k3: 0.0,
+        });
         for &(x, y) in &[(0.3, -0.2), (-0.5, 0.4), (0.0, 0.0)] {
             let (xd, yd) = c.distort(x, y);
             let (xu, yu) = c.undistort(xd, yd);
@@ -220,16 +245,36 @@ mod tests {
 
     #[test]
     fn rays_project_back_to_their_pixels() {
-        let c = cam(Distortion::RadTan { k1: -0.15, k2: 0.02, p1: 0.0, p2: 0.001, k3: 0.0 });
+        let c = cam(Distortion::RadTan {
+            k1: -0.15,
+            k2: 0.02,
+            p1: 0.0,
+            p2: 0.001,
+            k3: 0.0,
+        });
         let r = Rays::new(&c);
         for &(u, v) in &[(0usize, 0usize), (63, 47), (10, 30)] {
             let i = v * 64 + u;
-            let (pu, pv) = c.project([r.x[i] as f64 * 2.0, r.y[i] as f64 * 2.0, 2.0]).unwrap();
-            assert!((pu - u as f64).abs() < 1e-3 && (pv - v as f64).abs() < 1e-3, "{pu} {pv}");
+            let (pu, pv) = c
+                .project([r.x[i] as f64 * 2.0, r.y[i] as f64 * 2.0, 2.0])
+                .unwrap();
+            assert!(
+                (pu - u as f64).abs() < 1e-3 && (pv - v as f64).abs() < 1e-3,
+                "{pu} {pv}"
+            );
         }
         let plain = Rays::new(&cam(Distortion::None));
         assert!((plain.d_du[5][0] - 1.0 / 50.0).abs() < 1e-7);
         assert_eq!(plain.max_jacobian, 1.0);
-        assert!(cam(Distortion::Equidistant { k1: 0.0, k2: 0.0, k3: 0.0, k4: 0.0 }).validate().is_err());
+        assert!(
+            cam(Distortion::Equidistant {
+                k1: 0.0,
+                k2: 0.0,
+                k3: 0.0,
+                k4: 0.0
+            })
+            .validate()
+            .is_err()
+        );
     }
 }

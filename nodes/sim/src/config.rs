@@ -30,6 +30,10 @@ pub struct RenderConfig {
     /// before the next key frame stay inside its thresholds by this margin (covers sub-pixel
     /// peaks and the slow change of texture filtering with distance).
     pub quiet_margin_log: f64,
+    /// Safety margin, log units, of the same test for pixels that keep their surface between
+    /// key frames, where the bound comes from the texture values along the pixel's path
+    /// (covers the small non-linearity of that path).
+    pub path_margin_log: f64,
     /// Factor applied to the smallest background depth seen in the last key frame before it is
     /// used to bound image speeds.
     pub depth_safety: f64,
@@ -41,12 +45,13 @@ impl Default for RenderConfig {
     fn default() -> Self {
         Self {
             max_px_per_step: 0.5,
-            speed_safety: 1.25,
+            speed_safety: 1.1,
             max_step_s: 5e-3,
             min_step_s: 1e-6,
-            steps_per_keyframe: 8,
+            steps_per_keyframe: 16,
             quiet_margin_log: 0.03,
-            depth_safety: 0.8,
+            path_margin_log: 0.01,
+            depth_safety: 0.9,
             edge_supersampling: true,
         }
     }
@@ -63,7 +68,10 @@ pub struct TruthConfig {
 
 impl Default for TruthConfig {
     fn default() -> Self {
-        Self { mask_rate_hz: 60.0, camera_rate_hz: 200.0 }
+        Self {
+            mask_rate_hz: 60.0,
+            camera_rate_hz: 200.0,
+        }
     }
 }
 
@@ -111,7 +119,10 @@ impl SceneConfig {
     /// Checks every part; the error names the field.
     pub fn validate(&self) -> Result<(), SimError> {
         if !(self.duration_s.is_finite() && self.duration_s > 0.0 && self.duration_s <= 3600.0) {
-            return Err(SimError::Config(format!("duration_s = {} must be in (0, 3600]", self.duration_s)));
+            return Err(SimError::Config(format!(
+                "duration_s = {} must be in (0, 3600]",
+                self.duration_s
+            )));
         }
         self.camera.validate()?;
         self.scene.validate()?;
@@ -132,7 +143,10 @@ impl SceneConfig {
             return Err(SimError::Config(format!("render parameters out of range: {r:?}")));
         }
         let t = &self.truth;
-        if !(t.mask_rate_hz > 0.0 && t.mask_rate_hz <= 10_000.0 && t.camera_rate_hz > 0.0 && t.camera_rate_hz <= 100_000.0)
+        if !(t.mask_rate_hz > 0.0
+            && t.mask_rate_hz <= 10_000.0
+            && t.camera_rate_hz > 0.0
+            && t.camera_rate_hz <= 100_000.0)
         {
             return Err(SimError::Config(format!("truth rates out of range: {t:?}")));
         }

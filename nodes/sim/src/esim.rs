@@ -56,14 +56,18 @@ impl EsimConfig {
             if v.is_finite() && v > 0.0 {
                 Ok(())
             } else {
-                Err(SimError::Config(format!("esim.{name} = {v} must be finite and > 0")))
+                Err(SimError::Config(format!(
+                    "esim.{name} = {v} must be finite and > 0"
+                )))
             }
         };
         let nonneg = |name: &str, v: f64| {
             if v.is_finite() && v >= 0.0 {
                 Ok(())
             } else {
-                Err(SimError::Config(format!("esim.{name} = {v} must be finite and >= 0")))
+                Err(SimError::Config(format!(
+                    "esim.{name} = {v} must be finite and >= 0"
+                )))
             }
         };
         pos("c_on", self.c_on)?;
@@ -155,12 +159,22 @@ impl NoiseSource {
     /// Noise for `pixels` pixels; the hot pixels are drawn here.
     pub fn new(cfg: &EsimConfig, pixels: usize, seed: u64) -> Self {
         let mut rng = Rng::new(seed, 0x4015e);
-        let hot: Vec<u32> = (0..cfg.hot_pixels).map(|_| rng.below(pixels as u64) as u32).collect();
+        let hot: Vec<u32> = (0..cfg.hot_pixels)
+            .map(|_| rng.below(pixels as u64) as u32)
+            .collect();
         let ba_rate = cfg.noise_rate_hz * pixels as f64;
         let hot_rate = cfg.hot_pixel_rate_hz * hot.len() as f64;
         let next_ba = rng.exponential(ba_rate);
         let next_hot = rng.exponential(hot_rate);
-        Self { rng, pixels: pixels as u64, ba_rate, hot, hot_rate, next_ba, next_hot }
+        Self {
+            rng,
+            pixels: pixels as u64,
+            ba_rate,
+            hot,
+            hot_rate,
+            next_ba,
+            next_hot,
+        }
     }
 
     /// The hot pixels (row-major indices).
@@ -200,7 +214,18 @@ mod tests {
         let mut out = Vec::new();
         for k in 1..l.len() {
             let (t0, t1) = ((k - 1) as f64 * dt, k as f64 * dt);
-            crossings(&mut reference, &mut last, l[k - 1], l[k], t0, t1, c, c, refr, |t, p| out.push((t, p)));
+            crossings(
+                &mut reference,
+                &mut last,
+                l[k - 1],
+                l[k],
+                t0,
+                t1,
+                c,
+                c,
+                refr,
+                |t, p| out.push((t, p)),
+            );
         }
         out
     }
@@ -241,7 +266,12 @@ mod tests {
 
     #[test]
     fn noise_rate_matches_configuration() {
-        let cfg = EsimConfig { noise_rate_hz: 2.0, hot_pixels: 2, hot_pixel_rate_hz: 100.0, ..Default::default() };
+        let cfg = EsimConfig {
+            noise_rate_hz: 2.0,
+            hot_pixels: 2,
+            hot_pixel_rate_hz: 100.0,
+            ..Default::default()
+        };
         let mut src = NoiseSource::new(&cfg, 10_000, 5);
         let hot = src.hot_pixels().to_vec();
         let (mut n, mut n_hot, mut last) = (0usize, 0usize, 0.0);

@@ -50,7 +50,10 @@ impl ImuConfig {
     /// Checks the values.
     pub fn validate(&self) -> Result<(), SimError> {
         if !(self.rate_hz.is_finite() && self.rate_hz > 0.0 && self.rate_hz <= 100_000.0) {
-            return Err(SimError::Config(format!("imu.rate_hz = {} must be in (0, 1e5]", self.rate_hz)));
+            return Err(SimError::Config(format!(
+                "imu.rate_hz = {} must be in (0, 1e5]",
+                self.rate_hz
+            )));
         }
         let finite = [self.gyro_noise_std, self.accel_noise_std, self.gravity]
             .iter()
@@ -58,7 +61,9 @@ impl ImuConfig {
             .chain(&self.accel_bias)
             .all(|v| v.is_finite());
         if !finite || self.gyro_noise_std < 0.0 || self.accel_noise_std < 0.0 {
-            return Err(SimError::Config("imu: noise levels must be finite and >= 0, biases finite".into()));
+            return Err(SimError::Config(
+                "imu: noise levels must be finite and >= 0, biases finite".into(),
+            ));
         }
         Ok(())
     }
@@ -70,7 +75,10 @@ pub fn ideal_reading(cam: &RigidState, gravity: f64) -> ([f64; 3], [f64; 3]) {
     // Specific force = acceleration - gravity vector, world (z up), then into the camera frame.
     let f_world = math::add(cam.acceleration, [0.0, 0.0, gravity]);
     let accel_cam = math::mul_mtv(&cam.rotation, f_world);
-    (math::mul_mtv(&IMU_TO_CAMERA, gyro_cam), math::mul_mtv(&IMU_TO_CAMERA, accel_cam))
+    (
+        math::mul_mtv(&IMU_TO_CAMERA, gyro_cam),
+        math::mul_mtv(&IMU_TO_CAMERA, accel_cam),
+    )
 }
 
 /// Produces IMU samples on a fixed time grid `k / rate_hz`.
@@ -84,7 +92,11 @@ pub struct ImuSampler {
 impl ImuSampler {
     /// A sampler with its own noise stream.
     pub fn new(cfg: ImuConfig, seed: u64) -> Self {
-        Self { cfg, rng: Rng::new(seed, 0x1a0), next_index: 0 }
+        Self {
+            cfg,
+            rng: Rng::new(seed, 0x1a0),
+            next_index: 0,
+        }
     }
 
     /// Samples with `t < t_end` not produced yet, using `state(t)` for the camera state.
@@ -121,7 +133,10 @@ mod tests {
         assert!(g.iter().all(|v| v.abs() < 1e-12));
         // Specific force points up = camera -y; in IMU frame: v_imu = R^T v_cam.
         let a_cam = math::mul_mv(&IMU_TO_CAMERA, a);
-        assert!((a_cam[1] + 9.81).abs() < 1e-9 && a_cam[0].abs() < 1e-9, "{a_cam:?}");
+        assert!(
+            (a_cam[1] + 9.81).abs() < 1e-9 && a_cam[0].abs() < 1e-9,
+            "{a_cam:?}"
+        );
         // A yaw rate about camera x shows up as imu y (w_cam.x = w_imu.y).
         let mut spin = tr.clone();
         spin.axes = [0, 1, 2];

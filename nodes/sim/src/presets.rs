@@ -8,6 +8,7 @@
 
 use evseg_schemas::Distortion;
 
+use crate::SimError;
 use crate::camera::CameraConfig;
 use crate::config::{RenderConfig, SceneConfig, TruthConfig};
 use crate::esim::EsimConfig;
@@ -17,7 +18,6 @@ use crate::rng::Rng;
 use crate::scene::{BoxConfig, Lighting, ObjectConfig, PlaneConfig, SceneContent};
 use crate::texture::{Pattern, TextureConfig};
 use crate::trajectory::{RigidTrajectory, Signal};
-use crate::SimError;
 
 /// Names accepted by [`preset`].
 pub const PRESET_NAMES: &[&str] = &[
@@ -41,12 +41,33 @@ pub fn preset(name: &str, seed: u64) -> Result<SceneConfig, SimError> {
     let cfg = match name {
         "one-object" => {
             // One large box (0.5 x 0.36 x 0.4 m) 1.8 m ahead, swinging sideways at up to 1 m/s.
-            let o = b.object(1, [0.25, 0.18, 0.2], [0.0, 1.8, 1.1], [0.55, 0.2, 0.15], 0.3, b.checker_texture(1));
+            let o = b.object(
+                1,
+                [0.25, 0.18, 0.2],
+                [0.0, 1.8, 1.1],
+                [0.55, 0.2, 0.15],
+                0.3,
+                b.checker_texture(1),
+            );
             b.finish(vec![o], 3.0)
         }
         "two-objects" => {
-            let o1 = b.object(1, [0.2, 0.15, 0.15], [-0.2, 1.6, 1.0], [0.5, 0.15, 0.12], 0.33, b.checker_texture(1));
-            let mut o2 = b.object(2, [0.3, 0.05, 0.25], [0.3, 2.6, 1.4], [0.35, 0.25, 0.3], 0.27, b.blob_texture(2));
+            let o1 = b.object(
+                1,
+                [0.2, 0.15, 0.15],
+                [-0.2, 1.6, 1.0],
+                [0.5, 0.15, 0.12],
+                0.33,
+                b.checker_texture(1),
+            );
+            let mut o2 = b.object(
+                2,
+                [0.3, 0.05, 0.25],
+                [0.3, 2.6, 1.4],
+                [0.35, 0.25, 0.3],
+                0.27,
+                b.blob_texture(2),
+            );
             // The second moves mostly up and down, against the first.
             o2.shape.trajectory.position[2].terms[0].amplitude = 0.35;
             o2.shape.trajectory.position[0].terms[0].amplitude = 0.25;
@@ -57,27 +78,62 @@ pub fn preset(name: &str, seed: u64) -> Result<SceneConfig, SimError> {
             b.camera.angles[0] = Signal::constant(0.0).with(0.35, 0.9, b.phase());
             b.camera.angles[1] = Signal::constant(-0.12).with(0.15, 1.2, b.phase());
             b.camera.angles[2] = Signal::constant(0.0).with(0.1, 0.8, b.phase());
-            let o = b.object(1, [0.2, 0.15, 0.15], [0.0, 1.8, 1.1], [0.45, 0.15, 0.12], 0.3, b.checker_texture(1));
+            let o = b.object(
+                1,
+                [0.2, 0.15, 0.15],
+                [0.0, 1.8, 1.1],
+                [0.45, 0.15, 0.12],
+                0.3,
+                b.checker_texture(1),
+            );
             b.finish(vec![o], 3.0)
         }
         "enter-leave" => {
             // Object 1 crosses left to right (in view about 0.4..2.1 s), object 2 right to left
             // (about 2.6..4.5 s): stretches with no moving object at the start, middle and end.
-            let mut o1 = b.object(1, [0.2, 0.15, 0.15], [-2.0, 2.0, 1.0], [0.0, 0.1, 0.1], 0.4, b.checker_texture(1));
+            let mut o1 = b.object(
+                1,
+                [0.2, 0.15, 0.15],
+                [-2.0, 2.0, 1.0],
+                [0.0, 0.1, 0.1],
+                0.4,
+                b.checker_texture(1),
+            );
             o1.shape.trajectory.position[0].rate = 1.6;
-            let mut o2 = b.object(2, [0.25, 0.12, 0.2], [5.0, 2.3, 1.3], [0.0, 0.1, 0.12], 0.35, b.blob_texture(2));
+            let mut o2 = b.object(
+                2,
+                [0.25, 0.12, 0.2],
+                [5.0, 2.3, 1.3],
+                [0.0, 0.1, 0.12],
+                0.35,
+                b.blob_texture(2),
+            );
             o2.shape.trajectory.position[0].rate = -1.4;
             b.finish(vec![o1, o2], 5.0)
         }
         "camera-only" => b.finish(Vec::new(), 3.0),
         "low-contrast" => {
-            let o = b.object(1, [0.22, 0.16, 0.18], [0.0, 1.8, 1.1], [0.5, 0.2, 0.15], 0.3, b.checker_texture(1));
+            let o = b.object(
+                1,
+                [0.22, 0.16, 0.18],
+                [0.0, 1.8, 1.1],
+                [0.5, 0.2, 0.15],
+                0.3,
+                b.checker_texture(1),
+            );
             let mut cfg = b.finish(vec![o], 3.0);
             scale_contrast(&mut cfg, 0.35);
             cfg
         }
         "high-contrast" => {
-            let o = b.object(1, [0.22, 0.16, 0.18], [0.0, 1.8, 1.1], [0.5, 0.2, 0.15], 0.3, b.checker_texture(1));
+            let o = b.object(
+                1,
+                [0.22, 0.16, 0.18],
+                [0.0, 1.8, 1.1],
+                [0.5, 0.2, 0.15],
+                0.3,
+                b.checker_texture(1),
+            );
             let mut cfg = b.finish(vec![o], 3.0);
             scale_contrast(&mut cfg, 2.0);
             cfg
@@ -85,12 +141,28 @@ pub fn preset(name: &str, seed: u64) -> Result<SceneConfig, SimError> {
         "distorted-lens" => {
             b.camera_cfg.fx = 560.0;
             b.camera_cfg.fy = 560.0;
-            b.camera_cfg.distortion = Distortion::RadTan { k1: -0.22, k2: 0.06, p1: 0.0006, p2: -0.0008, k3: 0.0 };
-            let o = b.object(1, [0.22, 0.16, 0.18], [0.0, 1.8, 1.1], [0.5, 0.2, 0.15], 0.3, b.checker_texture(1));
+            b.camera_cfg.distortion = Distortion::RadTan {
+                k1: -0.22,
+                k2: 0.06,
+                p1: 0.0006,
+                p2: -0.0008,
+                k3: 0.0,
+            };
+            let o = b.object(
+                1,
+                [0.22, 0.16, 0.18],
+                [0.0, 1.8, 1.1],
+                [0.5, 0.2, 0.15],
+                0.3,
+                b.checker_texture(1),
+            );
             b.finish(vec![o], 3.0)
         }
         _ => {
-            return Err(SimError::UnknownPreset { name: name.to_string(), valid: PRESET_NAMES.join(", ") });
+            return Err(SimError::UnknownPreset {
+                name: name.to_string(),
+                valid: PRESET_NAMES.join(", "),
+            });
         }
     };
     Ok(cfg)
@@ -119,17 +191,22 @@ struct Builder {
 }
 
 fn plane(origin: V3, u: V3, v: V3, texture: TextureConfig) -> PlaneConfig {
-    PlaneConfig { origin, axis_u: u, axis_v: v, texture }
+    PlaneConfig {
+        origin,
+        axis_u: u,
+        axis_v: v,
+        texture,
+    }
 }
 
 fn wall_texture(pattern: Pattern, contrast: f64, albedo: f64, seed: u64) -> TextureConfig {
     TextureConfig {
         pattern,
         size: 1024,
-        texel_m: 0.01,
+        texel_m: 0.015,
         mean_albedo: albedo,
         contrast,
-        noise_weight: 0.2,
+        noise_weight: 0.15,
         noise_feature_m: 1.5,
         seed,
     }
@@ -177,11 +254,11 @@ impl Builder {
 
     fn checker_texture(&self, seed: u64) -> TextureConfig {
         TextureConfig {
-            pattern: Pattern::Checker { square_m: 0.08 },
+            pattern: Pattern::Checker { square_m: 0.1 },
             size: 512,
             texel_m: 0.004,
             mean_albedo: 0.45,
-            contrast: 0.8,
+            contrast: 0.5,
             noise_weight: 0.2,
             noise_feature_m: 0.25,
             seed: 1000 + seed,
@@ -190,11 +267,14 @@ impl Builder {
 
     fn blob_texture(&self, seed: u64) -> TextureConfig {
         TextureConfig {
-            pattern: Pattern::Blobs { per_m2: 150.0, radius_m: 0.035 },
+            pattern: Pattern::Blobs {
+                per_m2: 150.0,
+                radius_m: 0.035,
+            },
             size: 512,
             texel_m: 0.004,
             mean_albedo: 0.5,
-            contrast: 0.8,
+            contrast: 0.5,
             noise_weight: 0.2,
             noise_feature_m: 0.3,
             seed: 1000 + seed,
@@ -203,7 +283,15 @@ impl Builder {
 
     /// A box object with half sizes `half` swinging around `center` (world) with amplitudes
     /// `swing` (m) at about `freq` Hz, and tumbling at up to ~1 rad/s.
-    fn object(&mut self, id: u16, half: V3, center: V3, swing: V3, freq: f64, texture: TextureConfig) -> ObjectConfig {
+    fn object(
+        &mut self,
+        id: u16,
+        half: V3,
+        center: V3,
+        swing: V3,
+        freq: f64,
+        texture: TextureConfig,
+    ) -> ObjectConfig {
         let pos = |c: f64, a: f64, f: f64, rng: &mut Rng| {
             let mut s = Signal::constant(c);
             if a > 0.0 {
@@ -226,7 +314,12 @@ impl Builder {
             id,
             shape: BoxConfig {
                 half_extents: half,
-                trajectory: RigidTrajectory { position, base_rotation: math::IDENTITY, axes: [2, 1, 0], angles },
+                trajectory: RigidTrajectory {
+                    position,
+                    base_rotation: math::IDENTITY,
+                    axes: [2, 1, 0],
+                    angles,
+                },
                 texture,
             },
         }
@@ -234,20 +327,33 @@ impl Builder {
 
     fn room(&self) -> SceneContent {
         let (x, y, z) = ([1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]);
-        let clutter = Pattern::Blobs { per_m2: 3.0, radius_m: 0.15 };
+        let clutter = Pattern::Blobs {
+            per_m2: 2.0,
+            radius_m: 0.15,
+        };
         let planes = vec![
             // Floor (z = 0) with large tiles.
-            plane([0.0, 0.0, 0.0], x, y, wall_texture(Pattern::Checker { square_m: 0.5 }, 0.35, 0.35, 1)),
+            plane(
+                [0.0, 0.0, 0.0],
+                x,
+                y,
+                wall_texture(Pattern::Checker { square_m: 0.5 }, 0.25, 0.35, 1),
+            ),
             // Ceiling (z = 3).
-            plane([0.0, 0.0, 3.0], y, x, wall_texture(Pattern::Noise, 0.3, 0.6, 2)),
+            plane([0.0, 0.0, 3.0], y, x, wall_texture(Pattern::Noise, 0.2, 0.6, 2)),
             // Back wall (y = 6), cluttered.
-            plane([0.0, 6.0, 0.0], x, z, wall_texture(clutter, 0.6, 0.5, 3)),
+            plane([0.0, 6.0, 0.0], x, z, wall_texture(clutter, 0.4, 0.5, 3)),
             // Wall behind the camera (y = -3).
-            plane([0.0, -3.0, 0.0], z, x, wall_texture(Pattern::Noise, 0.3, 0.5, 4)),
+            plane([0.0, -3.0, 0.0], z, x, wall_texture(Pattern::Noise, 0.2, 0.5, 4)),
             // Left wall (x = -3).
-            plane([-3.0, 0.0, 0.0], y, z, wall_texture(clutter, 0.55, 0.45, 5)),
+            plane([-3.0, 0.0, 0.0], y, z, wall_texture(clutter, 0.4, 0.45, 5)),
             // Right wall (x = 3).
-            plane([3.0, 0.0, 0.0], z, y, wall_texture(Pattern::Stripes { period_m: 0.4 }, 0.4, 0.5, 6)),
+            plane(
+                [3.0, 0.0, 0.0],
+                z,
+                y,
+                wall_texture(Pattern::Stripes { period_m: 0.4 }, 0.3, 0.5, 6),
+            ),
         ];
         let furniture = |center: V3, half: V3, yaw: f64, pattern: Pattern, seed: u64| BoxConfig {
             half_extents: half,
@@ -255,25 +361,58 @@ impl Builder {
             texture: TextureConfig {
                 pattern,
                 size: 512,
-                texel_m: 0.006,
+                texel_m: 0.008,
                 mean_albedo: 0.45,
-                contrast: 0.6,
-                noise_weight: 0.25,
+                contrast: 0.4,
+                noise_weight: 0.2,
                 noise_feature_m: 0.5,
                 seed,
             },
         };
         let boxes = vec![
-            furniture([-2.0, 3.5, 0.7], [0.5, 0.35, 0.7], 0.3, Pattern::Blobs { per_m2: 20.0, radius_m: 0.06 }, 11),
-            furniture([1.6, 3.0, 0.45], [0.6, 0.4, 0.45], -0.2, Pattern::Stripes { period_m: 0.12 }, 12),
-            furniture([0.3, 5.2, 1.6], [0.9, 0.03, 0.6], 0.0, Pattern::Blobs { per_m2: 30.0, radius_m: 0.05 }, 13),
-            furniture([2.3, 4.5, 1.0], [0.2, 0.2, 1.0], 0.5, Pattern::Checker { square_m: 0.1 }, 14),
+            furniture(
+                [-2.0, 3.5, 0.7],
+                [0.5, 0.35, 0.7],
+                0.3,
+                Pattern::Blobs {
+                    per_m2: 20.0,
+                    radius_m: 0.06,
+                },
+                11,
+            ),
+            furniture(
+                [1.6, 3.0, 0.45],
+                [0.6, 0.4, 0.45],
+                -0.2,
+                Pattern::Stripes { period_m: 0.12 },
+                12,
+            ),
+            furniture(
+                [0.3, 5.2, 1.6],
+                [0.9, 0.03, 0.6],
+                0.0,
+                Pattern::Blobs {
+                    per_m2: 30.0,
+                    radius_m: 0.05,
+                },
+                13,
+            ),
+            furniture(
+                [2.3, 4.5, 1.0],
+                [0.2, 0.2, 1.0],
+                0.5,
+                Pattern::Checker { square_m: 0.1 },
+                14,
+            ),
         ];
         SceneContent {
             planes,
             boxes,
             objects: Vec::new(),
-            lighting: Lighting { direction: [-0.3, -0.5, 0.8], ambient: 0.6 },
+            lighting: Lighting {
+                direction: [-0.3, -0.5, 0.8],
+                ambient: 0.6,
+            },
         }
     }
 
@@ -309,15 +448,30 @@ mod tests {
             // Camera translation is never trivial: mean speed over the sequence 0.2..1.2 m/s.
             let n = 300;
             let mean: f64 = (0..n)
-                .map(|i| math::norm(cfg.camera_trajectory.state(i as f64 / n as f64 * cfg.duration_s).velocity))
+                .map(|i| {
+                    math::norm(
+                        cfg.camera_trajectory
+                            .state(i as f64 / n as f64 * cfg.duration_s)
+                            .velocity,
+                    )
+                })
                 .sum::<f64>()
                 / n as f64;
             assert!((0.2..1.2).contains(&mean), "{name}: mean speed {mean}");
         }
         let err = preset("no-such", 1).unwrap_err().to_string();
-        assert!(err.contains("no-such") && err.contains("one-object") && err.contains("camera-only"), "{err}");
+        assert!(
+            err.contains("no-such") && err.contains("one-object") && err.contains("camera-only"),
+            "{err}"
+        );
         // Same seed, same config; different seed, different phases.
-        assert_eq!(preset("two-objects", 5).unwrap(), preset("two-objects", 5).unwrap());
-        assert_ne!(preset("two-objects", 5).unwrap(), preset("two-objects", 6).unwrap());
+        assert_eq!(
+            preset("two-objects", 5).unwrap(),
+            preset("two-objects", 5).unwrap()
+        );
+        assert_ne!(
+            preset("two-objects", 5).unwrap(),
+            preset("two-objects", 6).unwrap()
+        );
     }
 }

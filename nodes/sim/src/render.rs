@@ -15,7 +15,14 @@ use crate::trajectory::RigidState;
 
 /// Texture coordinate offsets (m) that make the six faces of a box show different parts of its
 /// texture.
-const FACE_OFFSET: [[f32; 2]; 6] = [[0.0, 0.0], [0.37, 0.11], [0.71, 0.53], [0.13, 0.91], [0.59, 0.29], [0.97, 0.77]];
+const FACE_OFFSET: [[f32; 2]; 6] = [
+    [0.0, 0.0],
+    [0.37, 0.11],
+    [0.71, 0.53],
+    [0.13, 0.91],
+    [0.59, 0.29],
+    [0.97, 0.77],
+];
 /// Smallest cosine of incidence used for the texture footprint (caps the blur at grazing view).
 const MIN_COS: f32 = 0.25;
 
@@ -30,6 +37,12 @@ pub struct Hit {
     pub id: u16,
     /// Depth along the optical axis, m (infinite when nothing was hit).
     pub z: f32,
+    /// Texture coordinates of the hit, m (face offsets included).
+    pub u: f32,
+    /// Texture coordinates of the hit, m.
+    pub v: f32,
+    /// Pixel footprint on the surface, m (selects the mip level).
+    pub footprint: f32,
 }
 
 #[derive(Debug, Clone)]
@@ -78,6 +91,8 @@ pub struct FrameGeom {
     pub motions: Vec<RelativeMotion>,
     /// Camera-frame pose of every box.
     pub box_poses: Vec<BoxPose>,
+    /// Log shading of every surface key.
+    pub shade_by_key: Vec<f32>,
 }
 
 fn f3(v: V3) -> [f32; 3] {
@@ -114,6 +129,7 @@ impl FrameGeom {
                 key: i as u16,
             });
         }
+        let mut shade_by_key: Vec<f32> = planes.iter().map(|p| p.ln_shade).collect();
         let mut motions = vec![RelativeMotion::new(&cs, None)];
         let mut boxes = Vec::with_capacity(scene.boxes.len());
         let mut box_poses = Vec::with_capacity(scene.boxes.len());
@@ -130,7 +146,10 @@ impl FrameGeom {
                 n[face / 2] = if face % 2 == 0 { -1.0 } else { 1.0 };
                 *s = scene.lighting.ln_shade(math::mul_mv(&bs.rotation, n)) as f32;
             }
-            let Some(bbox) = box_bbox(cam, &pose, b.half) else { continue };
+            shade_by_key.extend_from_slice(&ln_shade);
+            let Some(bbox) = box_bbox(cam, &pose, b.half) else {
+                continue;
+            };
             boxes.push(BoxGeom {
                 r_bc: [f3(r_bc[0]), f3(r_bc[1]), f3(r_bc[2])],
                 o_b: f3(o_b),
@@ -144,7 +163,16 @@ impl FrameGeom {
             });
         }
         let inv_f = (2.0 / (cam.fx + cam.fy)) as f32;
-        Self { t, cam: cs, planes, boxes, inv_f, motions, box_poses }
+        Self {
+            t,
+            cam: cs,
+            planes,
+            boxes,
+            inv_f,
+            motions,
+            box_poses,
+            shade_by_key,
+        }
     }
 
     /// Pixel bounding boxes `[u0, v0, u1, v1]` of the visible moving objects, with their ids.
@@ -167,7 +195,11 @@ impl FrameGeom {
                 }
             }
         }
-        let mut s = if best_plane == usize::MAX { f32::INFINITY } else { 1.0 / best_inv };
+        let mut s = if best_plane == usize::MAX {
+            f32::INFINITY
+        } else {
+            1.0 / best_inv
+        };
         let mut best_box = usize::MAX;
         let mut box_face = 0usize;
         let mut box_db = [0.0f32; 3];
@@ -178,12 +210,16 @@ impl FrameGeom {
             if only.is_some_and(|id| id != b.id) {
                 continue;
             }
-            let db = [dot3(&b.r_bc[0], x, y), dot3(&b.r_bc[1], x, y), dot3(&b.r_bc[2], x, y)];
+            let db = [
+                dot3(&b.r_bc[0], x, y),
+                dot3(&b.r_bc[1], x, y),
+                dot3(&b.r_bc[2], x, y),
+            ];
             let mut t_in = f32::NEG_INFINITY;
             let mut t_out = f32::INFINITY;
             let mut axis = 0usize;
-            for k in 0..3 {
-                let inv = 1.0 / db[k];
+            for (k, &dk) in db.iter().enumerate() {
+                let inv = 1.0 / dk;
                 let t1 = (-b.half[k] - b.o_b[k]) * inv;
                 let t2 = (b.half[k] - b.o_b[k]) * inv;
                 let (lo, hi) = if t1 < t2 { (t1, t2) } else { (t2, t1) };
@@ -204,16 +240,37 @@ impl FrameGeom {
         if best_box != usize::MAX {
             let b = &self.boxes[best_box];
             let axis = box_face / 2;
-            let hp = [b.o_b[0] + s * box_db[0], b.o_b[1] + s * box_db[1], b.o_b[2] + s * box_db[2]];
+            let hp = [
+                b.o_b[0] + s * box_db[0],
+                b.o_b[1] + s * box_db[1],
+                b.o_b[2] + s * box_db[2],
+            ];
             let (j, k) = ((axis + 1) % 3, (axis + 2) % 3);
             let cos = (box_db[axis].abs() / dn).max(MIN_COS);
             let footprint = s * self.inv_f / cos;
             let off = FACE_OFFSET[box_face];
-            let l = scene.textures[b.tex].sample(hp[j] + off[0], hp[k] + off[1], footprint) + b.ln_shade[box_face];
-            return Hit { l, key: b.key_base + box_face as u16, id: b.id, z: s };
+            let (u, v) = (hp[j] + off[0], hp[k] + off[1]);
+            let l = scene.textures[b.tex].sample(u, v, footprint) + b.ln_shade[box_face];
+            return Hit {
+                l,
+                key: b.key_base + box_face as u16,
+                id: b.id,
+                z: s,
+                u,
+                v,
+                footprint,
+            };
         }
         if best_plane == usize::MAX {
-            return Hit { l: 0.0, key: u16::MAX, id: 0, z: f32::INFINITY };
+            return Hit {
+                l: 0.0,
+                key: u16::MAX,
+                id: 0,
+                z: f32::INFINITY,
+                u: 0.0,
+                v: 0.0,
+                footprint: 1.0,
+            };
         }
         let p = &self.planes[best_plane];
         let u = s * dot3(&p.e1, x, y) + p.off1;
@@ -221,12 +278,30 @@ impl FrameGeom {
         let cos = (dot3(&p.n, x, y).abs() / dn).max(MIN_COS);
         let footprint = s * self.inv_f / cos;
         let l = scene.textures[p.tex].sample(u, v, footprint) + p.ln_shade;
-        Hit { l, key: p.key, id: 0, z: s }
+        Hit {
+            l,
+            key: p.key,
+            id: 0,
+            z: s,
+            u,
+            v,
+            footprint,
+        }
     }
 
     /// Log intensity of pixel `(px, py)` from 2x2 sub-samples averaged in linear intensity;
     /// `(x, y)` is the pixel centre's normalized ray and `du`, `dv` its change per pixel.
-    pub fn supersample(&self, scene: &Scene, x: f32, y: f32, du: [f32; 2], dv: [f32; 2], px: i32, py: i32) -> f32 {
+    #[allow(clippy::too_many_arguments)]
+    pub fn supersample(
+        &self,
+        scene: &Scene,
+        x: f32,
+        y: f32,
+        du: [f32; 2],
+        dv: [f32; 2],
+        px: i32,
+        py: i32,
+    ) -> f32 {
         let mut acc = 0.0f32;
         for (ou, ov) in [(-0.25f32, -0.25f32), (0.25, -0.25), (-0.25, 0.25), (0.25, 0.25)] {
             let sx = x + ou * du[0] + ov * dv[0];
@@ -238,14 +313,28 @@ impl FrameGeom {
 
     /// True optical flow (px/s) at pixel `(px, py)` with normalized ray `(x, y)` of the surface of
     /// object `id` (background for 0); `None` when that surface is not on the ray.
-    pub fn flow(&self, scene: &Scene, cam: &CameraConfig, x: f32, y: f32, px: i32, py: i32, id: u16) -> Option<(f64, f64)> {
+    #[allow(clippy::too_many_arguments)]
+    pub fn flow(
+        &self,
+        scene: &Scene,
+        cam: &CameraConfig,
+        x: f32,
+        y: f32,
+        px: i32,
+        py: i32,
+        id: u16,
+    ) -> Option<(f64, f64)> {
         let hit = self.cast(scene, x, y, px, py, Some(id));
         if !hit.z.is_finite() || hit.key == u16::MAX {
             return None;
         }
         let motion = if id == 0 {
             // Background boxes do not move, but use their motion for generality.
-            match self.boxes.iter().find(|b| b.id == 0 && (b.key_base..b.key_base + 6).contains(&hit.key)) {
+            match self
+                .boxes
+                .iter()
+                .find(|b| b.id == 0 && (b.key_base..b.key_base + 6).contains(&hit.key))
+            {
                 Some(b) => &self.motions[b.motion],
                 None => &self.motions[0],
             }
@@ -291,7 +380,12 @@ fn box_bbox(cam: &CameraConfig, pose: &BoxPose, half: V3) -> Option<[i32; 4]> {
             }
         }
     }
-    let bb = [(u0 - 2.0).floor() as i32, (v0 - 2.0).floor() as i32, (u1 + 2.0).ceil() as i32, (v1 + 2.0).ceil() as i32];
+    let bb = [
+        (u0 - 2.0).floor() as i32,
+        (v0 - 2.0).floor() as i32,
+        (u1 + 2.0).ceil() as i32,
+        (v1 + 2.0).ceil() as i32,
+    ];
     if bb[2] < 0 || bb[3] < 0 || bb[0] >= w || bb[1] >= h {
         return None;
     }

@@ -86,9 +86,13 @@ impl SceneContent {
         for (i, p) in self.planes.iter().enumerate() {
             let what = format!("scene.planes[{i}]");
             let (u, v) = (p.axis_u, p.axis_v);
-            if (math::norm(u) - 1.0).abs() > 1e-6 || (math::norm(v) - 1.0).abs() > 1e-6 || math::dot(u, v).abs() > 1e-6
+            if (math::norm(u) - 1.0).abs() > 1e-6
+                || (math::norm(v) - 1.0).abs() > 1e-6
+                || math::dot(u, v).abs() > 1e-6
             {
-                return Err(SimError::Config(format!("{what}: axis_u and axis_v must be orthonormal")));
+                return Err(SimError::Config(format!(
+                    "{what}: axis_u and axis_v must be orthonormal"
+                )));
             }
             p.texture.validate(&what)?;
         }
@@ -104,7 +108,10 @@ impl SceneContent {
         for (i, o) in self.objects.iter().enumerate() {
             let what = format!("scene.objects[{i}]");
             if o.id == 0 || o.id > 255 {
-                return Err(SimError::Config(format!("{what}: id {} must be in 1..=255", o.id)));
+                return Err(SimError::Config(format!(
+                    "{what}: id {} must be in 1..=255",
+                    o.id
+                )));
             }
             if self.objects[..i].iter().any(|p| p.id == o.id) {
                 return Err(SimError::Config(format!("{what}: id {} used twice", o.id)));
@@ -112,7 +119,9 @@ impl SceneContent {
             check_box(&o.shape, &what)?;
         }
         if !(self.lighting.ambient > 0.0 && self.lighting.ambient <= 1.0) {
-            return Err(SimError::Config("scene.lighting.ambient must be in (0, 1]".into()));
+            return Err(SimError::Config(
+                "scene.lighting.ambient must be in (0, 1]".into(),
+            ));
         }
         Ok(())
     }
@@ -150,6 +159,8 @@ pub struct Scene {
     pub camera: RigidTrajectory,
     /// Object id of every surface key (planes, then six faces per box).
     pub key_id: Vec<u16>,
+    /// Texture index of every surface key.
+    pub key_texture: Vec<usize>,
 }
 
 impl Scene {
@@ -158,13 +169,19 @@ impl Scene {
         let mut textures = Vec::new();
         let mut key_id = Vec::new();
         let mut plane_texture = Vec::new();
+        let mut key_texture = Vec::new();
         for (i, p) in content.planes.iter().enumerate() {
             textures.push(Texture::bake(&p.texture, seed ^ (i as u64 + 1) << 20, eps));
             plane_texture.push(textures.len() - 1);
             key_id.push(0);
+            key_texture.push(textures.len() - 1);
         }
         let mut boxes = Vec::new();
-        let all = content.boxes.iter().map(|b| (0u16, b)).chain(content.objects.iter().map(|o| (o.id, &o.shape)));
+        let all = content
+            .boxes
+            .iter()
+            .map(|b| (0u16, b))
+            .chain(content.objects.iter().map(|o| (o.id, &o.shape)));
         for (j, (id, b)) in all.enumerate() {
             textures.push(Texture::bake(&b.texture, seed ^ (j as u64 + 101) << 20, eps));
             boxes.push(SceneBox {
@@ -175,8 +192,18 @@ impl Scene {
                 key_base: key_id.len() as u16,
             });
             key_id.extend([id; 6]);
+            key_texture.extend([textures.len() - 1; 6]);
         }
-        Self { planes: content.planes.clone(), plane_texture, boxes, textures, lighting: content.lighting.clone(), camera, key_id }
+        Self {
+            planes: content.planes.clone(),
+            plane_texture,
+            boxes,
+            textures,
+            lighting: content.lighting.clone(),
+            camera,
+            key_id,
+            key_texture,
+        }
     }
 
     /// Camera state at `t` (s).
@@ -202,7 +229,10 @@ impl RelativeMotion {
         let r_cw = math::transpose(&cam.rotation);
         let w_c = cam.omega_body;
         match body {
-            None => Self { linear: math::scale(math::mul_mv(&r_cw, cam.velocity), -1.0), angular: math::scale(w_c, -1.0) },
+            None => Self {
+                linear: math::scale(math::mul_mv(&r_cw, cam.velocity), -1.0),
+                angular: math::scale(w_c, -1.0),
+            },
             Some(b) => {
                 let w_o = b.omega_world();
                 let v = math::add(b.velocity, math::cross(w_o, math::sub(cam.position, b.position)));
@@ -255,7 +285,13 @@ impl RelativeMotion {
         // V(P) = v + w x P with P = Z (x, y, 1): flow = (v_xy - x v_z) / Z + B(x) w-like term.
         let trans = (v[0].abs() + v[1].abs() + (max_x + max_y) * v[2].abs()) / z_min;
         let mut rot: f64 = 0.0;
-        for &(x, y) in &[(max_x, max_y), (max_x, -max_y), (-max_x, max_y), (-max_x, -max_y), (0.0, 0.0)] {
+        for &(x, y) in &[
+            (max_x, max_y),
+            (max_x, -max_y),
+            (-max_x, max_y),
+            (-max_x, -max_y),
+            (0.0, 0.0),
+        ] {
             let c = math::cross(w, [x, y, 1.0]);
             let fx = c[0] - x * c[2];
             let fy = c[1] - y * c[2];
@@ -280,7 +316,10 @@ impl BoxPose {
     /// Pose of a box with world state `b` seen from a camera with world state `cam`.
     pub fn new(cam: &RigidState, b: &RigidState) -> Self {
         let r_cw = math::transpose(&cam.rotation);
-        Self { r_cb: math::mul_mm(&r_cw, &b.rotation), center: math::mul_mv(&r_cw, math::sub(b.position, cam.position)) }
+        Self {
+            r_cb: math::mul_mm(&r_cw, &b.rotation),
+            center: math::mul_mv(&r_cw, math::sub(b.position, cam.position)),
+        }
     }
 
     /// The 8 corners in the camera frame.
@@ -306,7 +345,11 @@ mod tests {
     #[test]
     fn relative_motion_of_static_world_is_minus_camera_motion() {
         let cam = RigidTrajectory {
-            position: [Signal::linear(0.0, 0.5), Signal::constant(0.0), Signal::constant(1.0)],
+            position: [
+                Signal::linear(0.0, 0.5),
+                Signal::constant(0.0),
+                Signal::constant(1.0),
+            ],
             base_rotation: math::IDENTITY,
             axes: [2, 1, 0],
             angles: [Signal::linear(0.0, 0.3), Signal::default(), Signal::default()],
@@ -321,7 +364,10 @@ mod tests {
 
     #[test]
     fn ball_bound_covers_points_of_a_tumbling_body() {
-        let m = RelativeMotion { linear: [0.8, -0.3, 0.2], angular: [1.0, 0.5, -0.7] };
+        let m = RelativeMotion {
+            linear: [0.8, -0.3, 0.2],
+            angular: [1.0, 0.5, -0.7],
+        };
         let c = [0.3, -0.1, 2.0];
         let b = m.speed_bound_ball(c, 0.3, 1.7, 0.8);
         for i in 0..1000 {
@@ -335,7 +381,10 @@ mod tests {
 
     #[test]
     fn speed_bound_covers_sampled_points() {
-        let m = RelativeMotion { linear: [0.3, -0.2, 0.5], angular: [0.4, -0.7, 0.2] };
+        let m = RelativeMotion {
+            linear: [0.3, -0.2, 0.5],
+            angular: [0.4, -0.7, 0.2],
+        };
         let b = m.speed_bound(1.5, 0.6, 0.45);
         for i in 0..50 {
             let x = -0.6 + 1.2 * (i as f64 / 49.0);

@@ -106,6 +106,9 @@ pub struct Texture {
     scales: Vec<f32>,
     inv_texel: f32,
     max_level: f32,
+    /// Per level k: min and max of the level-0 texels in each aligned 2^k x 2^k cell.
+    range_min: Vec<Vec<f32>>,
+    range_max: Vec<Vec<f32>>,
 }
 
 /// `floor` without a libm call (valid for |x| < 2^31).
@@ -175,8 +178,42 @@ impl Texture {
         }
         let max_level = (levels.len() - 1) as f32;
         let inv_texel = (1.0 / cfg.texel_m) as f32;
-        let scales = (0..levels.len()).map(|k| inv_texel / (1u32 << k) as f32).collect();
-        Self { levels, sizes, scales, inv_texel, max_level }
+        let scales = (0..levels.len())
+            .map(|k| inv_texel / (1u32 << k) as f32)
+            .collect();
+        let mut range_min = vec![levels[0].clone()];
+        let mut range_max = vec![levels[0].clone()];
+        let mut m = cfg.size as usize;
+        while m > 1 {
+            let h = m / 2;
+            let (pmin, pmax) = (&range_min[range_min.len() - 1], &range_max[range_max.len() - 1]);
+            let mut nmin = vec![0.0f32; h * h];
+            let mut nmax = vec![0.0f32; h * h];
+            for y in 0..h {
+                for x in 0..h {
+                    let idx = [
+                        2 * y * m + 2 * x,
+                        2 * y * m + 2 * x + 1,
+                        (2 * y + 1) * m + 2 * x,
+                        (2 * y + 1) * m + 2 * x + 1,
+                    ];
+                    nmin[y * h + x] = idx.iter().map(|&i| pmin[i]).fold(f32::INFINITY, f32::min);
+                    nmax[y * h + x] = idx.iter().map(|&i| pmax[i]).fold(f32::NEG_INFINITY, f32::max);
+                }
+            }
+            range_min.push(nmin);
+            range_max.push(nmax);
+            m = h;
+        }
+        Self {
+            levels,
+            sizes,
+            scales,
+            inv_texel,
+            max_level,
+            range_min,
+            range_max,
+        }
     }
 
     fn pattern(cfg: &TextureConfig, n: usize, extent: f64, rng: &mut Rng) -> Vec<f64> {
@@ -240,7 +277,9 @@ impl Texture {
         if cfg.noise_weight <= 0.0 {
             return out;
         }
-        let mut cells = ((extent / cfg.noise_feature_m).round().max(1.0) as usize).next_power_of_two().min(n);
+        let mut cells = ((extent / cfg.noise_feature_m).round().max(1.0) as usize)
+            .next_power_of_two()
+            .min(n);
         let mut amp = 1.0;
         let mut total = 0.0;
         while cells <= n / 8 {
@@ -313,6 +352,44 @@ impl Texture {
         a + f * (b - a)
     }
 
+    /// Bounds `(min, max)` of every value [`Texture::sample`] can return at points of the
+    /// rectangle spanned by `(u0, v0)` and `(u1, v1)` (m) with footprints up to `footprint_m`.
+    #[inline]
+    pub fn range(&self, u0: f32, v0: f32, u1: f32, v1: f32, footprint_m: f32) -> (f32, f32) {
+        // Filtering reaches up to two texels of the sampled level beyond the point.
+        let lod = fast_log2((footprint_m * self.inv_texel).max(1e-6)).clamp(0.0, self.max_level);
+        let pad = 2.0 * (1u32 << (lod as u32 + 1)) as f32;
+        let s = self.inv_texel;
+        let (a0, a1) = ((u0.min(u1) * s - pad), (u0.max(u1) * s + pad));
+        let (b0, b1) = ((v0.min(v1) * s - pad), (v0.max(v1) * s + pad));
+        let extent = (a1 - a0).max(b1 - b0).max(1.0);
+        // Cells of 2^k texels with 2^k >= extent: the rectangle touches at most 2 x 2 of them.
+        let k = (fast_log2(extent).ceil() as usize).min(self.range_min.len() - 1);
+        let n = (self.sizes[0] >> k).max(1);
+        if n <= 2 {
+            let last = self.range_min.len() - 1;
+            return (self.range_min[last][0], self.range_max[last][0]);
+        }
+        let cell = (1u32 << k) as f32;
+        let mask = n - 1;
+        let (x0, y0) = (
+            (floor_fast(a0 / cell) as i32 as u32) & mask,
+            (floor_fast(b0 / cell) as i32 as u32) & mask,
+        );
+        let (x1, y1) = ((x0 + 1) & mask, (y0 + 1) & mask);
+        let (mn, mx) = (&self.range_min[k], &self.range_max[k]);
+        let at = |x: u32, y: u32| (y * n + x) as usize;
+        let lo = mn[at(x0, y0)]
+            .min(mn[at(x1, y0)])
+            .min(mn[at(x0, y1)])
+            .min(mn[at(x1, y1)]);
+        let hi = mx[at(x0, y0)]
+            .max(mx[at(x1, y0)])
+            .max(mx[at(x0, y1)])
+            .max(mx[at(x1, y1)]);
+        (lo, hi)
+    }
+
     /// The coarsest level's mean, i.e. the texture's average log intensity.
     pub fn mean(&self) -> f32 {
         let last = &self.levels[self.levels.len() - 1];
@@ -354,7 +431,10 @@ mod tests {
         for p in [
             Pattern::Noise,
             Pattern::Checker { square_m: 0.08 },
-            Pattern::Blobs { per_m2: 30.0, radius_m: 0.05 },
+            Pattern::Blobs {
+                per_m2: 30.0,
+                radius_m: 0.05,
+            },
             Pattern::Stripes { period_m: 0.1 },
         ] {
             let c = cfg(p);
@@ -372,8 +452,37 @@ mod tests {
             let hi = t.levels[0].iter().cloned().fold(f32::MIN, f32::max);
             assert!(hi - lo > 0.3, "{p:?}: range {lo}..{hi}");
         }
+        // Range bounds hold every sample inside the rectangle.
+        let t = Texture::bake(
+            &cfg(Pattern::Blobs {
+                per_m2: 30.0,
+                radius_m: 0.05,
+            }),
+            2,
+            0.01,
+        );
+        for (u0, v0, u1, v1, fp) in [
+            (0.1f32, 0.2f32, 0.13f32, 0.21f32, 0.005f32),
+            (-0.3, 0.6, -0.2, 0.5, 0.03),
+            (0.5, 0.5, 0.5, 0.5, 0.001),
+        ] {
+            let (lo, hi) = t.range(u0, v0, u1, v1, fp);
+            assert!(hi >= lo);
+            for i in 0..=20 {
+                let f = i as f32 / 20.0;
+                for ff in [fp * 0.5, fp] {
+                    let s = t.sample(u0 + f * (u1 - u0), v0 + f * (v1 - v0), ff);
+                    assert!(s >= lo - 1e-6 && s <= hi + 1e-6, "{s} outside {lo}..{hi}");
+                }
+            }
+        }
         let mut bad = cfg(Pattern::Noise);
         bad.size = 100;
-        assert!(bad.validate("wall").unwrap_err().to_string().contains("wall.texture"));
+        assert!(
+            bad.validate("wall")
+                .unwrap_err()
+                .to_string()
+                .contains("wall.texture")
+        );
     }
 }

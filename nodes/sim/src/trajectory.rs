@@ -30,17 +30,29 @@ pub struct Signal {
 impl Signal {
     /// A constant signal.
     pub fn constant(offset: f64) -> Self {
-        Self { offset, rate: 0.0, terms: Vec::new() }
+        Self {
+            offset,
+            rate: 0.0,
+            terms: Vec::new(),
+        }
     }
 
     /// `offset + rate t`.
     pub fn linear(offset: f64, rate: f64) -> Self {
-        Self { offset, rate, terms: Vec::new() }
+        Self {
+            offset,
+            rate,
+            terms: Vec::new(),
+        }
     }
 
     /// Adds a sinusoid (builder style).
     pub fn with(mut self, amplitude: f64, freq_hz: f64, phase_rad: f64) -> Self {
-        self.terms.push(Sinusoid { amplitude, freq_hz, phase_rad });
+        self.terms.push(Sinusoid {
+            amplitude,
+            freq_hz,
+            phase_rad,
+        });
         self
     }
 
@@ -62,7 +74,11 @@ impl Signal {
     /// An upper bound of |first derivative| over all time.
     pub fn max_rate(&self) -> f64 {
         self.rate.abs()
-            + self.terms.iter().map(|s| (s.amplitude * std::f64::consts::TAU * s.freq_hz).abs()).sum::<f64>()
+            + self
+                .terms
+                .iter()
+                .map(|s| (s.amplitude * std::f64::consts::TAU * s.freq_hz).abs())
+                .sum::<f64>()
     }
 }
 
@@ -117,8 +133,16 @@ impl RigidTrajectory {
 
     /// State at time `t` (s).
     pub fn state(&self, t: f64) -> RigidState {
-        let p = [self.position[0].eval(t), self.position[1].eval(t), self.position[2].eval(t)];
-        let a = [self.angles[0].eval(t), self.angles[1].eval(t), self.angles[2].eval(t)];
+        let p = [
+            self.position[0].eval(t),
+            self.position[1].eval(t),
+            self.position[2].eval(t),
+        ];
+        let a = [
+            self.angles[0].eval(t),
+            self.angles[1].eval(t),
+            self.angles[2].eval(t),
+        ];
         let r1 = math::rot_axis(self.axes[0], a[0].0);
         let r2 = math::rot_axis(self.axes[1], a[1].0);
         let r3 = math::rot_axis(self.axes[2], a[2].0);
@@ -143,7 +167,11 @@ impl RigidTrajectory {
 
     /// Upper bound of the linear speed over all time, m/s.
     pub fn max_speed(&self) -> f64 {
-        self.position.iter().map(|s| s.max_rate().powi(2)).sum::<f64>().sqrt()
+        self.position
+            .iter()
+            .map(|s| s.max_rate().powi(2))
+            .sum::<f64>()
+            .sqrt()
     }
 }
 
@@ -169,6 +197,7 @@ mod tests {
     }
 
     #[test]
+    #[allow(clippy::needless_range_loop)]
     fn velocities_match_finite_differences() {
         let tr = wobbly();
         let h = 1e-6;
@@ -192,7 +221,11 @@ mod tests {
             let sk = math::mul_mm(&math::transpose(&s.rotation), &d);
             let w = [sk[2][1], sk[0][2], sk[1][0]];
             for k in 0..3 {
-                assert!((w[k] - s.omega_body[k]).abs() < 1e-6, "{w:?} vs {:?}", s.omega_body);
+                assert!(
+                    (w[k] - s.omega_body[k]).abs() < 1e-6,
+                    "{w:?} vs {:?}",
+                    s.omega_body
+                );
             }
         }
     }

@@ -41,12 +41,20 @@ pub fn mask(scene: &Scene, rays: &Rays, geom: &FrameGeom) -> Mask {
     for (v, row) in ids.chunks_mut(w).enumerate() {
         for (u, id) in row.iter_mut().enumerate() {
             let (ui, vi) = (u as i32, v as i32);
-            if !boxes.iter().any(|b| ui >= b[0] && ui <= b[2] && vi >= b[1] && vi <= b[3]) {
+            if !boxes
+                .iter()
+                .any(|b| ui >= b[0] && ui <= b[2] && vi >= b[1] && vi <= b[3])
+            {
                 continue;
             }
             let i = v * w + u;
             *id = geom.cast(scene, rays.x[i], rays.y[i], ui, vi, None).id;
         }
     }
-    Mask { t: geom.t, width: w as u16, height: h as u16, ids }
+    Mask {
+        t: geom.t,
+        width: w as u16,
+        height: h as u16,
+        ids,
+    }
 }

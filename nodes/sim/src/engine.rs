@@ -1,0 +1,794 @@
+//! The simulation core: one key-frame interval at a time.
+//!
+//! Each interval `[t0, t1]` holds up to `steps_per_keyframe` render steps, each short enough
+//! that no scene point moves more than `max_px_per_step` pixels. Key frames at `t0` and `t1`
+//! ray-cast every pixel. In between, every pixel gets one of three treatments:
+//!
+//! - **quiet**: the log intensities of both key frames within the distance scene points travel
+//!   during the interval stay inside the pixel's thresholds (with a margin). Whatever passes
+//!   the pixel during the interval comes from that neighbourhood (brightness constancy), so it
+//!   cannot fire; it goes straight from `t0` to `t1` (a firing here is counted as a violation).
+//! - **stable**: the pixel sees the same surface at both key frames and is not on an edge in
+//!   either, so its texture coordinates move smoothly; they are interpolated linearly between
+//!   the key frames and the texture is sampled at steps of at most `max_px_per_step` of this
+//!   pixel's own image motion (no ray casting).
+//! - **unstable** (near a silhouette, crease or seam): ray cast at every render step with edge
+//!   supersampling.
+
+use crate::camera::{CameraConfig, Rays};
+use crate::config::SceneConfig;
+use crate::esim::{self, NoiseSource, Thresholds};
+use crate::filters;
+use crate::render::FrameGeom;
+use crate::scene::{self, Scene};
+use crate::{SimStats, math};
+
+/// One event with its truth, before it is split into columns.
+#[derive(Debug, Clone, Copy)]
+pub struct RawEvent {
+    /// Time, s.
+    pub t: f64,
+    /// Row-major pixel index.
+    pub pixel: u32,
+    /// Polarity 0/1.
+    pub p: u8,
+    /// Object id.
+    pub id: u16,
+    /// Flow, px/s.
+    pub fx: f32,
+    /// Flow, px/s.
+    pub fy: f32,
+}
+
+/// Every pixel ray cast at one instant.
+#[derive(Debug, Clone)]
+pub struct KeyFrame {
+    /// The scene at this instant.
+    pub geom: FrameGeom,
+    /// Log intensity (edge pixels supersampled).
+    pub l: Vec<f32>,
+    /// Surface key of the pixel centre.
+    pub key: Vec<u16>,
+    /// Object id of the pixel centre.
+    pub id: Vec<u16>,
+    /// Texture coordinates, m.
+    pub u: Vec<f32>,
+    /// Texture coordinates, m.
+    pub v: Vec<f32>,
+    /// Texture footprint, m.
+    pub footprint: Vec<f32>,
+    /// Size of one pixel on the surface across the ray, m.
+    pub px_size: Vec<f32>,
+    /// True where a 4-neighbour sees another surface.
+    pub edge: Vec<bool>,
+}
+
+impl KeyFrame {
+    fn new(geom: FrameGeom, n: usize) -> Self {
+        Self {
+            geom,
+            l: vec![0.0; n],
+            key: vec![0; n],
+            id: vec![0; n],
+            u: vec![0.0; n],
+            v: vec![0.0; n],
+            footprint: vec![0.0; n],
+            px_size: vec![0.0; n],
+            edge: vec![false; n],
+        }
+    }
+}
+
+/// Side of the square pixel blocks whose smallest background depth bounds image speeds.
+const BLOCK: usize = 16;
+
+/// One block of the background depth summary of the last key frame.
+#[derive(Debug, Clone, Copy)]
+struct DepthBlock {
+    /// Normalized coordinates of the block centre.
+    x: f64,
+    y: f64,
+    /// Factor covering the change of rotational flow across the block.
+    rot_margin: f64,
+    /// Smallest background depth in the block, m (infinite if none).
+    zmin: f64,
+}
+
+const QUIET: u8 = 0;
+const STABLE: u8 = 1;
+const UNSTABLE: u8 = 2;
+
+/// The per-pixel state and the key frames.
+#[derive(Debug, Clone)]
+pub struct Engine {
+    pub(crate) scene: Scene,
+    pub(crate) rays: Rays,
+    thresholds: Thresholds,
+    noise: NoiseSource,
+    reference: Vec<f32>,
+    last_event: Vec<f64>,
+    kf0: KeyFrame,
+    kf1: KeyFrame,
+    class: Vec<u8>,
+    // Unstable-pixel step buffers.
+    l_prev: Vec<f32>,
+    id_prev: Vec<u16>,
+    step_l: Vec<f32>,
+    step_key: Vec<u16>,
+    step_id: Vec<u16>,
+    stamp: Vec<u32>,
+    stamp_counter: u32,
+    // Filter buffers.
+    lo: Vec<f32>,
+    hi: Vec<f32>,
+    tmp_a: Vec<f32>,
+    tmp_b: Vec<f32>,
+    blocks: Vec<DepthBlock>,
+    zmin_bg: f64,
+    last_dt: f64,
+    /// Time of `kf0`, s.
+    pub(crate) t: f64,
+    pub(crate) stats: SimStats,
+}
+
+struct FireCtx<'a> {
+    scene: &'a Scene,
+    cam: &'a CameraConfig,
+    rays: &'a Rays,
+    refractory: f64,
+}
+
+impl Engine {
+    /// Bakes the scene and renders the key frame at t = 0 (references start at its intensities).
+    pub fn new(cfg: &SceneConfig) -> Self {
+        let scene = Scene::new(
+            &cfg.scene,
+            cfg.camera_trajectory.clone(),
+            cfg.seed,
+            cfg.esim.log_eps,
+        );
+        let rays = Rays::new(&cfg.camera);
+        let n = rays.width * rays.height;
+        let mut rng = crate::rng::Rng::new(cfg.seed, 0x7e5);
+        let thresholds = Thresholds::draw(&cfg.esim, n, &mut rng);
+        let noise = NoiseSource::new(&cfg.esim, n, cfg.seed);
+        let geom = FrameGeom::new(&scene, &cfg.camera, 0.0);
+        let mut e = Self {
+            kf0: KeyFrame::new(geom.clone(), n),
+            kf1: KeyFrame::new(geom, n),
+            scene,
+            rays,
+            thresholds,
+            noise,
+            reference: vec![0.0; n],
+            last_event: vec![f64::NEG_INFINITY; n],
+            class: vec![QUIET; n],
+            l_prev: vec![0.0; n],
+            id_prev: vec![0; n],
+            step_l: vec![0.0; n],
+            step_key: vec![0; n],
+            step_id: vec![0; n],
+            stamp: vec![0; n],
+            stamp_counter: 0,
+            lo: vec![0.0; n],
+            hi: vec![0.0; n],
+            tmp_a: vec![0.0; n],
+            tmp_b: vec![0.0; n],
+            blocks: Vec::new(),
+            zmin_bg: 1.0,
+            last_dt: cfg.render.max_step_s,
+            t: 0.0,
+            stats: SimStats::default(),
+        };
+        e.render_keyframe(cfg);
+        std::mem::swap(&mut e.kf0, &mut e.kf1);
+        e.reference.copy_from_slice(&e.kf0.l);
+        e
+    }
+
+    /// Bound of the image speed (px/s) of any scene point at time `t`: the background from the
+    /// depths of the last key frame (per 16x16 block, times `depth_safety`), each object from a
+    /// ball around its centre.
+    fn speed_bound(&self, cfg: &SceneConfig, t: f64) -> f64 {
+        let cam = self.scene.camera_state(t);
+        let (mx, my) = (self.rays.max_abs_x, self.rays.max_abs_y);
+        let r_max = mx.hypot(my);
+        let bg = scene::RelativeMotion::new(&cam, None);
+        let safety = cfg.render.depth_safety;
+        let mut s: f64 = 0.0;
+        for b in &self.blocks {
+            let z = if b.zmin.is_finite() {
+                b.zmin.min(self.zmin_bg * 4.0)
+            } else {
+                self.zmin_bg
+            } * safety;
+            let (rot, trans) = bg.flow_parts(b.x, b.y);
+            s = s.max(rot * b.rot_margin + trans / z);
+        }
+        for b in self.scene.boxes.iter().filter(|b| b.id != 0) {
+            let bs = b.trajectory.state(t);
+            let pose = scene::BoxPose::new(&cam, &bs);
+            let corners = pose.corners(b.half);
+            let zmin = corners.iter().map(|c| c[2]).fold(f64::INFINITY, f64::min);
+            let zmax = corners.iter().map(|c| c[2]).fold(f64::NEG_INFINITY, f64::max);
+            if zmax <= 0.0 {
+                continue;
+            }
+            if zmin > 0.1 {
+                // Skip objects well outside the field of view (55 px at f = 550).
+                let out = |k: usize, lim: f64| {
+                    corners.iter().all(|c| c[k] / c[2] > lim + 0.1)
+                        || corners.iter().all(|c| c[k] / c[2] < -lim - 0.1)
+                };
+                if out(0, mx) || out(1, my) {
+                    continue;
+                }
+            }
+            let m = scene::RelativeMotion::new(&cam, Some(&bs));
+            s = s.max(m.speed_bound_ball(pose.center, math::norm(b.half), zmin.max(0.1), r_max));
+        }
+        let c = &cfg.camera;
+        s * c.fx.max(c.fy) * self.rays.max_jacobian
+    }
+
+    /// Render times of the next interval and the bound (px) of how far any scene point moves.
+    fn plan(&mut self, cfg: &SceneConfig) -> (Vec<f64>, f64) {
+        let r = &cfg.render;
+        let dur = cfg.duration_s;
+        let mut times = vec![self.t];
+        let mut travel = 0.0;
+        for _ in 0..r.steps_per_keyframe {
+            let t = times[times.len() - 1];
+            if t >= dur {
+                break;
+            }
+            let bound = self
+                .speed_bound(cfg, t)
+                .max(self.speed_bound(cfg, (t + self.last_dt).min(dur)));
+            let speed = bound * r.speed_safety;
+            let mut dt = if speed > 0.0 {
+                (r.max_px_per_step / speed).clamp(r.min_step_s, r.max_step_s)
+            } else {
+                r.max_step_s
+            };
+            if t + dt > dur - 0.5 * r.min_step_s {
+                dt = dur - t;
+            }
+            self.last_dt = dt;
+            travel += speed * dt;
+            times.push(t + dt);
+        }
+        (times, travel)
+    }
+
+    /// Largest change of any moving object's face shading (log units) between two times.
+    fn shade_change(&self, t0: f64, t1: f64) -> f32 {
+        let mut worst = 0.0f64;
+        for b in self.scene.boxes.iter().filter(|b| b.id != 0) {
+            let (r0, r1) = (b.trajectory.state(t0).rotation, b.trajectory.state(t1).rotation);
+            for face in 0..6 {
+                let mut n = [0.0; 3];
+                n[face / 2] = if face % 2 == 0 { -1.0 } else { 1.0 };
+                let l = &self.scene.lighting;
+                let d = l.ln_shade(math::mul_mv(&r0, n)) - l.ln_shade(math::mul_mv(&r1, n));
+                worst = worst.max(d.abs());
+            }
+        }
+        worst as f32
+    }
+
+    fn next_stamp(&mut self) -> u32 {
+        self.stamp_counter = self.stamp_counter.wrapping_add(1);
+        if self.stamp_counter == 0 {
+            self.stamp.fill(0);
+            self.stamp_counter = 1;
+        }
+        self.stamp_counter
+    }
+
+    /// Ray casts every pixel at `kf1.geom` into `kf1` (edge pixels supersampled) and updates
+    /// the background depth summary.
+    fn render_keyframe(&mut self, cfg: &SceneConfig) {
+        let (w, h) = (self.rays.width, self.rays.height);
+        let (bw, bh) = (w.div_ceil(BLOCK), h.div_ceil(BLOCK));
+        if self.blocks.is_empty() {
+            let step = BLOCK as f64 * 0.5 / cfg.camera.fx.min(cfg.camera.fy);
+            for by in 0..bh {
+                for bx in 0..bw {
+                    let (cu, cv) = (
+                        (bx * BLOCK + BLOCK / 2).min(w - 1),
+                        (by * BLOCK + BLOCK / 2).min(h - 1),
+                    );
+                    let i = cv * w + cu;
+                    let (x, y) = (self.rays.x[i] as f64, self.rays.y[i] as f64);
+                    // Rotational flow grows like 1 + r^2; half a block further out is covered.
+                    let r = x.hypot(y);
+                    let rot_margin = (1.0 + (r + step).powi(2)) / (1.0 + r * r) * 1.02;
+                    self.blocks.push(DepthBlock {
+                        x,
+                        y,
+                        rot_margin,
+                        zmin: f64::INFINITY,
+                    });
+                }
+            }
+        }
+        let mut block_z = vec![f32::INFINITY; bw * bh];
+        let kf = &mut self.kf1;
+        let inv_f = (2.0 / (cfg.camera.fx + cfg.camera.fy)) as f32;
+        for v in 0..h {
+            let brow = (v / BLOCK) * bw;
+            for u in 0..w {
+                let i = v * w + u;
+                let hit = kf.geom.cast(
+                    &self.scene,
+                    self.rays.x[i],
+                    self.rays.y[i],
+                    u as i32,
+                    v as i32,
+                    None,
+                );
+                kf.l[i] = hit.l;
+                kf.key[i] = hit.key;
+                kf.id[i] = hit.id;
+                kf.u[i] = hit.u;
+                kf.v[i] = hit.v;
+                kf.footprint[i] = hit.footprint;
+                kf.px_size[i] = hit.z * inv_f;
+                if hit.id == 0 {
+                    let b = &mut block_z[brow + u / BLOCK];
+                    *b = b.min(hit.z);
+                }
+            }
+        }
+        let mut zmin = f32::INFINITY;
+        for (b, z) in self.blocks.iter_mut().zip(&block_z) {
+            b.zmin = *z as f64;
+            zmin = zmin.min(*z);
+        }
+        if zmin.is_finite() && zmin > 0.0 {
+            self.zmin_bg = zmin as f64;
+        }
+        for y in 0..h {
+            for x in 0..w {
+                let i = y * w + x;
+                let k = kf.key[i];
+                kf.edge[i] = (x + 1 < w && kf.key[i + 1] != k)
+                    || (x > 0 && kf.key[i - 1] != k)
+                    || (y + 1 < h && kf.key[i + w] != k)
+                    || (y > 0 && kf.key[i - w] != k);
+            }
+        }
+        if cfg.render.edge_supersampling {
+            for i in 0..w * h {
+                if kf.edge[i] {
+                    let r = &self.rays;
+                    let (x, y) = ((i % w) as i32, (i / w) as i32);
+                    kf.l[i] = kf
+                        .geom
+                        .supersample(&self.scene, r.x[i], r.y[i], r.d_du[i], r.d_dv[i], x, y);
+                    self.stats.supersampled += 1;
+                }
+            }
+        }
+        self.stats.pixel_renders += (w * h) as u64;
+        self.stats.keyframes += 1;
+    }
+
+    /// Simulates one interval; appends its events (sorted by time) to `out`.
+    pub fn advance(&mut self, cfg: &SceneConfig, out: &mut Vec<RawEvent>) {
+        let (times, travel) = self.plan(cfg);
+        let k = times.len() - 1;
+        if k == 0 {
+            self.t = cfg.duration_s;
+            return;
+        }
+        let (t0, t1) = (times[0], times[k]);
+        self.stats.steps += k as u64;
+        self.kf1.geom = FrameGeom::new(&self.scene, &cfg.camera, t1);
+        self.render_keyframe(cfg);
+        let radius = (travel.ceil() as usize + 1).min(256);
+        let shade = self.shade_change(t0, t1);
+        self.classify(cfg, radius, shade);
+
+        let mut batch: Vec<RawEvent> = Vec::new();
+        let ctx = FireCtx {
+            scene: &self.scene,
+            cam: &cfg.camera,
+            rays: &self.rays,
+            refractory: cfg.esim.refractory_s,
+        };
+        // Geometry of every render step (unstable pixels, noise labels).
+        let mut geoms: Vec<FrameGeom> = Vec::with_capacity(k + 1);
+        geoms.push(self.kf0.geom.clone());
+        for &t in &times[1..k] {
+            geoms.push(FrameGeom::new(&self.scene, &cfg.camera, t));
+        }
+        geoms.push(self.kf1.geom.clone());
+
+        // Quiet and stable pixels.
+        let max_px = cfg.render.max_px_per_step as f32;
+        let mut violations = 0u64;
+        let mut samples = 0u64;
+        let mut fired = 0u64;
+        let n = self.class.len();
+        for i in 0..n {
+            let (kf0, kf1) = (&self.kf0, &self.kf1);
+            let (c_on, c_off) = (self.thresholds.on[i], self.thresholds.off[i]);
+            match self.class[i] {
+                QUIET => {
+                    let before = batch.len();
+                    fire(
+                        &ctx,
+                        &mut self.reference[i],
+                        &mut self.last_event[i],
+                        i,
+                        kf0.l[i],
+                        kf1.l[i],
+                        (t0, t1),
+                        (&kf0.geom, &kf1.geom),
+                        (kf0.id[i], kf1.id[i]),
+                        (c_on, c_off),
+                        &mut batch,
+                    );
+                    if batch.len() > before {
+                        violations += 1;
+                    }
+                }
+                STABLE => {
+                    let key = kf0.key[i] as usize;
+                    let tex = &self.scene.textures[self.scene.key_texture[key]];
+                    let (s0, s1) = (kf0.geom.shade_by_key[key], kf1.geom.shade_by_key[key]);
+                    let (du, dv) = (kf1.u[i] - kf0.u[i], kf1.v[i] - kf0.v[i]);
+                    let size = kf0.px_size[i].min(kf1.px_size[i]).max(1e-9);
+                    let disp = (du * du + dv * dv).sqrt() / size;
+                    let m = ((disp / max_px).ceil() as usize).clamp(1, 4096);
+                    samples += m as u64 - 1;
+                    let id = kf0.id[i];
+                    let mut l_prev = kf0.l[i];
+                    let mut t_prev = t0;
+                    let before = batch.len();
+                    for j in 1..=m {
+                        let f = j as f32 / m as f32;
+                        let t = if j == m { t1 } else { t0 + (t1 - t0) * f as f64 };
+                        let l = if j == m {
+                            kf1.l[i]
+                        } else {
+                            let fp = kf0.footprint[i] + f * (kf1.footprint[i] - kf0.footprint[i]);
+                            tex.sample(kf0.u[i] + f * du, kf0.v[i] + f * dv, fp) + s0 + f * (s1 - s0)
+                        };
+                        fire_segment(
+                            &ctx,
+                            &mut self.reference[i],
+                            &mut self.last_event[i],
+                            i,
+                            l_prev,
+                            l,
+                            (t_prev, t),
+                            (t0, t1),
+                            (&kf0.geom, &kf1.geom),
+                            id,
+                            (c_on, c_off),
+                            &mut batch,
+                        );
+                        l_prev = l;
+                        t_prev = t;
+                    }
+                    fired += (batch.len() - before) as u64;
+                }
+                _ => {}
+            }
+        }
+        self.stats.skip_violations += violations;
+        self.stats.interpolated_samples += samples;
+
+        // Unstable pixels: ray cast at every step.
+        let unstable: Vec<u32> = (0..n as u32)
+            .filter(|&i| self.class[i as usize] == UNSTABLE)
+            .collect();
+        for &p in &unstable {
+            self.l_prev[p as usize] = self.kf0.l[p as usize];
+            self.id_prev[p as usize] = self.kf0.id[p as usize];
+        }
+        for s in 1..=k {
+            if s < k {
+                self.render_step(cfg, &geoms[s], &unstable);
+            }
+            let ctx = FireCtx {
+                scene: &self.scene,
+                cam: &cfg.camera,
+                rays: &self.rays,
+                refractory: cfg.esim.refractory_s,
+            };
+            for &p in &unstable {
+                let i = p as usize;
+                let (l1, id1) = if s < k {
+                    (self.step_l[i], self.step_id[i])
+                } else {
+                    (self.kf1.l[i], self.kf1.id[i])
+                };
+                let before = batch.len();
+                fire(
+                    &ctx,
+                    &mut self.reference[i],
+                    &mut self.last_event[i],
+                    i,
+                    self.l_prev[i],
+                    l1,
+                    (times[s - 1], times[s]),
+                    (&geoms[s - 1], &geoms[s]),
+                    (self.id_prev[i], id1),
+                    (self.thresholds.on[i], self.thresholds.off[i]),
+                    &mut batch,
+                );
+                fired += (batch.len() - before) as u64;
+                self.l_prev[i] = l1;
+                self.id_prev[i] = id1;
+            }
+        }
+        self.stats.model_events += fired + violations;
+
+        // Noise, labelled with the surface at its pixel at the nearest render step.
+        let w = self.rays.width;
+        let mut noise = 0u64;
+        let (scene, rays, cam) = (&self.scene, &self.rays, &cfg.camera);
+        self.noise.until(t1, |t, p, pol| {
+            let s = times.partition_point(|&x| x < t).min(k);
+            let s = if s > 0 && (t - times[s - 1]) < (times[s] - t) {
+                s - 1
+            } else {
+                s
+            };
+            let g = &geoms[s];
+            let i = p as usize;
+            let (x, y, u, v) = (rays.x[i], rays.y[i], (i % w) as i32, (i / w) as i32);
+            let hit = g.cast(scene, x, y, u, v, None);
+            let (fx, fy) = g.flow(scene, cam, x, y, u, v, hit.id).unwrap_or((0.0, 0.0));
+            batch.push(RawEvent {
+                t,
+                pixel: p,
+                p: pol,
+                id: hit.id,
+                fx: fx as f32,
+                fy: fy as f32,
+            });
+            noise += 1;
+        });
+        self.stats.noise_events += noise;
+
+        batch.sort_by(|a, b| a.t.total_cmp(&b.t));
+        out.extend_from_slice(&batch);
+        std::mem::swap(&mut self.kf0, &mut self.kf1);
+        self.t = t1;
+    }
+
+    /// Sorts every pixel into quiet, stable or unstable for the interval.
+    fn classify(&mut self, cfg: &SceneConfig, radius: usize, shade_margin: f32) {
+        let (w, h) = (self.rays.width, self.rays.height);
+        let (kf0, kf1) = (&self.kf0, &self.kf1);
+        for i in 0..w * h {
+            self.tmp_a[i] = kf0.l[i].min(kf1.l[i]);
+            self.tmp_b[i] = kf0.l[i].max(kf1.l[i]);
+        }
+        let (a, b) = (std::mem::take(&mut self.tmp_a), std::mem::take(&mut self.tmp_b));
+        let mut s1 = vec![0.0f32; w * h];
+        let mut s2 = vec![0.0f32; w * h];
+        filters::window_min_max(&a, &b, &mut self.lo, &mut self.hi, &mut s1, &mut s2, w, h, radius);
+        self.tmp_a = a;
+        self.tmp_b = b;
+        let margin = cfg.render.quiet_margin_log as f32;
+        let path_margin = cfg.render.path_margin_log as f32;
+        for i in 0..w * h {
+            let m = margin
+                + if kf0.id[i] != 0 || kf1.id[i] != 0 {
+                    shade_margin
+                } else {
+                    0.0
+                };
+            let r = self.reference[i];
+            let quiet =
+                self.hi[i] + m < r + self.thresholds.on[i] && self.lo[i] - m > r - self.thresholds.off[i];
+            let same = kf0.key[i] == kf1.key[i] && !kf0.edge[i] && !kf1.edge[i] && kf0.key[i] != u16::MAX;
+            self.class[i] = if quiet {
+                QUIET
+            } else if same {
+                // The pixel's path over the texture is known: bound its intensities directly.
+                let key = kf0.key[i] as usize;
+                let tex = &self.scene.textures[self.scene.key_texture[key]];
+                let fp = kf0.footprint[i].max(kf1.footprint[i]);
+                let (lo, hi) = tex.range(kf0.u[i], kf0.v[i], kf1.u[i], kf1.v[i], fp);
+                let (s0, s1) = (kf0.geom.shade_by_key[key], kf1.geom.shade_by_key[key]);
+                let (lo, hi) = (lo + s0.min(s1), hi + s0.max(s1));
+                let quiet_path = hi + path_margin < r + self.thresholds.on[i]
+                    && lo - path_margin > r - self.thresholds.off[i];
+                if quiet_path { QUIET } else { STABLE }
+            } else {
+                UNSTABLE
+            };
+        }
+    }
+
+    /// Ray casts the listed pixels at `geom` into the step buffers (edge pixels supersampled).
+    fn render_step(&mut self, cfg: &SceneConfig, geom: &FrameGeom, list: &[u32]) {
+        let stamp = self.next_stamp();
+        let w = self.rays.width;
+        for &p in list {
+            let i = p as usize;
+            let hit = geom.cast(
+                &self.scene,
+                self.rays.x[i],
+                self.rays.y[i],
+                (i % w) as i32,
+                (i / w) as i32,
+                None,
+            );
+            self.step_l[i] = hit.l;
+            self.step_id[i] = hit.id;
+            self.step_key[i] = hit.key;
+            self.stamp[i] = stamp;
+        }
+        self.stats.pixel_renders += list.len() as u64;
+        if !cfg.render.edge_supersampling {
+            return;
+        }
+        let n = self.stamp.len();
+        for &p in list {
+            let i = p as usize;
+            let (x, y) = (i % w, i / w);
+            let k = self.step_key[i];
+            let differs = |j: usize| self.stamp[j] == stamp && self.step_key[j] != k;
+            let edge = (x + 1 < w && differs(i + 1))
+                || (x > 0 && differs(i - 1))
+                || (i + w < n && differs(i + w))
+                || (y > 0 && differs(i - w));
+            if edge {
+                let r = &self.rays;
+                self.step_l[i] = geom.supersample(
+                    &self.scene,
+                    r.x[i],
+                    r.y[i],
+                    r.d_du[i],
+                    r.d_dv[i],
+                    x as i32,
+                    y as i32,
+                );
+                self.stats.supersampled += 1;
+            }
+        }
+    }
+}
+
+/// Threshold crossings of pixel `i` from `l0` to `l1` over `span`, with the truth of
+/// [`event_truth`] between the renders `geoms` (object ids `ids` at the pixel centre).
+#[allow(clippy::too_many_arguments)]
+fn fire(
+    ctx: &FireCtx,
+    reference: &mut f32,
+    last_event: &mut f64,
+    i: usize,
+    l0: f32,
+    l1: f32,
+    span: (f64, f64),
+    geoms: (&FrameGeom, &FrameGeom),
+    ids: (u16, u16),
+    thresholds: (f32, f32),
+    batch: &mut Vec<RawEvent>,
+) {
+    let (ta, tb) = span;
+    esim::crossings(
+        reference,
+        last_event,
+        l0,
+        l1,
+        ta,
+        tb,
+        thresholds.0,
+        thresholds.1,
+        ctx.refractory,
+        |t, pol| {
+            let frac = if tb > ta {
+                ((t - ta) / (tb - ta)) as f32
+            } else {
+                0.0
+            };
+            let (id, fx, fy) = event_truth(ctx, i, geoms.0, geoms.1, ids.0, ids.1, frac);
+            batch.push(RawEvent {
+                t,
+                pixel: i as u32,
+                p: pol,
+                id,
+                fx,
+                fy,
+            });
+        },
+    );
+}
+
+/// Like [`fire`] for a sub-segment `span` of a key-frame interval `whole` on one surface `id`;
+/// the truth interpolates between the key frames.
+#[allow(clippy::too_many_arguments)]
+fn fire_segment(
+    ctx: &FireCtx,
+    reference: &mut f32,
+    last_event: &mut f64,
+    i: usize,
+    l0: f32,
+    l1: f32,
+    span: (f64, f64),
+    whole: (f64, f64),
+    geoms: (&FrameGeom, &FrameGeom),
+    id: u16,
+    thresholds: (f32, f32),
+    batch: &mut Vec<RawEvent>,
+) {
+    let (ta, tb) = span;
+    let (wa, wb) = whole;
+    esim::crossings(
+        reference,
+        last_event,
+        l0,
+        l1,
+        ta,
+        tb,
+        thresholds.0,
+        thresholds.1,
+        ctx.refractory,
+        |t, pol| {
+            let frac = if wb > wa {
+                ((t - wa) / (wb - wa)) as f32
+            } else {
+                0.0
+            };
+            let (id, fx, fy) = event_truth(ctx, i, geoms.0, geoms.1, id, id, frac);
+            batch.push(RawEvent {
+                t,
+                pixel: i as u32,
+                p: pol,
+                id,
+                fx,
+                fy,
+            });
+        },
+    );
+}
+
+/// Object id and flow (px/s) of an event at pixel `i`, a fraction `frac` of the way from the
+/// render at `ga` (object `id_a` at the pixel centre) to the one at `gb` (object `id_b`).
+/// The id is the object's if it covers the pixel at either render (leading and trailing edges
+/// belong to the object); the flow is that surface's motion field at the pixel, interpolated
+/// between the two renders when both see it.
+fn event_truth(
+    ctx: &FireCtx,
+    i: usize,
+    ga: &FrameGeom,
+    gb: &FrameGeom,
+    id_a: u16,
+    id_b: u16,
+    frac: f32,
+) -> (u16, f32, f32) {
+    let id = match (id_a, id_b) {
+        (0, b) => b,
+        (a, 0) => a,
+        (a, b) => {
+            if frac < 0.5 {
+                a
+            } else {
+                b
+            }
+        }
+    };
+    let w = ctx.rays.width;
+    let (x, y, u, v) = (ctx.rays.x[i], ctx.rays.y[i], (i % w) as i32, (i / w) as i32);
+    let fa = ga.flow(ctx.scene, ctx.cam, x, y, u, v, id);
+    let fb = gb.flow(ctx.scene, ctx.cam, x, y, u, v, id);
+    let (fx, fy) = match (fa, fb) {
+        (Some(a), Some(b)) => {
+            let f = frac as f64;
+            (a.0 + f * (b.0 - a.0), a.1 + f * (b.1 - a.1))
+        }
+        (Some(a), None) => a,
+        (None, Some(b)) => b,
+        (None, None) => (0.0, 0.0),
+    };
+    (id, fx as f32, fy as f32)
+}
