@@ -4,10 +4,14 @@
 //! that no scene point moves more than `max_px_per_step` pixels. Key frames at `t0` and `t1`
 //! ray-cast every pixel. In between, every pixel gets one of three treatments:
 //!
-//! - **quiet**: the log intensities of both key frames within the distance scene points travel
-//!   during the interval stay inside the pixel's thresholds (with a margin). Whatever passes
-//!   the pixel during the interval comes from that neighbourhood (brightness constancy), so it
-//!   cannot fire; it goes straight from `t0` to `t1` (a firing here is counted as a violation).
+//! - **quiet**: it cannot cross a threshold during the interval, so it goes straight from `t0`
+//!   to `t1` (a firing there is counted as a violation, the events are kept). For a pixel that
+//!   keeps its surface, the bound is the range of texture values along its path between the
+//!   two key-frame texture coordinates (from a min/max pyramid of the texture) plus the
+//!   shading change, with `path_margin_log`. Otherwise (near edges) it is the range of both key
+//!   frames' log intensities within the distance any scene point travels in the interval, with
+//!   `quiet_margin_log`: whatever passes the pixel comes from that neighbourhood (brightness
+//!   constancy; content entering the view or uncovered is visible in the later key frame).
 //! - **stable**: the pixel sees the same surface at both key frames and is not on an edge in
 //!   either, so its texture coordinates move smoothly; they are interpolated linearly between
 //!   the key frames and the texture is sampled at steps of at most `max_px_per_step` of this

@@ -391,3 +391,44 @@ fn box_bbox(cam: &CameraConfig, pose: &BoxPose, half: V3) -> Option<[i32; 4]> {
     }
     Some([bb[0].max(0), bb[1].max(0), bb[2].min(w - 1), bb[3].min(h - 1)])
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use evseg_schemas::Distortion;
+
+    #[test]
+    fn pixel_flow_of_a_distorted_camera_matches_finite_differences() {
+        let cam = CameraConfig {
+            width: 640,
+            height: 480,
+            fx: 560.0,
+            fy: 555.0,
+            cx: 320.0,
+            cy: 240.0,
+            distortion: Distortion::RadTan {
+                k1: -0.22,
+                k2: 0.06,
+                p1: 0.0006,
+                p2: -0.0008,
+                k3: 0.0,
+            },
+        };
+        let m = RelativeMotion {
+            linear: [0.3, -0.2, 0.4],
+            angular: [0.2, -0.5, 0.3],
+        };
+        for p in [[0.8, -0.5, 2.0], [-1.1, 0.7, 3.0], [0.0, 0.0, 1.5]] {
+            let (x, y) = (p[0] / p[2], p[1] / p[2]);
+            let (ux, uy) = m.normalized_flow(p);
+            let (fx, fy) = cam.pixel_flow(x, y, ux, uy);
+            let h = 1e-5;
+            let v = m.velocity(p);
+            let a = cam.project(math::add(p, math::scale(v, -h))).unwrap();
+            let b = cam.project(math::add(p, math::scale(v, h))).unwrap();
+            let (dx, dy) = ((b.0 - a.0) / (2.0 * h), (b.1 - a.1) / (2.0 * h));
+            assert!((dx - fx).abs() < 1e-3 * fx.abs().max(1.0), "{dx} vs {fx}");
+            assert!((dy - fy).abs() < 1e-3 * fy.abs().max(1.0), "{dy} vs {fy}");
+        }
+    }
+}
