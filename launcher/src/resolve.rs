@@ -11,11 +11,14 @@ use evseg_schemas::describe::NodeDescription;
 /// Longest a binary may take to answer `--describe`.
 pub const DESCRIBE_TIMEOUT: Duration = Duration::from_secs(10);
 
+/// A located binary and its description, or why there is none.
+type Resolved = Result<(PathBuf, NodeDescription), String>;
+
 /// Finds binaries (next to the launcher, then on PATH; a name with a `/` is a path relative to
 /// the graph file) and caches their descriptions.
 pub struct BinaryResolver {
     graph_dir: PathBuf,
-    cache: Mutex<HashMap<String, Result<(PathBuf, NodeDescription), String>>>,
+    cache: Mutex<HashMap<String, Resolved>>,
 }
 
 impl BinaryResolver {

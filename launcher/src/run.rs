@@ -316,7 +316,7 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
     };
     let start = Instant::now();
     let policies: BTreeMap<String, evseg_graph::RestartPolicy> =
-        nodes.iter().map(|n| (n.id.clone(), n.restart.clone())).collect();
+        nodes.iter().map(|n| (n.id.clone(), n.restart)).collect();
     loop {
         if signals::stop_requested() {
             display.clear();

@@ -67,6 +67,9 @@ struct Port {
 pub struct Joiner {
     ports: Vec<Port>,
     next: u64,
+    /// False until the first set was handed out: a node (re)started in the middle of a stream
+    /// begins at the oldest sequence number all its main inputs have.
+    started: bool,
     live: bool,
     dropped: u64,
 }
@@ -84,6 +87,7 @@ impl Joiner {
                 })
                 .collect(),
             next: 0,
+            started: false,
             live,
             dropped: 0,
         }
@@ -125,6 +129,12 @@ impl Joiner {
                 None => return Ok(self.finished_or_waiting()),
             }
         } else {
+            if !self.started {
+                match self.first_common() {
+                    Some(first) => self.next = first,
+                    None => return Ok(JoinState::Waiting),
+                }
+            }
             self.next
         };
         // Lock-step: every main port must have `seq`, or have ended at exactly `seq`.
@@ -189,6 +199,7 @@ impl Joiner {
             }
         }
         self.next = seq + 1;
+        self.started = true;
         let (t_start, t_end) = t_span.unwrap_or((0.0, 0.0));
         Ok(JoinState::Ready(Joined {
             seq,
@@ -196,6 +207,20 @@ impl Joiner {
             t_end,
             frames,
         }))
+    }
+
+    /// Lock-step start: once every main port has a frame (or has ended), the oldest of their
+    /// first sequence numbers.
+    fn first_common(&self) -> Option<u64> {
+        let mut first = None::<u64>;
+        for p in self.main_ports() {
+            match (p.pending.keys().next(), p.end) {
+                (Some(&k), _) => first = Some(first.map_or(k, |f| f.min(k))),
+                (None, Some(c)) => first = Some(first.map_or(c, |f| f.min(c))),
+                (None, None) => return None,
+            }
+        }
+        first
     }
 
     fn finished_or_waiting(&self) -> JoinState {
@@ -295,6 +320,15 @@ mod tests {
         let x = ready(&mut j);
         assert_eq!(x.seq, 1);
         assert_eq!(x.frames[1].as_ref().unwrap().envelope.seq, 0);
+    }
+
+    #[test]
+    fn a_restarted_node_resumes_at_the_first_common_seq() {
+        let mut j = Joiner::new(&[("a".into(), false), ("b".into(), false)], false);
+        j.push(0, frame(7, FrameKind::Data));
+        assert!(matches!(j.poll().unwrap(), JoinState::Waiting));
+        j.push(1, frame(7, FrameKind::Data));
+        assert_eq!(ready(&mut j).seq, 7);
     }
 
     #[test]

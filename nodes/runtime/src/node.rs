@@ -367,7 +367,7 @@ impl Running {
     }
 }
 
-fn start(description: &NodeDescription, path: &PathBuf) -> Result<Running, RuntimeError> {
+fn start(description: &NodeDescription, path: &std::path::Path) -> Result<Running, RuntimeError> {
     let cfg = NodeConfig::load(path)?;
     if cfg.window == 0 || cfg.queue == 0 {
         return Err(RuntimeError::Config(format!(

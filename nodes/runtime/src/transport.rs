@@ -13,6 +13,9 @@ use crate::error::RuntimeError;
 use crate::progress::{DONE, Progress};
 use crate::signals;
 
+/// Subscriptions a component keeps alive by holding them.
+pub type Handles = Vec<Box<dyn std::any::Any + Send>>;
+
 /// How often blocking waits wake up to check for stop requests and vanished peers.
 pub const POLL: Duration = Duration::from_millis(50);
 
@@ -154,7 +157,13 @@ struct BookState {
     alive: HashSet<String>,
     /// Nodes whose token has been seen at least once.
     seen: HashSet<String>,
+    /// Nodes whose token disappeared, and when.
+    gone_since: HashMap<String, Instant>,
 }
+
+/// How long a consumer may be absent (for example while the launcher restarts it) before a
+/// producer waiting for it gives up.
+pub const CONSUMER_GRACE: Duration = Duration::from_secs(10);
 
 /// The credit book of a producer: what each consumer of each output has consumed, and who is
 /// alive. Lock-step publishing waits here.
@@ -166,15 +175,12 @@ pub struct CreditBook {
 impl CreditBook {
     /// Subscribes to the progress keys of every consumer of `cfg`'s outputs, and to the
     /// instance's liveliness tokens. The returned handles must be kept alive.
-    pub fn start(
-        session: &zenoh::Session,
-        cfg: &NodeConfig,
-    ) -> Result<(Arc<Self>, Vec<Box<dyn std::any::Any + Send>>), RuntimeError> {
+    pub fn start(session: &zenoh::Session, cfg: &NodeConfig) -> Result<(Arc<Self>, Handles), RuntimeError> {
         let book = Arc::new(Self {
             state: Mutex::new(BookState::default()),
             changed: Condvar::new(),
         });
-        let mut handles: Vec<Box<dyn std::any::Any + Send>> = Vec::new();
+        let mut handles: Handles = Vec::new();
         let mut ack_keys: Vec<&str> = cfg
             .outputs
             .iter()
@@ -212,9 +218,11 @@ impl CreditBook {
                 let mut s = lock(&b.state);
                 if sample.kind() == SampleKind::Put {
                     s.alive.insert(node.clone());
+                    s.gone_since.remove(&node);
                     s.seen.insert(node);
                 } else {
                     s.alive.remove(&node);
+                    s.gone_since.insert(node, Instant::now());
                 }
                 b.changed.notify_all();
             })
@@ -262,7 +270,11 @@ impl CreditBook {
                 return Err(RuntimeError::Stopped);
             }
             for (consumer, port) in watch {
-                if s.seen.contains(consumer) && !s.alive.contains(consumer) {
+                let absent_too_long = s
+                    .gone_since
+                    .get(consumer)
+                    .is_some_and(|t| t.elapsed() > CONSUMER_GRACE);
+                if s.seen.contains(consumer) && !s.alive.contains(consumer) && absent_too_long {
                     let finished = s.consumed.iter().any(|((n, _), c)| n == consumer && *c == DONE);
                     if !finished {
                         return Err(RuntimeError::ConsumerGone {

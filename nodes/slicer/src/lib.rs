@@ -360,6 +360,19 @@ mod tests {
     }
 
     #[test]
+    fn events_older_than_the_open_window_are_counted() {
+        let mut s = Slicer::new(SlicerParams {
+            window_s: 0.1,
+            ..Default::default()
+        })
+        .unwrap();
+        s.push(packet(&[0.05], &[]), None, 0.1).unwrap();
+        let out = s.push(packet(&[0.09, 0.12], &[]), None, 0.2).unwrap();
+        assert_eq!(s.late_events(), 1);
+        assert_eq!(out[0].slice.events.t, vec![0.12]);
+    }
+
+    #[test]
     fn bad_input_is_refused() {
         assert!(
             Slicer::new(SlicerParams {

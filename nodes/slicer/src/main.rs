@@ -24,7 +24,17 @@ impl Stage for SlicerNode {
         let packet: EventPacket = input.get("events")?;
         let truth: Option<Truth> = input.get_opt("truth")?;
         let (_, t_end) = input.span();
+        let late_before = self.0.late_events();
         let slices = self.0.push(packet, truth, t_end)?;
+        let late = self.0.late_events() - late_before;
+        if late > 0 {
+            tracing::warn!(
+                packet = input.seq(),
+                late,
+                total = self.0.late_events(),
+                "events older than the open window dropped (source out of order)"
+            );
+        }
         publish(out, slices)
     }
 

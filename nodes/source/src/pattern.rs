@@ -88,8 +88,16 @@ impl EventSource for Pattern {
         if self.emitted >= self.total {
             return Ok(None);
         }
-        // Event i fires at i / rate.
-        let upto = ((t_end * self.params.rate).ceil().max(0.0) as u64).min(self.total);
+        // Event i fires at i / rate; take exactly the events with i / rate < t_end (the
+        // product t_end * rate alone can round across an integer).
+        let rate = self.params.rate;
+        let mut upto = ((t_end * rate).ceil().max(0.0) as u64).min(self.total);
+        while upto < self.total && (upto as f64 / rate) < t_end {
+            upto += 1;
+        }
+        while upto > self.emitted && ((upto - 1) as f64 / rate) >= t_end {
+            upto -= 1;
+        }
         let n = upto.saturating_sub(self.emitted) as usize;
         let mut events = Events::with_capacity(n);
         let (w, h) = (self.params.width as u32, self.params.height as u32);
@@ -144,6 +152,31 @@ mod tests {
             k += 1;
         }
         assert_eq!(n, 1000);
+    }
+
+    #[test]
+    fn batches_hold_exactly_the_events_before_their_end() {
+        // 0.01 * 70 rounds to 0.7000000000000001, whose product with the rate rounds to an
+        // integer: the event at exactly 0.7 s belongs to that batch.
+        let mut p = Pattern::new(PatternParams {
+            rate: 200_000.0,
+            seconds: 1.0,
+            ..params()
+        })
+        .unwrap();
+        let mut k = 0u64;
+        while let Some(b) = p.next_batch(k as f64 * 0.01 + 0.01).unwrap() {
+            let t_end = k as f64 * 0.01 + 0.01;
+            assert!(b.events.t.iter().all(|&t| t < t_end));
+            k += 1;
+            let next = p.clone().next_batch(k as f64 * 0.01 + 0.01).unwrap();
+            if let Some(n) = next {
+                assert!(
+                    n.events.t.iter().all(|&t| t >= t_end),
+                    "batch {k} starts before {t_end}"
+                );
+            }
+        }
     }
 
     #[test]

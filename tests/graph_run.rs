@@ -1,0 +1,225 @@
+//! Whole-graph runs on one machine: exactly-once delivery under back-pressure, live-mode drops,
+//! crash reports, restart policy, and no orphans when the launcher is killed.
+
+use std::time::{Duration, Instant};
+
+use evseg_tests::{Launcher, free_port, read_json, wait_no_processes, write};
+
+fn graph(port: u16, mode: &str, rate: u64, seconds: f64, delay_ms: f64, extra_slicer: &str) -> String {
+    format!(
+        r#"name: t{port}
+mode: {mode}
+window: 2
+queue: 2
+zenoh:
+  machines:
+    local: {{ listen: ["tcp/127.0.0.1:{port}"] }}
+nodes:
+  - id: source
+    run: evseg-source
+    params: {{ kind: pattern, rate: {rate}, seconds: {seconds}, batch_ms: 10, seed: 3 }}
+    outputs: [events]
+  - id: slicer
+    run: evseg-slicer
+    params: {{ window_ms: 20 {extra_slicer} }}
+    inputs: {{ events: source/events }}
+    outputs: [slices]
+  - id: inspect
+    run: evseg-inspect
+    params: {{ delay_ms: {delay_ms} }}
+    inputs: {{ slices: slicer/slices }}
+"#
+    )
+}
+
+#[test]
+fn every_event_arrives_exactly_once_in_order_with_a_slow_stage() {
+    let dir = tempfile::tempdir().unwrap();
+    let port = free_port();
+    let g = write(
+        dir.path(),
+        "graph.yaml",
+        &graph(port, "lockstep", 200_000, 1.0, 15.0, ""),
+    );
+    let out = dir.path().join("run");
+    let start = Instant::now();
+    let run = Launcher::start(
+        dir.path(),
+        &["run", g.to_str().unwrap(), "--out", out.to_str().unwrap(), "-q"],
+        "a",
+    )
+    .wait(Duration::from_secs(120));
+    assert!(run.status.success(), "run failed:\n{}", run.stderr);
+    let sent = read_json(&out.join("source-source.json"));
+    let seen = read_json(&out.join("inspect-inspect.json"));
+    assert_eq!(sent["count"], 200_000);
+    assert_eq!(
+        seen["digest"], sent,
+        "the inspector saw other events than the source sent"
+    );
+    assert_eq!(seen["problem_count"], 0, "{}", seen["problems"]);
+    assert_eq!(seen["slices"], 50);
+    // 50 slices at 15 ms each: the slow stage held the pipeline back instead of losing data.
+    assert!(start.elapsed() >= Duration::from_millis(750));
+}
+
+#[test]
+fn live_mode_drops_oldest_and_counts_the_drops() {
+    let dir = tempfile::tempdir().unwrap();
+    let port = free_port();
+    let g = write(
+        dir.path(),
+        "graph.yaml",
+        &graph(port, "live", 100_000, 1.0, 40.0, ""),
+    );
+    let out = dir.path().join("run");
+    let run = Launcher::start(
+        dir.path(),
+        &["run", g.to_str().unwrap(), "--out", out.to_str().unwrap(), "-q"],
+        "a",
+    )
+    .wait(Duration::from_secs(120));
+    assert!(run.status.success(), "run failed:\n{}", run.stderr);
+    let sent = read_json(&out.join("source-source.json"));
+    let seen = read_json(&out.join("inspect-inspect.json"));
+    let slices = seen["slices"].as_u64().unwrap();
+    assert!(
+        slices < 50,
+        "a 40 ms stage cannot keep up with 20 ms slices sent as fast as possible"
+    );
+    assert!(seen["digest"]["count"].as_u64().unwrap() < sent["count"].as_u64().unwrap());
+    // The inspector notices the gaps in slice numbers, and the summary counts drops.
+    assert!(seen["problem_count"].as_u64().unwrap() > 0);
+    let dropped: u64 = run
+        .stdout
+        .lines()
+        .find(|l| l.starts_with("inspect "))
+        .and_then(|l| l.split_whitespace().nth(3))
+        .and_then(|s| s.parse().ok())
+        .unwrap_or_else(|| panic!("no inspect row in summary:\n{}", run.stdout));
+    assert!(dropped > 0, "drops not counted:\n{}", run.stdout);
+}
+
+#[test]
+fn a_crashing_node_is_reported_and_everything_stops() {
+    let dir = tempfile::tempdir().unwrap();
+    let port = free_port();
+    // A negative window makes the slicer refuse to start.
+    let text = graph(port, "lockstep", 100_000, 100.0, 0.0, "").replace("window_ms: 20", "window_ms: -5");
+    let g = write(dir.path(), "graph.yaml", &text);
+    let out = dir.path().join("run");
+    let run = Launcher::start(
+        dir.path(),
+        &["run", g.to_str().unwrap(), "--out", out.to_str().unwrap(), "-q"],
+        "a",
+    )
+    .wait(Duration::from_secs(60));
+    assert!(!run.status.success());
+    let slicer_line = text.lines().position(|l| l.contains("id: slicer")).unwrap() + 1;
+    let origin = format!("graph.yaml:{slicer_line}:");
+    assert!(run.stderr.contains("node `slicer`"), "{}", run.stderr);
+    assert!(
+        run.stderr.contains(&origin),
+        "no graph position {origin} in:\n{}",
+        run.stderr
+    );
+    assert!(run.stderr.contains("exit code 1"), "{}", run.stderr);
+    assert!(
+        run.stderr.contains("window must be a positive number"),
+        "log tail missing:\n{}",
+        run.stderr
+    );
+    let left = wait_no_processes(out.to_str().unwrap(), Duration::from_secs(5));
+    assert!(left.is_empty(), "processes left behind: {left:?}");
+}
+
+#[test]
+fn a_killed_node_is_reported_with_its_signal() {
+    let dir = tempfile::tempdir().unwrap();
+    let port = free_port();
+    let g = write(
+        dir.path(),
+        "graph.yaml",
+        &graph(port, "lockstep", 100_000, 1000.0, 50.0, ""),
+    );
+    let out = dir.path().join("run");
+    let launcher = Launcher::start(
+        dir.path(),
+        &["run", g.to_str().unwrap(), "--out", out.to_str().unwrap(), "-q"],
+        "a",
+    );
+    let needle = out.join("config").join("slicer.json");
+    let start = Instant::now();
+    let pid = loop {
+        if let Some(&pid) = evseg_tests::processes_with(needle.to_str().unwrap()).first() {
+            break pid;
+        }
+        assert!(start.elapsed() < Duration::from_secs(30), "slicer never started");
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    std::thread::sleep(Duration::from_millis(300));
+    unsafe {
+        libc::kill(pid as i32, libc::SIGKILL);
+    }
+    let run = launcher.wait(Duration::from_secs(60));
+    assert!(!run.status.success());
+    assert!(
+        run.stderr.contains("node `slicer`") && run.stderr.contains("signal 9"),
+        "{}",
+        run.stderr
+    );
+    let left = wait_no_processes(out.to_str().unwrap(), Duration::from_secs(5));
+    assert!(left.is_empty(), "processes left behind: {left:?}");
+}
+
+#[test]
+fn restart_policy_restarts_then_gives_up() {
+    let dir = tempfile::tempdir().unwrap();
+    let port = free_port();
+    let text = graph(port, "lockstep", 100_000, 100.0, 0.0, "").replace(
+        "    params: { window_ms: 20  }\n",
+        "    params: { window_ms: -5 }\n    restart: { policy: on-failure, max: 2 }\n",
+    );
+    assert!(text.contains("on-failure"));
+    let g = write(dir.path(), "graph.yaml", &text);
+    let out = dir.path().join("run");
+    let run = Launcher::start(
+        dir.path(),
+        &["run", g.to_str().unwrap(), "--out", out.to_str().unwrap(), "-q"],
+        "a",
+    )
+    .wait(Duration::from_secs(60));
+    assert!(!run.status.success());
+    assert!(
+        run.stderr.contains("restart 1 of 2") && run.stderr.contains("restart 2 of 2"),
+        "{}",
+        run.stderr
+    );
+    assert!(run.stderr.contains("node `slicer`"), "{}", run.stderr);
+}
+
+#[test]
+fn killing_the_launcher_leaves_no_orphans() {
+    let dir = tempfile::tempdir().unwrap();
+    let port = free_port();
+    let g = write(
+        dir.path(),
+        "graph.yaml",
+        &graph(port, "lockstep", 100_000, 1000.0, 50.0, ""),
+    );
+    let out = dir.path().join("run");
+    let mut launcher = Launcher::start(
+        dir.path(),
+        &["run", g.to_str().unwrap(), "--out", out.to_str().unwrap(), "-q"],
+        "a",
+    );
+    let needle = out.to_str().unwrap().to_string();
+    let start = Instant::now();
+    while evseg_tests::processes_with(&format!("{needle}/config")).len() < 3 {
+        assert!(start.elapsed() < Duration::from_secs(30), "nodes never started");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    launcher.kill9();
+    let left = wait_no_processes(&needle, Duration::from_secs(5));
+    assert!(left.is_empty(), "orphans after SIGKILL of the launcher: {left:?}");
+}
