@@ -35,8 +35,12 @@ pub struct OutputPort {
 pub struct Param {
     /// Parameter name, as used in graph.yaml `params:`.
     pub name: String,
-    /// Default value (JSON); `null` when the parameter is required.
+    /// Default value (JSON). `null` means "no value unless given" (any type is then accepted);
+    /// otherwise a given value must have the default's JSON type.
     pub default: serde_json::Value,
+    /// True when the graph must give a (non-null) value.
+    #[serde(default)]
+    pub required: bool,
     /// Meaning, unit, and where the default comes from.
     #[serde(default)]
     pub doc: String,

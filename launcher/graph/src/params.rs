@@ -107,7 +107,7 @@ pub(crate) fn resolve(
         };
         let expected = json_kind(&declared.default);
         if declared.default.is_null() {
-            if value.is_null() {
+            if value.is_null() && declared.required {
                 p.error(
                     entry.value.at,
                     format!("parameter `{}` is required and cannot be null", entry.key),
@@ -134,7 +134,7 @@ pub(crate) fn resolve(
             Some(value) => {
                 out.insert(declared.name.clone(), value);
             }
-            None if declared.default.is_null() => {
+            None if declared.required => {
                 if given.is_some() && !spans.contains_key(&declared.name) {
                     p.error(
                         anchor,

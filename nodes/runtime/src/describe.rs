@@ -50,11 +50,23 @@ impl Describe {
         self
     }
 
-    /// A parameter with a default (`serde_json::Value::Null` = required).
+    /// A parameter with a default (`serde_json::Value::Null`: optional, no value unless given).
     pub fn param(mut self, name: &str, default: impl Into<serde_json::Value>, doc: &str) -> Self {
         self.0.params.push(Param {
             name: name.into(),
             default: default.into(),
+            required: false,
+            doc: doc.into(),
+        });
+        self
+    }
+
+    /// A parameter the graph must give (any JSON type, not null).
+    pub fn required(mut self, name: &str, doc: &str) -> Self {
+        self.0.params.push(Param {
+            name: name.into(),
+            default: serde_json::Value::Null,
+            required: true,
             doc: doc.into(),
         });
         self

@@ -1,7 +1,11 @@
 //! Event sources, each behind one trait so the source node (and in-process tools such as the
 //! transport benchmark) can drive any of them batch by batch.
 
+pub mod evimo2;
+pub mod file;
+mod order;
 pub mod pattern;
+pub mod synthetic;
 
 use evseg_schemas::{CameraInfo, Events, ImuSample, Truth};
 

@@ -8,7 +8,10 @@ use evseg_runtime::describe::Describe;
 use evseg_runtime::{BoxError, Mode, NodeConfig, Outputs, Source, run_source};
 use evseg_schemas::digest::EventDigest;
 use evseg_schemas::{EventPacket, Truth};
+use evseg_source::evimo2::Evimo2Source;
+use evseg_source::file::FileSource;
 use evseg_source::pattern::{Pattern, PatternParams};
+use evseg_source::synthetic::SyntheticSource;
 use evseg_source::{EventSource, SourceError};
 
 struct SourceNode {
@@ -54,18 +57,56 @@ impl Source for SourceNode {
     }
 }
 
+fn path_param(cfg: &NodeConfig) -> Result<std::path::PathBuf, BoxError> {
+    let path: Option<String> = cfg.param_opt("path")?;
+    let path =
+        path.ok_or_else(|| format!("node {}: this source kind needs the `path` parameter", cfg.node))?;
+    Ok(std::path::PathBuf::from(path))
+}
+
 fn open(cfg: &NodeConfig) -> Result<Box<dyn EventSource>, BoxError> {
     let kind: String = cfg.param("kind")?;
+    let seconds: Option<f64> = cfg.param_opt("seconds")?;
     match kind.as_str() {
+        "synthetic" => {
+            let scene: String = cfg.param("scene")?;
+            Ok(Box::new(SyntheticSource::new(
+                &scene,
+                cfg.param("seed")?,
+                seconds,
+            )?))
+        }
+        "evimo2" => {
+            let options = evseg_evimo2::ReadOptions {
+                imu_topic: cfg.param_opt("imu_topic")?,
+                imu_to_camera: cfg.param_opt("imu_to_camera")?,
+                imu_time_offset_s: cfg.param_opt("imu_time_offset_s")?,
+                sensor: None,
+            };
+            Ok(Box::new(Evimo2Source::open(
+                &path_param(cfg)?,
+                &options,
+                seconds,
+            )?))
+        }
+        "file" => {
+            let camera_file: Option<String> = cfg.param_opt("camera_file")?;
+            let camera_file = camera_file.map(std::path::PathBuf::from);
+            Ok(Box::new(FileSource::open(
+                &path_param(cfg)?,
+                camera_file.as_deref(),
+                seconds,
+            )?))
+        }
         "pattern" => Ok(Box::new(Pattern::new(PatternParams {
             rate: cfg.param("rate")?,
-            seconds: cfg.param("seconds")?,
+            seconds: seconds.unwrap_or(3.0),
             width: cfg.param("width")?,
             height: cfg.param("height")?,
             seed: cfg.param("seed")?,
         })?)),
         other => Err(Box::new(SourceError::Param(format!(
-            "unknown source kind `{other}` (known: pattern)"
+            "unknown source kind `{other}` (known: synthetic, evimo2, file, pattern)"
         )))),
     }
 }

@@ -22,9 +22,11 @@ fn output(name: &str, schema: &str) -> OutputPort {
     }
 }
 
+/// A parameter; a null default stands for a required one in these fixtures.
 fn param(name: &str, default: serde_json::Value) -> Param {
     Param {
         name: name.into(),
+        required: default.is_null(),
         default,
         doc: String::new(),
     }

@@ -1,0 +1,127 @@
+//! EVIMO2 v2 sequence folders (see METHOD_NOTES section 4): events, IMU, camera and object
+//! poses, and masks as ground truth (EVIMO2 has no per-event labels; the evaluator looks events
+//! up in the mask nearest in time).
+
+use std::path::Path;
+
+use evseg_evimo2::{MaskReader, ReadOptions, Sequence};
+use evseg_schemas::{CameraInfo, CameraMotion, ImuSample, ObjectPose, Truth};
+
+use crate::order::sort_by_time;
+use crate::{Batch, EventSource, SourceError};
+
+/// Reads an EVIMO2 v2 folder batch by batch.
+pub struct Evimo2Source {
+    camera: CameraInfo,
+    events: evseg_evimo2::EventReader,
+    masks: Option<MaskReader>,
+    next_mask: usize,
+    imu: Vec<ImuSample>,
+    next_imu: usize,
+    poses: Vec<CameraMotion>,
+    next_pose: usize,
+    objects: Vec<ObjectPose>,
+    next_object: usize,
+    /// Stop after this many seconds of sensor time.
+    seconds: Option<f64>,
+    done: bool,
+    /// Events that were out of order inside a batch (sorted, not dropped).
+    pub reordered: u64,
+}
+
+impl Evimo2Source {
+    /// Opens `folder` with `options` (IMU topic, IMU-to-camera rotation and offset overrides).
+    pub fn open(folder: &Path, options: &ReadOptions, seconds: Option<f64>) -> Result<Self, SourceError> {
+        let seq = Sequence::open(folder, options).map_err(|e| SourceError::Read(e.to_string()))?;
+        let events = seq.events().map_err(|e| SourceError::Read(e.to_string()))?;
+        let masks = match seq.masks() {
+            Ok(m) => Some(m),
+            Err(e) => {
+                tracing::warn!(
+                    "{}: no masks ({e}); the run has no segmentation ground truth",
+                    folder.display()
+                );
+                None
+            }
+        };
+        let mut objects = seq.object_poses();
+        objects.sort_by(|a, b| a.t.total_cmp(&b.t));
+        Ok(Self {
+            camera: seq.camera.clone(),
+            events,
+            masks,
+            next_mask: 0,
+            imu: seq.imu.clone(),
+            next_imu: 0,
+            poses: seq.camera_poses.clone(),
+            next_pose: 0,
+            objects,
+            next_object: 0,
+            seconds,
+            done: false,
+            reordered: 0,
+        })
+    }
+}
+
+/// Items of a time-sorted list from `*next` with time `< t_end`.
+fn take_until<T: Clone>(items: &[T], next: &mut usize, t_end: f64, t: impl Fn(&T) -> f64) -> Vec<T> {
+    let start = *next;
+    while *next < items.len() && t(&items[*next]) < t_end {
+        *next += 1;
+    }
+    items[start..*next].to_vec()
+}
+
+impl EventSource for Evimo2Source {
+    fn camera(&self) -> CameraInfo {
+        self.camera.clone()
+    }
+
+    fn next_batch(&mut self, t_end: f64) -> Result<Option<Batch>, SourceError> {
+        if self.done {
+            return Ok(None);
+        }
+        let limit = self.seconds.unwrap_or(f64::INFINITY);
+        let t_end_eff = t_end.min(limit);
+        let mut events = self
+            .events
+            .read_until(t_end_eff)
+            .map_err(|e| SourceError::Read(e.to_string()))?;
+        self.reordered += sort_by_time(&mut events) as u64;
+        let exhausted = self.events.position() >= self.events.len() || t_end >= limit;
+        let offset = self.camera.imu_time_offset_s;
+        let imu = take_until(&self.imu, &mut self.next_imu, t_end_eff, |s| s.t + offset);
+        let camera = take_until(&self.poses, &mut self.next_pose, t_end_eff, |p| p.t);
+        let objects = take_until(&self.objects, &mut self.next_object, t_end_eff, |o| o.t);
+        let mut masks = Vec::new();
+        if let Some(reader) = self.masks.as_mut() {
+            while self.next_mask < reader.len() && reader.entries()[self.next_mask].t < t_end_eff {
+                masks.push(
+                    reader
+                        .read(self.next_mask)
+                        .map_err(|e| SourceError::Read(e.to_string()))?,
+                );
+                self.next_mask += 1;
+            }
+        }
+        if exhausted {
+            self.done = true;
+        }
+        let truth = Truth {
+            masks,
+            camera,
+            objects,
+            ..Truth::default()
+        };
+        Ok(Some(Batch {
+            events,
+            imu,
+            truth: Some(truth),
+        }))
+    }
+
+    fn has_truth(&self) -> bool {
+        true
+    }
+}
