@@ -98,6 +98,16 @@ struct DepthBlock {
     zmin: f64,
 }
 
+/// Safety margin, log units, of the exact sample skipping along stable paths (covers f32
+/// rounding of the interpolated samples; not a modelling parameter).
+const SKIP_EPS_LOG: f32 = 1e-4;
+
+/// Stable paths: a jump shorter than this many grid points from the whole-path bound tries
+/// the bound of the next `LOCAL_WINDOW` points (a cost/benefit choice, not a model parameter).
+const LOCAL_MIN_JUMP: usize = 3;
+/// Grid points covered by the local bound of a stable path.
+const LOCAL_WINDOW: usize = 8;
+
 const QUIET: u8 = 0;
 const STABLE: u8 = 1;
 const UNSTABLE: u8 = 2;
@@ -125,8 +135,12 @@ pub struct Engine {
     // Filter buffers.
     lo: Vec<f32>,
     hi: Vec<f32>,
-    tmp_a: Vec<f32>,
-    tmp_b: Vec<f32>,
+    scratch: Vec<f32>,
+    /// Stable pixels: bound of |d(log intensity) / d(fraction of the interval)| along the
+    /// interpolated path, log units.
+    rate: Vec<f32>,
+    /// Stable pixels: bound of the change of log intensity from the changing mip level.
+    slack: Vec<f32>,
     blocks: Vec<DepthBlock>,
     zmin_bg: f64,
     last_dt: f64,
@@ -176,8 +190,9 @@ impl Engine {
             stamp_counter: 0,
             lo: vec![0.0; n],
             hi: vec![0.0; n],
-            tmp_a: vec![0.0; n],
-            tmp_b: vec![0.0; n],
+            scratch: Vec::new(),
+            rate: vec![0.0; n],
+            slack: vec![0.0; n],
             blocks: Vec::new(),
             zmin_bg: 1.0,
             last_dt: cfg.render.max_step_s,
@@ -447,20 +462,70 @@ impl Engine {
                     let size = kf0.px_size[i].min(kf1.px_size[i]).max(1e-9);
                     let disp = (du * du + dv * dv).sqrt() / size;
                     let m = ((disp / max_px).ceil() as usize).clamp(1, 4096);
-                    samples += m as u64 - 1;
                     let id = kf0.id[i];
                     let mut l_prev = kf0.l[i];
                     let mut t_prev = t0;
                     let before = batch.len();
-                    for j in 1..=m {
-                        let f = j as f32 / m as f32;
-                        let t = if j == m { t1 } else { t0 + (t1 - t0) * f as f64 };
-                        let l = if j == m {
+                    // Samples j/m along the path; grid points that provably stay strictly
+                    // inside the thresholds (Lipschitz bound `rate`, plus `slack`) are skipped:
+                    // they could not fire, and the reference level does not change there.
+                    let (rate, slack) = (self.rate[i], self.slack[i] + SKIP_EPS_LOG);
+                    let mf = m as f32;
+                    let mut j = 0usize;
+                    // No local bound is tried again before this grid index.
+                    let mut local_after = 0usize;
+                    while j < m {
+                        let r = self.reference[i];
+                        let room = (r + c_on - l_prev).min(l_prev - (r - c_off)) - slack;
+                        let mut jump = if room <= 0.0 {
+                            1
+                        } else if rate > 0.0 {
+                            ((room / rate * mf) as usize).max(1)
+                        } else {
+                            m
+                        };
+                        if jump < LOCAL_MIN_JUMP && j >= local_after && m - j > LOCAL_MIN_JUMP {
+                            // Bounds of the next few grid points only (smaller texture region).
+                            let w = (m - j).min(LOCAL_WINDOW);
+                            let (fa, fb) = (j as f32 / mf, (j + w) as f32 / mf);
+                            let b = tex.path_bounds(
+                                kf0.u[i] + fa * du,
+                                kf0.v[i] + fa * dv,
+                                kf0.u[i] + fb * du,
+                                kf0.v[i] + fb * dv,
+                                kf0.footprint[i].max(kf1.footprint[i]),
+                            );
+                            let (sa, sb) = (s0 + fa * (s1 - s0), s0 + fb * (s1 - s0));
+                            let inside = b.hi + sa.max(sb) + SKIP_EPS_LOG < r + c_on
+                                && b.lo + sa.min(sb) - SKIP_EPS_LOG > r - c_off;
+                            let local_rate = b.grad_per_m * (du * du + dv * dv).sqrt() + (s1 - s0).abs();
+                            jump = if inside {
+                                w
+                            } else if room > 0.0 && local_rate > 0.0 {
+                                ((room / local_rate * mf) as usize).clamp(1, w)
+                            } else {
+                                1
+                            };
+                            if jump < LOCAL_MIN_JUMP {
+                                local_after = j + w / 2;
+                            }
+                        }
+                        let next = (j + jump).min(m);
+                        let f = next as f32 / mf;
+                        let t = if next == m { t1 } else { t0 + (t1 - t0) * f as f64 };
+                        let l = if next == m {
                             kf1.l[i]
                         } else {
+                            samples += 1;
                             let fp = kf0.footprint[i] + f * (kf1.footprint[i] - kf0.footprint[i]);
                             tex.sample(kf0.u[i] + f * du, kf0.v[i] + f * dv, fp) + s0 + f * (s1 - s0)
                         };
+                        j = next;
+                        if jump > 1 {
+                            l_prev = l;
+                            t_prev = t;
+                            continue;
+                        }
                         fire_segment(
                             &ctx,
                             &mut self.reference[i],
@@ -571,15 +636,10 @@ impl Engine {
         let (w, h) = (self.rays.width, self.rays.height);
         let (kf0, kf1) = (&self.kf0, &self.kf1);
         for i in 0..w * h {
-            self.tmp_a[i] = kf0.l[i].min(kf1.l[i]);
-            self.tmp_b[i] = kf0.l[i].max(kf1.l[i]);
+            self.lo[i] = kf0.l[i].min(kf1.l[i]);
+            self.hi[i] = kf0.l[i].max(kf1.l[i]);
         }
-        let (a, b) = (std::mem::take(&mut self.tmp_a), std::mem::take(&mut self.tmp_b));
-        let mut s1 = vec![0.0f32; w * h];
-        let mut s2 = vec![0.0f32; w * h];
-        filters::window_min_max(&a, &b, &mut self.lo, &mut self.hi, &mut s1, &mut s2, w, h, radius);
-        self.tmp_a = a;
-        self.tmp_b = b;
+        filters::window_min_max_in_place(&mut self.lo, &mut self.hi, w, h, radius, &mut self.scratch);
         let margin = cfg.render.quiet_margin_log as f32;
         let path_margin = cfg.render.path_margin_log as f32;
         for i in 0..w * h {
@@ -599,13 +659,21 @@ impl Engine {
                 // The pixel's path over the texture is known: bound its intensities directly.
                 let key = kf0.key[i] as usize;
                 let tex = &self.scene.textures[self.scene.key_texture[key]];
-                let fp = kf0.footprint[i].max(kf1.footprint[i]);
-                let (lo, hi) = tex.range(kf0.u[i], kf0.v[i], kf1.u[i], kf1.v[i], fp);
+                let (fp0, fp1) = (kf0.footprint[i], kf1.footprint[i]);
+                let b = tex.path_bounds(kf0.u[i], kf0.v[i], kf1.u[i], kf1.v[i], fp0.max(fp1));
                 let (s0, s1) = (kf0.geom.shade_by_key[key], kf1.geom.shade_by_key[key]);
-                let (lo, hi) = (lo + s0.min(s1), hi + s0.max(s1));
+                let (lo, hi) = (b.lo + s0.min(s1), b.hi + s0.max(s1));
                 let quiet_path = hi + path_margin < r + self.thresholds.on[i]
                     && lo - path_margin > r - self.thresholds.off[i];
-                if quiet_path { QUIET } else { STABLE }
+                if quiet_path {
+                    QUIET
+                } else {
+                    // Bounds for skipping samples along the interpolated path (see `advance`).
+                    let (du, dv) = (kf1.u[i] - kf0.u[i], kf1.v[i] - kf0.v[i]);
+                    self.rate[i] = b.grad_per_m * (du * du + dv * dv).sqrt() + (s1 - s0).abs();
+                    self.slack[i] = (tex.lod(fp1) - tex.lod(fp0)).abs() * (b.hi - b.lo);
+                    STABLE
+                }
             } else {
                 UNSTABLE
             };

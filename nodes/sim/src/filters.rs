@@ -1,80 +1,91 @@
 //! Separable sliding-window image filters.
 
 /// Minimum and maximum of `src` (row-major, `w` x `h`) over square windows of radius `r`
-/// clipped at the image border (van Herk / Gil-Werman: a few comparisons per pixel and pass,
-/// whatever the radius). `tmp_lo` and `tmp_hi` are scratch images of the same size.
+/// clipped at the image border. `tmp_lo` and `tmp_hi` are unused scratch kept for API
+/// compatibility; see [`window_min_max_in_place`].
 #[allow(clippy::too_many_arguments)]
 pub fn window_min_max(
     src_lo: &[f32],
     src_hi: &[f32],
     lo: &mut [f32],
     hi: &mut [f32],
-    tmp_lo: &mut [f32],
-    tmp_hi: &mut [f32],
+    _tmp_lo: &mut [f32],
+    _tmp_hi: &mut [f32],
     w: usize,
     h: usize,
     r: usize,
 ) {
-    let mut line = Vec::with_capacity(w.max(h));
-    let mut out = Vec::with_capacity(w.max(h));
-    let mut scratch = Scratch::default();
+    lo[..w * h].copy_from_slice(&src_lo[..w * h]);
+    hi[..w * h].copy_from_slice(&src_hi[..w * h]);
+    let mut scratch = Vec::new();
+    window_min_max_in_place(lo, hi, w, h, r, &mut scratch);
+}
+
+/// Replaces `lo` by its minimum and `hi` by its maximum over square windows of radius `r`
+/// (row-major `w` x `h` images, windows clipped at the border). Separable sparse-table passes
+/// (log2(2r + 1) vectorisable sweeps per axis, whatever the radius); `scratch` is reused.
+pub fn window_min_max_in_place(
+    lo: &mut [f32],
+    hi: &mut [f32],
+    w: usize,
+    h: usize,
+    r: usize,
+    scratch: &mut Vec<f32>,
+) {
+    if r == 0 {
+        return;
+    }
     for y in 0..h {
-        let rows = y * w..(y + 1) * w;
-        running(&src_lo[rows.clone()], r, false, &mut out, &mut scratch);
-        tmp_lo[rows.clone()].copy_from_slice(&out);
-        running(&src_hi[rows.clone()], r, true, &mut out, &mut scratch);
-        tmp_hi[rows].copy_from_slice(&out);
+        sliding::<false>(&mut lo[y * w..(y + 1) * w], w, 1, r, scratch);
+        sliding::<true>(&mut hi[y * w..(y + 1) * w], w, 1, r, scratch);
     }
-    for x in 0..w {
-        line.clear();
-        line.extend((0..h).map(|y| tmp_lo[y * w + x]));
-        running(&line, r, false, &mut out, &mut scratch);
-        for (y, v) in out.iter().enumerate() {
-            lo[y * w + x] = *v;
-        }
-        line.clear();
-        line.extend((0..h).map(|y| tmp_hi[y * w + x]));
-        running(&line, r, true, &mut out, &mut scratch);
-        for (y, v) in out.iter().enumerate() {
-            hi[y * w + x] = *v;
-        }
-    }
+    sliding::<false>(&mut lo[..w * h], h, w, r, scratch);
+    sliding::<true>(&mut hi[..w * h], h, w, r, scratch);
 }
 
-#[derive(Default)]
-struct Scratch {
-    pre: Vec<f32>,
-    suf: Vec<f32>,
-}
-
-/// Sliding-window minimum (or maximum when `max`) of radius `r` over one line.
-fn running(v: &[f32], r: usize, max: bool, out: &mut Vec<f32>, s: &mut Scratch) {
-    let n = v.len();
-    let k = 2 * r + 1;
-    let fill = if max { f32::NEG_INFINITY } else { f32::INFINITY };
-    let pick = |a: f32, b: f32| if max { a.max(b) } else { a.min(b) };
-    let padded = n + 2 * r;
-    let get = |j: usize| if j < r || j >= r + n { fill } else { v[j - r] };
-    s.pre.clear();
-    s.pre.resize(padded, fill);
-    s.suf.clear();
-    s.suf.resize(padded, fill);
-    for j in 0..padded {
-        s.pre[j] = if j % k == 0 {
-            get(j)
-        } else {
-            pick(s.pre[j - 1], get(j))
-        };
+/// Sliding minimum (maximum when `MAX`) over windows of `2r + 1` items, in place. `data` holds
+/// `n` items of `stride` values each (item `j` is `data[j * stride..(j + 1) * stride]`); the
+/// window runs over items, element-wise.
+fn sliding<const MAX: bool>(data: &mut [f32], n: usize, stride: usize, r: usize, pad: &mut Vec<f32>) {
+    let fill = if MAX { f32::NEG_INFINITY } else { f32::INFINITY };
+    let pick = |a: f32, b: f32| if MAX { a.max(b) } else { a.min(b) };
+    let np = n + 2 * r;
+    pad.clear();
+    pad.resize(np * stride, fill);
+    pad[r * stride..(r + n) * stride].copy_from_slice(&data[..n * stride]);
+    let win = 2 * r + 1;
+    // After the pass for `len`, item j holds the extreme of items [j, j + 2 len) (clipped).
+    let mut len = 1;
+    while len * 2 <= win {
+        let s = len * stride;
+        let m = (np - len) * stride;
+        let (head, tail) = pad.split_at_mut(s);
+        // pad[j] = pick(pad[j], pad[j + s]) for j < m, done in blocks of s (no overlap).
+        let mut j = 0;
+        while j < m {
+            let e = (j + s).min(m);
+            if j == 0 {
+                let (a, b) = (&mut head[..e], &tail[..e]);
+                for (x, y) in a.iter_mut().zip(b) {
+                    *x = pick(*x, *y);
+                }
+            } else {
+                let (a, b) = tail.split_at_mut(j);
+                let a = &mut a[j - s..e - s];
+                let b = &b[..e - j];
+                for (x, y) in a.iter_mut().zip(b) {
+                    *x = pick(*x, *y);
+                }
+            }
+            j = e;
+        }
+        len *= 2;
     }
-    for j in (0..padded).rev() {
-        s.suf[j] = if j % k == k - 1 || j == padded - 1 {
-            get(j)
-        } else {
-            pick(s.suf[j + 1], get(j))
-        };
+    // Window [j, j + win) of the padded items = items [j, j + len) and [j + win - len, j + win).
+    let off = (win - len) * stride;
+    for (j, d) in data[..n * stride].iter_mut().enumerate() {
+        *d = pick(pad[j], pad[j + off]);
     }
-    out.clear();
-    out.extend((0..n).map(|c| pick(s.suf[c], s.pre[c + 2 * r])));
 }
 
 #[cfg(test)]

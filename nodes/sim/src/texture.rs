@@ -109,6 +109,23 @@ pub struct Texture {
     /// Per level k: min and max of the level-0 texels in each aligned 2^k x 2^k cell.
     range_min: Vec<Vec<f32>>,
     range_max: Vec<Vec<f32>>,
+    /// Per level k: largest texel-to-texel difference of level 0 (log units per texel) along
+    /// either axis in each aligned 2^k x 2^k cell (cells include the differences to their
+    /// right and lower neighbours, wrapping).
+    grad_max: Vec<Vec<f32>>,
+}
+
+/// Bounds of a texture along a straight path of surface coordinates (see
+/// [`Texture::path_bounds`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PathBounds {
+    /// Smallest value any sample near the path can take, log units.
+    pub lo: f32,
+    /// Largest value any sample near the path can take, log units.
+    pub hi: f32,
+    /// Lipschitz bound of samples at one footprint near the path, log units per metre of
+    /// surface: `|sample(p, fp) - sample(q, fp)| <= grad_per_m * |p - q|`.
+    pub grad_per_m: f32,
 }
 
 /// `floor` without a libm call (valid for |x| < 2^31).
@@ -205,6 +222,7 @@ impl Texture {
             range_max.push(nmax);
             m = h;
         }
+        let grad_max = Self::gradient_pyramid(&levels[0], cfg.size as usize);
         Self {
             levels,
             sizes,
@@ -213,7 +231,38 @@ impl Texture {
             max_level,
             range_min,
             range_max,
+            grad_max,
         }
+    }
+
+    /// Pyramid of the largest level-0 neighbour difference per aligned cell (see `grad_max`).
+    fn gradient_pyramid(d: &[f32], n: usize) -> Vec<Vec<f32>> {
+        let mut g0 = vec![0.0f32; n * n];
+        for y in 0..n {
+            let y1 = (y + 1) % n;
+            for x in 0..n {
+                let x1 = (x + 1) % n;
+                let c = d[y * n + x];
+                g0[y * n + x] = (d[y * n + x1] - c).abs().max((d[y1 * n + x] - c).abs());
+            }
+        }
+        let mut out = vec![g0];
+        let mut m = n;
+        while m > 1 {
+            let h = m / 2;
+            let prev = &out[out.len() - 1];
+            let mut next = vec![0.0f32; h * h];
+            for y in 0..h {
+                for x in 0..h {
+                    let a = prev[2 * y * m + 2 * x].max(prev[2 * y * m + 2 * x + 1]);
+                    let b = prev[(2 * y + 1) * m + 2 * x].max(prev[(2 * y + 1) * m + 2 * x + 1]);
+                    next[y * h + x] = a.max(b);
+                }
+            }
+            out.push(next);
+            m = h;
+        }
+        out
     }
 
     fn pattern(cfg: &TextureConfig, n: usize, extent: f64, rng: &mut Rng) -> Vec<f64> {
@@ -356,38 +405,73 @@ impl Texture {
     /// rectangle spanned by `(u0, v0)` and `(u1, v1)` (m) with footprints up to `footprint_m`.
     #[inline]
     pub fn range(&self, u0: f32, v0: f32, u1: f32, v1: f32, footprint_m: f32) -> (f32, f32) {
-        // Filtering reaches up to two texels of the sampled level beyond the point.
-        let lod = fast_log2((footprint_m * self.inv_texel).max(1e-6)).clamp(0.0, self.max_level);
-        let pad = 2.0 * (1u32 << (lod as u32 + 1)) as f32;
+        let b = self.path_bounds(u0, v0, u1, v1, footprint_m);
+        (b.lo, b.hi)
+    }
+
+    /// Mip level (fractional, clamped to the baked levels) [`Texture::sample`] uses for a
+    /// footprint of `footprint_m` metres.
+    #[inline]
+    pub fn lod(&self, footprint_m: f32) -> f32 {
+        fast_log2((footprint_m * self.inv_texel).max(1e-6)).clamp(0.0, self.max_level)
+    }
+
+    /// Value range and Lipschitz bound of [`Texture::sample`] over the rectangle spanned by
+    /// `(u0, v0)` and `(u1, v1)` (m) with footprints up to `footprint_m`.
+    ///
+    /// The gradient of a bilinear interpolant is bounded per axis by the largest neighbour
+    /// difference of the texels it blends; texels of coarser levels are means of level-0
+    /// blocks, so their differences per level-0 texel are bounded by level-0 differences in
+    /// the blocks; trilinear blending at a fixed footprint keeps the bound. Hence
+    /// `sqrt(2) * max difference` per texel over the region the filters reach.
+    #[inline]
+    pub fn path_bounds(&self, u0: f32, v0: f32, u1: f32, v1: f32, footprint_m: f32) -> PathBounds {
+        // The bilinear filter of level L blends texels of level L within 1.5 of its texels
+        // (1.5 * 2^L level-0 texels) of the point; `sample` uses levels floor(lod) and
+        // floor(lod) + 1, or level 0 alone at lod 0. Half a texel more covers rounding.
+        let lod = self.lod(footprint_m);
+        let top = if lod <= 0.0 {
+            0
+        } else {
+            (lod as u32 + 1).min(self.max_level as u32)
+        };
+        let pad = 1.5 * (1u32 << top) as f32 + 0.5;
         let s = self.inv_texel;
         let (a0, a1) = ((u0.min(u1) * s - pad), (u0.max(u1) * s + pad));
         let (b0, b1) = ((v0.min(v1) * s - pad), (v0.max(v1) * s + pad));
         let extent = (a1 - a0).max(b1 - b0).max(1.0);
-        // Cells of 2^k texels with 2^k >= extent: the rectangle touches at most 2 x 2 of them.
-        let k = (fast_log2(extent).ceil() as usize).min(self.range_min.len() - 1);
+        // Cells of 2^k texels with 2 * 2^k >= extent: the rectangle touches at most 3 x 3.
+        let k = ((fast_log2(extent).ceil() as usize).saturating_sub(1)).min(self.range_min.len() - 1);
         let n = (self.sizes[0] >> k).max(1);
-        if n <= 2 {
+        let grad = |g: f32| g * s * std::f32::consts::SQRT_2;
+        if n <= 3 {
             let last = self.range_min.len() - 1;
-            return (self.range_min[last][0], self.range_max[last][0]);
+            return PathBounds {
+                lo: self.range_min[last][0],
+                hi: self.range_max[last][0],
+                grad_per_m: grad(self.grad_max[last][0]),
+            };
         }
         let cell = (1u32 << k) as f32;
         let mask = n - 1;
-        let (x0, y0) = (
-            (floor_fast(a0 / cell) as i32 as u32) & mask,
-            (floor_fast(b0 / cell) as i32 as u32) & mask,
-        );
-        let (x1, y1) = ((x0 + 1) & mask, (y0 + 1) & mask);
-        let (mn, mx) = (&self.range_min[k], &self.range_max[k]);
-        let at = |x: u32, y: u32| (y * n + x) as usize;
-        let lo = mn[at(x0, y0)]
-            .min(mn[at(x1, y0)])
-            .min(mn[at(x0, y1)])
-            .min(mn[at(x1, y1)]);
-        let hi = mx[at(x0, y0)]
-            .max(mx[at(x1, y0)])
-            .max(mx[at(x0, y1)])
-            .max(mx[at(x1, y1)]);
-        (lo, hi)
+        let (cx0, cy0) = (floor_fast(a0 / cell) as i32, floor_fast(b0 / cell) as i32);
+        let (cx1, cy1) = (floor_fast(a1 / cell) as i32, floor_fast(b1 / cell) as i32);
+        let (mn, mx, gm) = (&self.range_min[k], &self.range_max[k], &self.grad_max[k]);
+        let (mut lo, mut hi, mut g) = (f32::INFINITY, f32::NEG_INFINITY, 0.0f32);
+        for cy in cy0..=cy1 {
+            let row = ((cy as u32) & mask) * n;
+            for cx in cx0..=cx1 {
+                let c = (row + ((cx as u32) & mask)) as usize;
+                lo = lo.min(mn[c]);
+                hi = hi.max(mx[c]);
+                g = g.max(gm[c]);
+            }
+        }
+        PathBounds {
+            lo,
+            hi,
+            grad_per_m: grad(g),
+        }
     }
 
     /// The coarsest level's mean, i.e. the texture's average log intensity.
@@ -476,6 +560,69 @@ mod tests {
                 }
             }
         }
+        let mut bad = cfg(Pattern::Noise);
+        bad.size = 100;
+        assert!(
+            bad.validate("wall")
+                .unwrap_err()
+                .to_string()
+                .contains("wall.texture")
+        );
+    }
+
+    #[test]
+    fn path_bounds_hold_every_sample_and_every_slope_along_the_path() {
+        // Hard-edged patterns have the steepest slopes; check value and Lipschitz bounds on
+        // densely sampled paths at several footprints (mip levels 0..2).
+        for p in [
+            Pattern::Checker { square_m: 0.16 },
+            Pattern::Blobs {
+                per_m2: 10.0,
+                radius_m: 0.08,
+            },
+        ] {
+            let t = Texture::bake(&cfg(p), 4, 0.01);
+            let mut rng = Rng::new(11, 1);
+            let (mut tight, mut steep) = (0usize, 0.0f32);
+            for _ in 0..400 {
+                let (u0, v0) = (rng.range(-1.0, 1.0) as f32, rng.range(-1.0, 1.0) as f32);
+                let len = rng.range(0.0, 0.05) as f32;
+                let ang = rng.range(0.0, std::f64::consts::TAU) as f32;
+                let (u1, v1) = (u0 + len * ang.cos(), v0 + len * ang.sin());
+                let fp = [0.002f32, 0.012, 0.03][rng.below(3) as usize];
+                let b = t.path_bounds(u0, v0, u1, v1, fp);
+                let n = 200;
+                let mut prev = t.sample(u0, v0, fp);
+                for k in 1..=n {
+                    let f = k as f32 / n as f32;
+                    let s = t.sample(u0 + f * (u1 - u0), v0 + f * (v1 - v0), fp);
+                    assert!(
+                        s >= b.lo - 1e-5 && s <= b.hi + 1e-5,
+                        "{s} outside {}..{}",
+                        b.lo,
+                        b.hi
+                    );
+                    let slope = (s - prev).abs() / (len / n as f32).max(1e-9);
+                    steep = steep.max(slope / b.grad_per_m.max(1e-9));
+                    assert!(
+                        (s - prev).abs() <= b.grad_per_m * len / n as f32 + 1e-5,
+                        "slope {slope} > {}",
+                        b.grad_per_m
+                    );
+                    prev = s;
+                }
+                tight += usize::from(
+                    b.hi - b.lo < 0.5 * (t.range_max.last().unwrap()[0] - t.range_min.last().unwrap()[0]),
+                );
+            }
+            eprintln!("{p:?}: largest slope / bound {steep:.3}, local ranges {tight} of 400");
+            // The bounds are local: most short paths see much less than the texture's range.
+            assert!(tight > 40, "{p:?}: only {tight} tight ranges");
+        }
+    }
+
+    #[test]
+    fn invalid_sizes_are_rejected() {
         let mut bad = cfg(Pattern::Noise);
         bad.size = 100;
         assert!(
