@@ -1,18 +1,33 @@
-//! Runs a preset and prints event rates, work counters and wall time.
+//! Runs a preset (or every preset) and prints event rates, work counters, wall time and CPU
+//! time (the CPU time of the simulating thread is steadier than wall time on a shared machine).
 //!
 //! `cargo run --release -p evseg-sim --example sim_stats -- one-object 1.0 [seed]`
+//! `cargo run --release -p evseg-sim --example sim_stats -- all 1.0 [seed]`
 
 use std::time::Instant;
 
-fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let args: Vec<String> = std::env::args().collect();
-    let name = args.get(1).map(String::as_str).unwrap_or("one-object");
-    let secs: f64 = args.get(2).map(|s| s.parse()).transpose()?.unwrap_or(1.0);
-    let seed: u64 = args.get(3).map(|s| s.parse()).transpose()?.unwrap_or(1);
+/// CPU time (s) the calling thread has run, from `/proc/thread-self/schedstat` (Linux);
+/// `None` elsewhere.
+fn thread_cpu_seconds() -> Option<f64> {
+    let s = std::fs::read_to_string("/proc/thread-self/schedstat").ok()?;
+    let ns: f64 = s.split_whitespace().next()?.parse().ok()?;
+    Some(ns * 1e-9)
+}
+
+struct Row {
+    name: String,
+    events_per_s: f64,
+    wall: f64,
+    cpu: Option<f64>,
+    simulated: f64,
+}
+
+fn run(name: &str, secs: f64, seed: u64) -> Result<Row, Box<dyn std::error::Error>> {
     let cfg = evseg_sim::preset(name, seed)?;
     let t0 = Instant::now();
     let mut sim = evseg_sim::Simulator::new(cfg)?;
     let setup = t0.elapsed().as_secs_f64();
+    let cpu0 = thread_cpu_seconds();
     let t1 = Instant::now();
     let (mut n, mut on, mut obj) = (0usize, 0usize, 0usize);
     let mut t = 0.0;
@@ -24,6 +39,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         obj += c.truth.event_object.iter().filter(|&&i| i != 0).count();
     }
     let wall = t1.elapsed().as_secs_f64();
+    let cpu = match (cpu0, thread_cpu_seconds()) {
+        (Some(a), Some(b)) => Some(b - a),
+        _ => None,
+    };
     let s = sim.stats();
     let px = 640.0 * 480.0;
     println!("preset {name} seed {seed}: {t:.2} s simulated in {wall:.2} s wall (setup {setup:.2} s)");
@@ -34,8 +53,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         obj as f64 / n.max(1) as f64
     );
     println!(
-        "  sim-seconds per wall-second {:.3}, events per wall-second {:.2} M",
+        "  sim-seconds per wall-second {:.3}, per CPU-second {}, events per wall-second {:.2} M",
         t / wall,
+        cpu.map_or("n/a".to_string(), |c| format!("{:.3}", t / c)),
         n as f64 / wall / 1e6
     );
     println!(
@@ -49,5 +69,45 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         s.noise_events,
         s.skip_violations
     );
+    Ok(Row {
+        name: name.to_string(),
+        events_per_s: n as f64 / t,
+        wall,
+        cpu,
+        simulated: t,
+    })
+}
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let args: Vec<String> = std::env::args().collect();
+    let name = args.get(1).map(String::as_str).unwrap_or("one-object");
+    let secs: f64 = args.get(2).map(|s| s.parse()).transpose()?.unwrap_or(1.0);
+    let seed: u64 = args.get(3).map(|s| s.parse()).transpose()?.unwrap_or(1);
+    let names: Vec<&str> = if name == "all" {
+        evseg_sim::PRESET_NAMES.to_vec()
+    } else {
+        vec![name]
+    };
+    let mut rows = Vec::new();
+    for n in names {
+        rows.push(run(n, secs, seed)?);
+    }
+    if rows.len() > 1 {
+        println!();
+        println!(
+            "{:<16} {:>10} {:>14} {:>14}",
+            "preset", "M ev/s", "sim-s/wall-s", "sim-s/CPU-s"
+        );
+        for r in &rows {
+            println!(
+                "{:<16} {:>10.2} {:>14.3} {:>14}",
+                r.name,
+                r.events_per_s / 1e6,
+                r.simulated / r.wall,
+                r.cpu
+                    .map_or("n/a".to_string(), |c| format!("{:.3}", r.simulated / c))
+            );
+        }
+    }
     Ok(())
 }

@@ -74,9 +74,10 @@ pub fn preset(name: &str, seed: u64) -> Result<SceneConfig, SimError> {
             b.finish(vec![o1, o2], 3.0)
         }
         "fast-rotation" => {
-            // Strong rotation (up to ~1.4 rad/s yaw, ~0.8 rad/s pitch) with translation, one object.
-            b.camera.angles[0] = Signal::constant(0.0).with(0.28, 0.8, b.phase());
-            b.camera.angles[1] = Signal::constant(-0.12).with(0.12, 1.1, b.phase());
+            // Strong rotation (up to ~1.0 rad/s yaw, ~0.6 rad/s pitch, 3x the other presets)
+            // with translation, one object.
+            b.camera.angles[0] = Signal::constant(0.0).with(0.2, 0.8, b.phase());
+            b.camera.angles[1] = Signal::constant(-0.12).with(0.09, 1.1, b.phase());
             b.camera.angles[2] = Signal::constant(0.0).with(0.08, 0.7, b.phase());
             let o = b.object(
                 1,
@@ -122,7 +123,7 @@ pub fn preset(name: &str, seed: u64) -> Result<SceneConfig, SimError> {
                 b.checker_texture(1),
             );
             let mut cfg = b.finish(vec![o], 3.0);
-            scale_contrast(&mut cfg, 0.35);
+            scale_contrast(&mut cfg, 0.5);
             cfg
         }
         "high-contrast" => {
@@ -135,7 +136,7 @@ pub fn preset(name: &str, seed: u64) -> Result<SceneConfig, SimError> {
                 b.checker_texture(1),
             );
             let mut cfg = b.finish(vec![o], 3.0);
-            scale_contrast(&mut cfg, 2.0);
+            scale_contrast(&mut cfg, 1.6);
             cfg
         }
         "distorted-lens" => {
@@ -202,8 +203,8 @@ fn plane(origin: V3, u: V3, v: V3, texture: TextureConfig) -> PlaneConfig {
 fn wall_texture(pattern: Pattern, contrast: f64, albedo: f64, seed: u64) -> TextureConfig {
     TextureConfig {
         pattern,
-        size: 1024,
-        texel_m: 0.015,
+        size: 512,
+        texel_m: 0.03,
         mean_albedo: albedo,
         contrast,
         noise_weight: 0.15,
@@ -254,11 +255,11 @@ impl Builder {
 
     fn checker_texture(&self, seed: u64) -> TextureConfig {
         TextureConfig {
-            pattern: Pattern::Checker { square_m: 0.1 },
-            size: 512,
-            texel_m: 0.004,
+            pattern: Pattern::Checker { square_m: 0.2 },
+            size: 256,
+            texel_m: 0.008,
             mean_albedo: 0.45,
-            contrast: 0.5,
+            contrast: 0.3,
             noise_weight: 0.2,
             noise_feature_m: 0.25,
             seed: 1000 + seed,
@@ -268,13 +269,13 @@ impl Builder {
     fn blob_texture(&self, seed: u64) -> TextureConfig {
         TextureConfig {
             pattern: Pattern::Blobs {
-                per_m2: 150.0,
-                radius_m: 0.035,
+                per_m2: 40.0,
+                radius_m: 0.06,
             },
-            size: 512,
-            texel_m: 0.004,
+            size: 256,
+            texel_m: 0.008,
             mean_albedo: 0.5,
-            contrast: 0.5,
+            contrast: 0.3,
             noise_weight: 0.2,
             noise_feature_m: 0.3,
             seed: 1000 + seed,
@@ -337,22 +338,22 @@ impl Builder {
                 [0.0, 0.0, 0.0],
                 x,
                 y,
-                wall_texture(Pattern::Checker { square_m: 0.5 }, 0.25, 0.35, 1),
+                wall_texture(Pattern::Checker { square_m: 0.5 }, 0.15, 0.35, 1),
             ),
             // Ceiling (z = 3).
-            plane([0.0, 0.0, 3.0], y, x, wall_texture(Pattern::Noise, 0.2, 0.6, 2)),
+            plane([0.0, 0.0, 3.0], y, x, wall_texture(Pattern::Noise, 0.15, 0.6, 2)),
             // Back wall (y = 6), cluttered.
-            plane([0.0, 6.0, 0.0], x, z, wall_texture(clutter, 0.4, 0.5, 3)),
+            plane([0.0, 6.0, 0.0], x, z, wall_texture(clutter, 0.2, 0.5, 3)),
             // Wall behind the camera (y = -3).
-            plane([0.0, -3.0, 0.0], z, x, wall_texture(Pattern::Noise, 0.2, 0.5, 4)),
+            plane([0.0, -3.0, 0.0], z, x, wall_texture(Pattern::Noise, 0.15, 0.5, 4)),
             // Left wall (x = -3).
-            plane([-3.0, 0.0, 0.0], y, z, wall_texture(clutter, 0.4, 0.45, 5)),
+            plane([-3.0, 0.0, 0.0], y, z, wall_texture(clutter, 0.2, 0.45, 5)),
             // Right wall (x = 3).
             plane(
                 [3.0, 0.0, 0.0],
                 z,
                 y,
-                wall_texture(Pattern::Stripes { period_m: 0.4 }, 0.3, 0.5, 6),
+                wall_texture(Pattern::Stripes { period_m: 0.6 }, 0.15, 0.5, 6),
             ),
         ];
         let furniture = |center: V3, half: V3, yaw: f64, pattern: Pattern, seed: u64| BoxConfig {
@@ -360,10 +361,10 @@ impl Builder {
             trajectory: RigidTrajectory::fixed(center, math::rot_axis(2, yaw)),
             texture: TextureConfig {
                 pattern,
-                size: 512,
-                texel_m: 0.008,
+                size: 256,
+                texel_m: 0.016,
                 mean_albedo: 0.45,
-                contrast: 0.4,
+                contrast: 0.2,
                 noise_weight: 0.2,
                 noise_feature_m: 0.5,
                 seed,
@@ -375,8 +376,8 @@ impl Builder {
                 [0.5, 0.35, 0.7],
                 0.3,
                 Pattern::Blobs {
-                    per_m2: 20.0,
-                    radius_m: 0.06,
+                    per_m2: 8.0,
+                    radius_m: 0.1,
                 },
                 11,
             ),
@@ -384,7 +385,7 @@ impl Builder {
                 [1.6, 3.0, 0.45],
                 [0.6, 0.4, 0.45],
                 -0.2,
-                Pattern::Stripes { period_m: 0.12 },
+                Pattern::Stripes { period_m: 0.25 },
                 12,
             ),
             furniture(
@@ -392,8 +393,8 @@ impl Builder {
                 [0.9, 0.03, 0.6],
                 0.0,
                 Pattern::Blobs {
-                    per_m2: 30.0,
-                    radius_m: 0.05,
+                    per_m2: 10.0,
+                    radius_m: 0.09,
                 },
                 13,
             ),
@@ -401,7 +402,7 @@ impl Builder {
                 [2.3, 4.5, 1.0],
                 [0.2, 0.2, 1.0],
                 0.5,
-                Pattern::Checker { square_m: 0.1 },
+                Pattern::Checker { square_m: 0.2 },
                 14,
             ),
         ];
