@@ -124,18 +124,16 @@ fn main() -> ExitCode {
         "truth",
         "ground truth aligned with the packets (sources that have it)",
     )
-    .param("kind", serde_json::Value::Null, "source kind: pattern")
+    .required("kind", "source kind: synthetic (built-in simulator), evimo2 (EVIMO2 v2 folder), file (AEDAT4, EVT2/EVT3 .raw, .es, text), pattern (transport test pattern)")
+    .param("path", serde_json::Value::Null, "evimo2: sequence folder; file: recording")
+    .param("scene", "two-objects", "synthetic: scene preset (one-object, two-objects, fast-rotation, enter-leave, camera-only, low-contrast, high-contrast, distorted-lens)")
+    .param("camera_file", serde_json::Value::Null, "file: JSON camera file (intrinsics, distortion, IMU-to-camera rotation, time offset)")
+    .param("imu_topic", serde_json::Value::Null, "evimo2: IMU topic in meta (default: the first)")
+    .param("imu_to_camera", serde_json::Value::Null, "evimo2: IMU-to-camera rotation, row-major 9 numbers (default: EVIMO2 convention)")
+    .param("imu_time_offset_s", serde_json::Value::Null, "evimo2: IMU time offset, seconds (default: -0.02, EVIMO2 convention)")
     .param("batch_ms", 10.0, "sensor time per published packet, milliseconds")
-    .param(
-        "speed",
-        0.0,
-        "live mode: real-time factor (1 = sensor time), 0 = as fast as possible",
-    )
-    .param(
-        "seconds",
-        3.0,
-        "length of the stream, seconds (pattern, simulator)",
-    )
+    .param("speed", 0.0, "live mode: real-time factor (1 = sensor time), 0 = as fast as possible")
+    .param("seconds", serde_json::Value::Null, "stop after this many seconds of sensor time (simulator: default the preset's length; pattern: default 3 s)")
     .param("rate", 1.0e6, "pattern: events per second of sensor time")
     .param("width", 640, "pattern: sensor width, pixels")
     .param("height", 480, "pattern: sensor height, pixels")
