@@ -15,7 +15,13 @@
 //! - **stable**: the pixel sees the same surface at both key frames and is not on an edge in
 //!   either, so its texture coordinates move smoothly; they are interpolated linearly between
 //!   the key frames and the texture is sampled at steps of at most `max_px_per_step` of this
-//!   pixel's own image motion (no ray casting).
+//!   pixel's own image motion (no ray casting). Grid points that provably stay strictly inside
+//!   the pixel's thresholds are skipped: from the last sample, the log intensity can change by
+//!   at most `rate * (fraction of the interval) + slack` (texture Lipschitz bound from a
+//!   pyramid of texel differences, times the texture-coordinate motion, plus the shading
+//!   change; `slack` covers the slowly changing mip level), and a window's value range from the
+//!   min/max pyramid may keep it inside. Skipped points could not fire and leave the reference
+//!   level unchanged, so the events are exactly those of sampling every grid point.
 //! - **unstable** (near a silhouette, crease or seam): ray cast at every render step with edge
 //!   supersampling.
 

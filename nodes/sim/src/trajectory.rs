@@ -106,8 +106,9 @@ impl RigidState {
 
 /// A smooth rigid-body trajectory in the world frame (z up).
 ///
-/// Orientation (body -> world) is `base_rotation * R(axes[0], angles[0]) * R(axes[1], angles[1])
-/// * R(axes[2], angles[2])` where `R(a, theta)` rotates about body axis `a` (0 = x, 1 = y, 2 = z).
+/// Orientation (body -> world) is
+/// `base_rotation * R(axes[0], angles[0]) * R(axes[1], angles[1]) * R(axes[2], angles[2])`
+/// where `R(a, theta)` rotates about body axis `a` (0 = x, 1 = y, 2 = z).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct RigidTrajectory {
     /// World position of the body origin, per world axis, m.
