@@ -1,0 +1,81 @@
+//! Evaluation settings.
+
+use serde::Serialize;
+
+use crate::error::EvalError;
+
+/// Settings of the evaluation. Every default says where it comes from.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct EvalParams {
+    /// Mask period assumed before two masks have been seen, seconds. Default 1/60 s: EVIMO2's
+    /// ground-truth frames for the event cameras are at 60 Hz (METHOD_NOTES section 4).
+    pub default_mask_period_s: f64,
+    /// Largest distance between two ground-truth samples (poses, velocities) that may be
+    /// interpolated, seconds. Default 0.1 s: 20 Vicon samples at 200 Hz, six mask frames at
+    /// 60 Hz; longer gaps are the Vicon dropouts METHOD_NOTES section 4 warns about.
+    pub max_gap_s: f64,
+    /// How long after a slice's end its evaluation waits for ground truth carried by later
+    /// slices (nearest mask, bracketing samples), seconds. Default 0.1 s, which must be at least
+    /// `max_gap_s` and half a mask period.
+    pub lookahead_s: f64,
+    /// Camera speed below which the direction of translation is undefined and its angular error
+    /// is skipped, m/s. Default 0.05 m/s: a 1 mm Vicon position noise over a 30 ms window is
+    /// already 0.03 m/s of apparent velocity.
+    pub min_speed_mps: f64,
+    /// Frames kept for the report's frame plot. Default 4 (the `frames_in_plot` node parameter).
+    pub frames_in_plot: usize,
+    /// Largest sensor (width x height, pixels) for which frame snapshots are kept. Default
+    /// 4 Mpx: above every event camera in use (EVIMO2's largest is 640 x 480) and 24 MB per kept
+    /// frame at most.
+    pub max_snapshot_pixels: usize,
+}
+
+impl Default for EvalParams {
+    fn default() -> Self {
+        Self {
+            default_mask_period_s: 1.0 / 60.0,
+            max_gap_s: 0.1,
+            lookahead_s: 0.1,
+            min_speed_mps: 0.05,
+            frames_in_plot: 4,
+            max_snapshot_pixels: 4 << 20,
+        }
+    }
+}
+
+impl EvalParams {
+    /// Checks ranges and consistency.
+    pub fn validate(&self) -> Result<(), EvalError> {
+        let pos = |name: &'static str, v: f64| {
+            if v.is_finite() && v > 0.0 {
+                Ok(())
+            } else {
+                Err(EvalError::Param {
+                    name,
+                    reason: format!("must be a positive number of seconds, got {v}"),
+                })
+            }
+        };
+        pos("default_mask_period_s", self.default_mask_period_s)?;
+        pos("max_gap_s", self.max_gap_s)?;
+        pos("lookahead_s", self.lookahead_s)?;
+        if self.lookahead_s < self.max_gap_s || self.lookahead_s < self.default_mask_period_s / 2.0 {
+            return Err(EvalError::Param {
+                name: "lookahead_s",
+                reason: format!(
+                    "{} s is shorter than max_gap_s ({} s) or half the mask period ({} s)",
+                    self.lookahead_s,
+                    self.max_gap_s,
+                    self.default_mask_period_s / 2.0
+                ),
+            });
+        }
+        if !(self.min_speed_mps.is_finite() && self.min_speed_mps >= 0.0) {
+            return Err(EvalError::Param {
+                name: "min_speed_mps",
+                reason: format!("must be >= 0 m/s, got {}", self.min_speed_mps),
+            });
+        }
+        Ok(())
+    }
+}
