@@ -1,5 +1,6 @@
 //! `evseg`: check and run graphs of evseg nodes.
 
+mod bench_transport;
 mod resolve;
 mod run;
 mod rundir;
@@ -53,6 +54,28 @@ enum Command {
         #[arg(default_value = "graph.yaml")]
         graph: PathBuf,
     },
+    /// Benchmarks (run with --release binaries).
+    Bench {
+        #[command(subcommand)]
+        what: BenchWhat,
+    },
+}
+
+#[derive(Subcommand)]
+enum BenchWhat {
+    /// Events per second through source -> slicer -> sink: three processes over Zenoh against
+    /// the same stages in one process.
+    Transport {
+        /// Events per slice (comma separated).
+        #[arg(long, value_delimiter = ',', default_values_t = [10_000u64, 100_000, 1_000_000])]
+        slices: Vec<u64>,
+        /// Working folder for graphs and runs.
+        #[arg(long, default_value = "runs/bench-transport")]
+        work: PathBuf,
+        /// Also write the table as JSON here.
+        #[arg(long)]
+        json: Option<PathBuf>,
+    },
 }
 
 fn init_tracing() {
@@ -95,6 +118,15 @@ fn main() -> ExitCode {
     });
     let result = match command {
         Command::Check { graph } => check(&graph),
+        Command::Bench {
+            what: BenchWhat::Transport { slices, work, json },
+        } => bench_transport::bench(&slices, &work).and_then(|rows| {
+            println!("{}", bench_transport::markdown(&rows));
+            if let Some(p) = json {
+                std::fs::write(&p, serde_json::to_string_pretty(&rows)?)?;
+            }
+            Ok(())
+        }),
         Command::Run {
             graph,
             machine,

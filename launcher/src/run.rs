@@ -107,9 +107,9 @@ pub fn node_config(graph: &Graph, node: &NodeSpec, router: &[String], run_dir: &
         window: u64::from(graph.window),
         queue: graph.queue as usize,
         zenoh: ZenohSettings {
-            mode: "client".into(),
+            mode: "peer".into(),
             connect: router.iter().map(|e| local_endpoint(e)).collect(),
-            listen: vec![],
+            listen: vec!["tcp/127.0.0.1:0".into()],
         },
         params: node.params.clone(),
         inputs: node

@@ -303,6 +303,21 @@ mod tests {
         ));
     }
 
+    #[test]
+    fn a_column_of_the_wrong_length_is_an_error() {
+        let mut events = Events::default();
+        events.push(0.5, 3, 4, 1);
+        let mut p = packet();
+        p.events = events;
+        let mut bytes = encode(0, 0.0, 1.0, &p).unwrap();
+        // The x column is "02 03 00"; claim 3 bytes instead of 2 by patching its length byte.
+        let pos = bytes.windows(3).rposition(|w| w == [2, 3, 0]).unwrap();
+        bytes[pos] = 3;
+        bytes.insert(pos + 3, 0);
+        let err = decode::<EventPacket>(&bytes).unwrap_err().to_string();
+        assert!(err.contains("not a multiple of 2"), "{err}");
+    }
+
     /// Pins the wire format: a change here is a change of every recording and every peer.
     #[test]
     fn golden_bytes() {
@@ -342,5 +357,5 @@ mod tests {
         );
     }
 
-    const GOLDEN_EVENT_PACKET: &str = "1165767365672e4576656e745061636b6574010003000000000000e03f000000000000f03f000201000000000000f03f000000000000f03f0000000000000000000000000000000000000000000000f03f000000000000000000000000000000000000000000000000000000000000f03f000000000000000000000000000000000000000000000000000000000000f03f000000000000000001017301000000000000e03f010301fb0401010100";
+    const GOLDEN_EVENT_PACKET: &str = "1165767365672e4576656e745061636b6574010003000000000000e03f000000000000f03f000201000000000000f03f000000000000f03f0000000000000000000000000000000000000000000000f03f000000000000000000000000000000000000000000000000000000000000f03f000000000000000000000000000000000000000000000000000000000000f03f000000000000000001017308000000000000e03f020300020401010100";
 }

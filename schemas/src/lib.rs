@@ -17,6 +17,7 @@
 //! (`--describe`) in [`describe`].
 
 pub mod codec;
+pub mod columns;
 pub mod describe;
 pub mod digest;
 pub mod keys;

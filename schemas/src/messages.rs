@@ -10,12 +10,16 @@ use crate::codec::Message;
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct Events {
     /// Timestamps, seconds on the sequence clock.
+    #[serde(with = "crate::columns::f64s")]
     pub t: Vec<f64>,
     /// Column, pixels (0 = left).
+    #[serde(with = "crate::columns::u16s")]
     pub x: Vec<u16>,
     /// Row, pixels (0 = top).
+    #[serde(with = "crate::columns::u16s")]
     pub y: Vec<u16>,
     /// Polarity: 1 = brightness increase (ON), 0 = decrease (OFF).
+    #[serde(with = "crate::columns::u8s")]
     pub p: Vec<u8>,
 }
 
@@ -181,10 +185,13 @@ impl Message for Slice {
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct NormalFlow {
     /// Normal flow x component, normalized coordinates per second.
+    #[serde(with = "crate::columns::f32s")]
     pub nx: Vec<f32>,
     /// Normal flow y component, normalized coordinates per second.
+    #[serde(with = "crate::columns::f32s")]
     pub ny: Vec<f32>,
     /// Confidence in [0, 1]; 0 = no reliable estimate (the flow values are then 0).
+    #[serde(with = "crate::columns::f32s")]
     pub confidence: Vec<f32>,
 }
 
@@ -197,6 +204,7 @@ impl Message for NormalFlow {
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct Clusters {
     /// Cluster index per event; `u16::MAX` = not assigned (for example, no valid flow).
+    #[serde(with = "crate::columns::u16s")]
     pub id: Vec<u16>,
     /// Number of clusters.
     pub count: u16,
@@ -211,6 +219,7 @@ impl Message for Clusters {
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct Residuals {
     /// Residual normal flow, normalized coordinates per second (NaN where no flow).
+    #[serde(with = "crate::columns::f32s")]
     pub residual: Vec<f32>,
     /// True where the event is a candidate background event.
     pub background: Vec<bool>,
@@ -242,6 +251,7 @@ pub struct Segment {
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct Segmentation {
     /// Segment label per event (0 = background).
+    #[serde(with = "crate::columns::u32s")]
     pub label: Vec<u32>,
     /// The segments.
     pub segments: Vec<Segment>,
@@ -286,6 +296,7 @@ pub struct Track {
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct Tracks {
     /// Track id per event (0 = background), aligned with the slice's events.
+    #[serde(with = "crate::columns::u32s")]
     pub label: Vec<u32>,
     /// Tracks alive in this slice.
     pub tracks: Vec<Track>,
@@ -336,6 +347,7 @@ pub struct Mask {
     /// Height, pixels.
     pub height: u16,
     /// Object id per pixel, row-major (0 = background).
+    #[serde(with = "crate::columns::u16s")]
     pub ids: Vec<u16>,
 }
 
@@ -343,10 +355,13 @@ pub struct Mask {
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct Truth {
     /// Object id per event (0 = background), aligned with the events; empty if unknown.
+    #[serde(with = "crate::columns::u16s")]
     pub event_object: Vec<u16>,
     /// True optical flow per event, x, pixels per second; empty if unknown.
+    #[serde(with = "crate::columns::f32s")]
     pub flow_x: Vec<f32>,
     /// True optical flow per event, y, pixels per second; empty if unknown.
+    #[serde(with = "crate::columns::f32s")]
     pub flow_y: Vec<f32>,
     /// Masks whose time falls in the span.
     pub masks: Vec<Mask>,

@@ -24,6 +24,18 @@ pub struct InspectReport {
     pub problems: Vec<String>,
     /// Number of problems found.
     pub problem_count: u64,
+    /// Wall clock at the first slice's arrival, ns since the Unix epoch (throughput figures).
+    pub first_arrival_ns: Option<u64>,
+    /// Wall clock at the last slice's arrival, ns since the Unix epoch.
+    pub last_arrival_ns: Option<u64>,
+}
+
+/// Wall clock, ns since the Unix epoch.
+pub fn now_ns() -> u64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_nanos() as u64)
+        .unwrap_or(0)
 }
 
 /// Checks slices one by one.
@@ -90,6 +102,9 @@ impl Inspector {
         }
         self.report.digest.add(ev);
         self.report.slices += 1;
+        let now = now_ns();
+        self.report.first_arrival_ns.get_or_insert(now);
+        self.report.last_arrival_ns = Some(now);
     }
 
     /// The report so far.

@@ -21,8 +21,17 @@ struct SourceNode {
     /// Real-time factor for live runs (0 = as fast as possible).
     speed: f64,
     started: Instant,
-    digest: EventDigest,
+    summary: SourceSummary,
     summary_path: std::path::PathBuf,
+}
+
+/// What the source writes to `source-<node>.json` when it ends.
+#[derive(serde::Serialize)]
+struct SourceSummary {
+    /// Digest of every event published, in order.
+    digest: EventDigest,
+    /// Wall clock of the first publication, ns since the Unix epoch (throughput figures).
+    first_publish_ns: Option<u64>,
 }
 
 impl Source for SourceNode {
@@ -30,7 +39,7 @@ impl Source for SourceNode {
         let t_start = self.seq as f64 * self.batch_s;
         let t_end = t_start + self.batch_s;
         let Some(batch) = self.source.next_batch(t_end)? else {
-            let json = serde_json::to_string_pretty(&self.digest)?;
+            let json = serde_json::to_string_pretty(&self.summary)?;
             std::fs::write(&self.summary_path, json)
                 .map_err(|e| format!("cannot write {}: {e}", self.summary_path.display()))?;
             return Ok(false);
@@ -42,7 +51,13 @@ impl Source for SourceNode {
                 std::thread::sleep(std::time::Duration::from_secs_f64(due - now));
             }
         }
-        self.digest.add(&batch.events);
+        self.summary.digest.add(&batch.events);
+        self.summary.first_publish_ns.get_or_insert_with(|| {
+            std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map(|d| d.as_nanos() as u64)
+                .unwrap_or(0)
+        });
         let packet = EventPacket {
             camera: self.source.camera(),
             events: batch.events,
@@ -155,7 +170,10 @@ fn main() -> ExitCode {
                 0.0
             },
             started: Instant::now(),
-            digest: EventDigest::default(),
+            summary: SourceSummary {
+                digest: EventDigest::default(),
+                first_publish_ns: None,
+            },
             summary_path: cfg.run_dir.join(format!("source-{}.json", cfg.node)),
         })
     })
