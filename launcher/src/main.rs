@@ -150,6 +150,11 @@ fn main() -> ExitCode {
             run::run(&opts).map(|outcome| {
                 let order: Vec<String> = outcome.stats.keys().cloned().collect();
                 println!("{}", run::summary(&outcome, &order));
+                for report in run::reports(&outcome.dir) {
+                    if let Ok(text) = std::fs::read_to_string(&report) {
+                        println!("{}:\n{text}", report.display());
+                    }
+                }
                 println!(
                     "run finished in {:.2} s; folder {}",
                     outcome.seconds,

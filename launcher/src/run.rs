@@ -382,6 +382,19 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
     })
 }
 
+/// Markdown reports the nodes wrote into the run folder (`*/report.md`, one level down).
+pub fn reports(dir: &Path) -> Vec<PathBuf> {
+    let mut found: Vec<PathBuf> = std::fs::read_dir(dir)
+        .into_iter()
+        .flatten()
+        .flatten()
+        .map(|e| e.path().join("report.md"))
+        .filter(|p| p.is_file())
+        .collect();
+    found.sort();
+    found
+}
+
 fn indent(text: &str) -> String {
     text.lines()
         .map(|l| format!("    {l}"))
