@@ -42,7 +42,8 @@ pub fn iou_figure(reports: &[SliceReport]) -> Canvas {
                 style: Style::LineMarkers,
             },
         ],
-        y_range: Some((0.0, 1.0)),
+        // A little headroom so that IoU 1 is not drawn on the frame.
+        y_range: Some((0.0, 1.04)),
     };
     chart(&[panel], "time (s)", WIDTH, PANEL + 40)
 }
@@ -121,8 +122,13 @@ pub fn object_motion_figure(reports: &[SliceReport]) -> Option<Canvas> {
         .map(|(k, axis)| {
             let mut series = Vec::new();
             for (i, (id, samples)) in per_obj.iter().take(4).enumerate() {
-                let color = PALETTE[(2 * i) % PALETTE.len()];
-                let dim = color.map(|c| c / 2);
+                // First object: black truth, red track; further objects: dark and bright palette.
+                let (dim, color) = if i == 0 {
+                    ([20, 20, 20], PALETTE[3])
+                } else {
+                    let c = PALETTE[(2 * i) % PALETTE.len()];
+                    (c.map(|v| v / 2), c)
+                };
                 series.push(Series {
                     name: format!("obj {id} truth"),
                     color: dim,

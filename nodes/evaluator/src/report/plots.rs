@@ -319,7 +319,7 @@ pub fn frames_figure(frames: &[&FrameSnapshot], panel_width: usize) -> Canvas {
         x += 16 + super::font::text_width(name, 1) as i64 + 20;
     }
     c.text(
-        "colours: one per object id; a predicted label takes the colour of the object it is matched to",
+        "colours: one per object; a predicted label takes its matched object's colour",
         left,
         y + 22,
         1,
