@@ -1,5 +1,6 @@
 //! `evseg`: check and run graphs of evseg nodes.
 
+mod bench_scenes;
 mod bench_transport;
 mod resolve;
 mod run;
@@ -54,10 +55,33 @@ enum Command {
         #[arg(default_value = "graph.yaml")]
         graph: PathBuf,
     },
-    /// Benchmarks (run with --release binaries).
+    /// Benchmarks (use --release binaries). Without a subcommand: the versioned simulator scene
+    /// set through a graph, scored by its evaluator, as a table with mean values.
     Bench {
         #[command(subcommand)]
-        what: BenchWhat,
+        what: Option<BenchWhat>,
+        /// Graph to run (needs an evseg-source and an evseg-evaluator node).
+        #[arg(long, default_value = "graph.yaml")]
+        graph: PathBuf,
+        /// Working folder (one run folder per scene).
+        #[arg(long, default_value = "runs/bench")]
+        work: PathBuf,
+    },
+    /// Simulate a scene and write it as an EVIMO2 v2 sequence folder.
+    Sim {
+        /// Scene preset (one-object, two-objects, fast-rotation, enter-leave, camera-only,
+        /// low-contrast, high-contrast, distorted-lens).
+        #[arg(long)]
+        scene: String,
+        /// Output folder.
+        #[arg(long)]
+        out: PathBuf,
+        /// Seed.
+        #[arg(long, default_value_t = 7)]
+        seed: u64,
+        /// Length, seconds of sensor time (default: the preset's).
+        #[arg(long)]
+        seconds: Option<f64>,
     },
 }
 
@@ -118,8 +142,34 @@ fn main() -> ExitCode {
     });
     let result = match command {
         Command::Check { graph } => check(&graph),
+        Command::Sim {
+            scene,
+            out,
+            seed,
+            seconds,
+        } => evseg_source::synthetic::write_evimo2(&scene, seed, seconds, 1.0, &out)
+            .map(|n| {
+                println!(
+                    "{n} events of `{scene}` (seed {seed}) written to {} as an EVIMO2 v2 folder",
+                    out.display()
+                );
+            })
+            .map_err(anyhow::Error::from),
         Command::Bench {
-            what: BenchWhat::Transport { slices, work, json },
+            what: None,
+            graph,
+            work,
+        } => bench_scenes::bench(&graph, &work, false).and_then(|rows| {
+            let md = bench_scenes::markdown(&rows, &graph);
+            println!("{md}");
+            std::fs::create_dir_all(&work)?;
+            std::fs::write(work.join("bench.md"), &md)?;
+            std::fs::write(work.join("bench.json"), serde_json::to_string_pretty(&rows)?)?;
+            Ok(())
+        }),
+        Command::Bench {
+            what: Some(BenchWhat::Transport { slices, work, json }),
+            ..
         } => bench_transport::bench(&slices, &work).and_then(|rows| {
             println!("{}", bench_transport::markdown(&rows));
             if let Some(p) = json {
