@@ -21,6 +21,8 @@
 //! stamped inside its own window, a slice is scored once ground truth up to `lookahead_s` past its
 //! end has arrived (or at [`Evaluator::finish`]).
 
+#![deny(missing_docs)]
+
 pub mod egomotion;
 pub mod error;
 pub mod frames;

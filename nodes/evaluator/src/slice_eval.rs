@@ -3,7 +3,9 @@
 use evseg_schemas::{Events, Metric, Metrics, Tracks};
 use serde::Serialize;
 
-use crate::egomotion::{EgomotionScore, InterpolationGap, score_egomotion, true_camera_velocity};
+use crate::egomotion::{
+    EgomotionScore, InterpolationGap, TrueVelocity, score_egomotion, true_camera_velocity,
+};
 use crate::error::EvalError;
 use crate::history::TruthHistory;
 use crate::iou::{self, IouCounts, MaskLookup};
@@ -95,6 +97,8 @@ pub struct SliceReport {
     pub iou_mask: Outcome<MaskIouScore>,
     /// (c) Per-object IoU after Hungarian matching.
     pub objects: Outcome<ObjectsScore>,
+    /// True camera velocity of the window, whether or not the result has an egomotion.
+    pub camera_truth: Outcome<TrueVelocity>,
     /// (d) Egomotion.
     pub egomotion: Outcome<EgomotionScore>,
     /// (e) Object image-plane motion, one entry per matched-or-not ground-truth object.
@@ -185,6 +189,7 @@ pub fn evaluate_slice(
     };
 
     let truth_v = true_camera_velocity(history.camera(), p.t_start, p.t_end, params.max_gap_s);
+    let camera_truth: Outcome<TrueVelocity> = truth_v.clone().into();
     let egomotion = score_egomotion(p.seq, &p.result.egomotion, truth_v, params.min_speed_mps)?;
 
     let mut object_motion = Vec::new();
@@ -217,6 +222,7 @@ pub fn evaluate_slice(
         iou_events,
         iou_mask,
         objects,
+        camera_truth,
         egomotion,
         object_motion,
     };

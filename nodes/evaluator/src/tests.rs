@@ -253,6 +253,9 @@ fn all_background_scores_zero_and_invalid_egomotion_is_not_available() {
     assert_eq!(sum.egomotion.direction_error.median_deg, None);
     assert_eq!(sum.object_motion.with_prediction, 0);
     assert_eq!(sum.object_motion.rmse_translational_flow, None);
+    // The true velocity is still reported (for the plot), without any estimate.
+    assert!(ev.reports()[3].camera_truth.scored().is_some());
+    assert!(ev.reports()[3].egomotion.scored().is_none());
     // Per-slice metrics carry NaN, never a substitute.
     let m = ev.reports()[3].metrics();
     let get = |n: &str| m.values.iter().find(|v| v.name == n).unwrap().value;

@@ -59,11 +59,11 @@ pub fn velocity_figure(reports: &[SliceReport]) -> Canvas {
                 .map(|r| {
                     (
                         mid(r),
-                        r.egomotion.scored().map_or(f64::NAN, |e| e.true_velocity_mps[k]),
+                        r.camera_truth.scored().map_or(f64::NAN, |v| v.velocity_mps[k]),
                     )
                 })
                 .collect();
-            let est = reports
+            let est: Vec<(f64, f64)> = reports
                 .iter()
                 .map(|r| {
                     (
@@ -74,6 +74,11 @@ pub fn velocity_figure(reports: &[SliceReport]) -> Canvas {
                     )
                 })
                 .collect();
+            let est_name = if est.iter().any(|p| p.1.is_finite()) {
+                "estimate: direction x true speed"
+            } else {
+                "estimate: not available (valid=false)"
+            };
             Panel {
                 title: format!("camera velocity V{axis} (camera frame)"),
                 y_label: format!("V{axis} (m/s)"),
@@ -85,7 +90,7 @@ pub fn velocity_figure(reports: &[SliceReport]) -> Canvas {
                         style: Style::Line,
                     },
                     Series {
-                        name: "estimate: direction x true speed".into(),
+                        name: est_name.into(),
                         color: PALETTE[3],
                         points: est,
                         style: Style::LineMarkers,
