@@ -14,11 +14,19 @@ macro_rules! column {
 
             /// Writes the column as one byte block.
             pub fn serialize<S: Serializer>(v: &[$t], s: S) -> Result<S::Ok, S::Error> {
-                let mut bytes = Vec::with_capacity(v.len() * $n);
-                for x in v {
-                    bytes.extend_from_slice(&x.to_le_bytes());
+                // On little-endian machines the values' memory is already the wire format.
+                #[cfg(target_endian = "little")]
+                {
+                    s.serialize_bytes(bytemuck::cast_slice(v))
                 }
-                s.serialize_bytes(&bytes)
+                #[cfg(not(target_endian = "little"))]
+                {
+                    let mut bytes = Vec::with_capacity(v.len() * $n);
+                    for x in v {
+                        bytes.extend_from_slice(&x.to_le_bytes());
+                    }
+                    s.serialize_bytes(&bytes)
+                }
             }
 
             struct V;

@@ -9,13 +9,41 @@ use std::collections::BTreeMap;
 
 use evseg_schemas::{Envelope, FrameKind};
 
+/// The bytes of a received frame: Zenoh's own buffer when it is contiguous (no copy), or an
+/// owned copy otherwise.
+#[derive(Debug, Clone)]
+pub enum FrameBytes {
+    /// Owned bytes.
+    Owned(Vec<u8>),
+    /// A contiguous Zenoh payload.
+    Zenoh(zenoh::bytes::ZBytes),
+}
+
+impl FrameBytes {
+    /// From a Zenoh payload, copying only when it is not contiguous.
+    pub fn from_payload(payload: &zenoh::bytes::ZBytes) -> Self {
+        match payload.to_bytes() {
+            std::borrow::Cow::Borrowed(_) => Self::Zenoh(payload.clone()),
+            std::borrow::Cow::Owned(v) => Self::Owned(v),
+        }
+    }
+
+    /// The bytes.
+    pub fn as_slice(&self) -> std::borrow::Cow<'_, [u8]> {
+        match self {
+            Self::Owned(v) => std::borrow::Cow::Borrowed(v),
+            Self::Zenoh(z) => z.to_bytes(),
+        }
+    }
+}
+
 /// One received frame: its envelope and its full bytes (envelope included).
 #[derive(Debug, Clone)]
 pub struct RawFrame {
     /// Decoded header.
     pub envelope: Envelope,
     /// The encoded frame, as received.
-    pub bytes: Vec<u8>,
+    pub bytes: FrameBytes,
 }
 
 /// A complete set of inputs for one slice.
@@ -278,7 +306,7 @@ mod tests {
                 t_end: seq as f64 + 1.0,
                 publish_ns: 0,
             },
-            bytes: vec![seq as u8],
+            bytes: FrameBytes::Owned(vec![seq as u8]),
         }
     }
 

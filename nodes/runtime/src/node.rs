@@ -85,7 +85,7 @@ impl Inputs<'_> {
         let Some(frame) = &self.joined.frames[i] else {
             return Ok(None);
         };
-        let decoded = codec::decode::<T>(&frame.bytes).map_err(|source| RuntimeError::Decode {
+        let decoded = codec::decode::<T>(&frame.bytes.as_slice()).map_err(|source| RuntimeError::Decode {
             node: self.cfg.node.clone(),
             port: port.to_string(),
             key: self.cfg.inputs[i].key.clone(),
@@ -584,7 +584,8 @@ fn stage_loop<S: Stage>(mut run: Running, stage: &mut S) -> Result<(), RuntimeEr
         }
         for arrival in inbox.drain(POLL) {
             let binding = &run.cfg.inputs[arrival.port];
-            match codec::decode_header(&arrival.bytes) {
+            let header = codec::decode_header(&arrival.bytes.as_slice());
+            match header {
                 Ok((envelope, _))
                     if envelope.schema == binding.schema
                         || envelope.kind == evseg_schemas::FrameKind::End =>

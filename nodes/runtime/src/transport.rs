@@ -10,6 +10,7 @@ use zenoh::sample::SampleKind;
 
 use crate::config::{NodeConfig, ZenohSettings};
 use crate::error::RuntimeError;
+use crate::join::FrameBytes;
 use crate::progress::{DONE, Progress};
 use crate::signals;
 
@@ -59,12 +60,12 @@ pub struct Arrival {
     /// Index of the input port in the node config.
     pub port: usize,
     /// Encoded frame.
-    pub bytes: Vec<u8>,
+    pub bytes: FrameBytes,
 }
 
 #[derive(Default)]
 struct InboxState {
-    queues: Vec<VecDeque<Vec<u8>>>,
+    queues: Vec<VecDeque<FrameBytes>>,
     dropped: u64,
 }
 
@@ -89,7 +90,7 @@ impl Inbox {
         })
     }
 
-    fn push(&self, port: usize, bytes: Vec<u8>) {
+    fn push(&self, port: usize, bytes: FrameBytes) {
         let mut s = lock(&self.state);
         if let Some(q) = s.queues.get_mut(port) {
             q.push_back(bytes);
@@ -139,7 +140,7 @@ pub fn subscribe_inputs(
             .declare_subscriber(input.key.clone())
             .callback(move |sample| {
                 if sample.kind() == SampleKind::Put {
-                    inbox.push(i, sample.payload().to_bytes().into_owned());
+                    inbox.push(i, FrameBytes::from_payload(sample.payload()));
                 }
             })
             .wait()
