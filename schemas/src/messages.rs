@@ -143,6 +143,24 @@ pub struct CameraInfo {
 impl CameraInfo {
     /// The identity rotation, row-major.
     pub const IDENTITY: [f64; 9] = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0];
+
+    /// An ideal pinhole camera of `width` x `height` pixels with focal length `f` pixels and the
+    /// principal point at the image centre; no distortion, IMU frame = camera frame, no offset.
+    pub fn pinhole(width: u16, height: u16, f: f64, sensor: &str) -> Self {
+        Self {
+            width,
+            height,
+            fx: f,
+            fy: f,
+            cx: (f64::from(width) - 1.0) / 2.0,
+            cy: (f64::from(height) - 1.0) / 2.0,
+            distortion: Distortion::None,
+            imu_to_camera: Self::IDENTITY,
+            imu_time_offset_s: 0.0,
+            time_origin_us: 0,
+            sensor: sensor.to_string(),
+        }
+    }
 }
 
 /// What a source publishes per batch on its `events` output: a time-ordered chunk of events, the

@@ -123,19 +123,7 @@ mod tests {
         for &t in ts {
             events.push(t, 1, 1, 1);
         }
-        let camera = CameraInfo {
-            width: 1,
-            height: 1,
-            fx: 1.0,
-            fy: 1.0,
-            cx: 0.0,
-            cy: 0.0,
-            distortion: Default::default(),
-            imu_to_camera: CameraInfo::IDENTITY,
-            imu_time_offset_s: 0.0,
-            time_origin_us: 0,
-            sensor: String::new(),
-        };
+        let camera = CameraInfo::pinhole(1, 1, 1.0, "test");
         Slice {
             camera,
             events,

@@ -222,20 +222,9 @@ impl Slicer {
     }
 }
 
+/// Camera used only if a slice had to be emitted before any packet named one.
 fn default_camera() -> CameraInfo {
-    CameraInfo {
-        width: 0,
-        height: 0,
-        fx: 1.0,
-        fy: 1.0,
-        cx: 0.0,
-        cy: 0.0,
-        distortion: Default::default(),
-        imu_to_camera: CameraInfo::IDENTITY,
-        imu_time_offset_s: 0.0,
-        time_origin_us: 0,
-        sensor: String::new(),
-    }
+    CameraInfo::pinhole(1, 1, 1.0, "unknown")
 }
 
 fn append_truth(acc: &mut Truth, t: &Truth, range: std::ops::Range<usize>) {

@@ -2,7 +2,7 @@
 //! sequence, alternating polarity. It has no scene content; it exists to measure and test the
 //! transport (throughput, exactly-once delivery) with a source that costs almost nothing.
 
-use evseg_schemas::{CameraInfo, Distortion, Events};
+use evseg_schemas::{CameraInfo, Events};
 
 use crate::{Batch, EventSource, SourceError};
 
@@ -69,19 +69,7 @@ impl Pattern {
 impl EventSource for Pattern {
     fn camera(&self) -> CameraInfo {
         let (w, h) = (self.params.width, self.params.height);
-        CameraInfo {
-            width: w,
-            height: h,
-            fx: w as f64,
-            fy: w as f64,
-            cx: (w as f64 - 1.0) / 2.0,
-            cy: (h as f64 - 1.0) / 2.0,
-            distortion: Distortion::None,
-            imu_to_camera: CameraInfo::IDENTITY,
-            imu_time_offset_s: 0.0,
-            time_origin_us: 0,
-            sensor: "test-pattern".into(),
-        }
+        CameraInfo::pinhole(w, h, f64::from(w), "test-pattern")
     }
 
     fn next_batch(&mut self, t_end: f64) -> Result<Option<Batch>, SourceError> {
