@@ -1,0 +1,18 @@
+//! Shared geometry of the method (METHOD_NOTES section 1), in one place for every stage:
+//!
+//! - [`camera`]: pixel <-> normalized coordinates through the lens model (radial-tangential or
+//!   equidistant), and a per-pixel undistortion table for the hot loops;
+//! - [`motion`]: the motion-field matrices `A(x)`, `B(x)` (translation and rotation) and the
+//!   planar-scene matrix `C(x)`, with the flows they give;
+//! - [`lsq`]: small dense least squares (normal equations with Tikhonov regularization).
+//!
+//! Normalized coordinates: undistorted, focal length 1, camera frame x right, y down, z forward.
+//! Flows in normalized coordinates per second; rotation rates in rad/s; translations in the units
+//! the caller chose (m/s with depth in m, or "per unit depth").
+
+pub mod camera;
+pub mod lsq;
+pub mod motion;
+
+pub use camera::{Camera, UndistortTable};
+pub use motion::{a_matrix, b_matrix, c_matrix, planar_flow, rotational_flow, translational_flow};
