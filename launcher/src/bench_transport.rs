@@ -54,9 +54,12 @@ fn in_process(slice_events: u64, seconds: f64) -> anyhow::Result<(u64, f64)> {
         ..SlicerParams::default()
     })?;
     let mut inspector = Inspector::default();
+    // The source node keeps a digest of what it publishes; the in-process side does the same work.
+    let mut source_digest = evseg_schemas::digest::EventDigest::default();
     let start = Instant::now();
     let mut k = 0u64;
     while let Some(batch) = source.next_batch((k + 1) as f64 * window)? {
+        source_digest.add(&batch.events);
         let packet = evseg_schemas::EventPacket {
             camera: source.camera(),
             events: batch.events,
@@ -72,7 +75,7 @@ fn in_process(slice_events: u64, seconds: f64) -> anyhow::Result<(u64, f64)> {
     }
     let dt = start.elapsed().as_secs_f64();
     let r = inspector.report();
-    if r.problem_count != 0 {
+    if r.problem_count != 0 || r.digest != source_digest {
         bail!("in-process run found problems: {:?}", r.problems);
     }
     Ok((r.digest.count, dt))

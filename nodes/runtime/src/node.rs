@@ -351,6 +351,8 @@ impl Running {
         let json = serde_json::to_vec(&p).map_err(|e| RuntimeError::Config(e.to_string()))?;
         self.session
             .put(self.cfg.ack_key.clone(), json)
+            // Progress is tiny and on the critical path of lock-step credit: never wait in a batch.
+            .express(true)
             .wait()
             .map_err(|e| RuntimeError::Zenoh(e.to_string()))
     }
@@ -403,6 +405,8 @@ fn start(description: &NodeDescription, path: &std::path::Path) -> Result<Runnin
         let publisher = session
             .declare_publisher(o.key.clone())
             .congestion_control(cc)
+            // Slices are large and complete when published; batching them only adds latency.
+            .express(true)
             .wait()
             .map_err(|e| RuntimeError::Zenoh(e.to_string()))?;
         let consumers = o
