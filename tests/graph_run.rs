@@ -223,3 +223,71 @@ fn killing_the_launcher_leaves_no_orphans() {
     let left = wait_no_processes(&needle, Duration::from_secs(5));
     assert!(left.is_empty(), "orphans after SIGKILL of the launcher: {left:?}");
 }
+
+#[test]
+fn an_evimo2_folder_runs_through_the_graph_into_the_evaluator() {
+    let dir = tempfile::tempdir().unwrap();
+    let seq = dir.path().join("seq");
+    // A short simulated sequence written as an EVIMO2 v2 folder by `evseg sim`.
+    let sim = std::process::Command::new(evseg_tests::bin("evseg"))
+        .args([
+            "sim",
+            "--scene",
+            "one-object",
+            "--seconds",
+            "0.2",
+            "--seed",
+            "4",
+            "--out",
+            seq.to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    assert!(sim.status.success(), "{}", String::from_utf8_lossy(&sim.stderr));
+    let written: u64 = String::from_utf8_lossy(&sim.stdout)
+        .split_whitespace()
+        .next()
+        .unwrap()
+        .parse()
+        .unwrap();
+    let port = free_port();
+    let graph = std::fs::read_to_string(evseg_tests::workspace_root().join("graphs/evimo2.yaml"))
+        .unwrap()
+        .replace(
+            "mode: lockstep",
+            &format!(
+                "mode: lockstep\nzenoh:\n  machines:\n    local: {{ listen: [\"tcp/127.0.0.1:{port}\"] }}"
+            ),
+        );
+    let g = write(dir.path(), "graph.yaml", &graph);
+    let out = dir.path().join("run");
+    let path = format!("source.path={}", seq.display());
+    let run = Launcher::start(
+        dir.path(),
+        &[
+            "run",
+            g.to_str().unwrap(),
+            "--set",
+            &path,
+            "--out",
+            out.to_str().unwrap(),
+            "-q",
+        ],
+        "a",
+    )
+    .wait(Duration::from_secs(300));
+    assert!(run.status.success(), "run failed:\n{}", run.stderr);
+    let sent = read_json(&out.join("source-source.json"))["digest"].clone();
+    assert_eq!(
+        sent["count"].as_u64(),
+        Some(written),
+        "the source did not deliver every event of the folder"
+    );
+    let report = read_json(&out.join("report").join("report.json"));
+    assert!(report["sequence"]["windows"].as_u64().unwrap() >= 6, "{report}");
+    assert!(
+        run.stdout.contains("| evimo2 |"),
+        "the table is printed:\n{}",
+        run.stdout
+    );
+}
