@@ -128,6 +128,8 @@ fn check(graph: &Path) -> anyhow::Result<()> {
 }
 
 fn main() -> ExitCode {
+    // Same allocator settings as the nodes (the in-process side of `bench transport` runs here).
+    evseg_runtime::memory::tune_allocator();
     init_tracing();
     let cli = Cli::parse();
     let command = cli.command.unwrap_or(Command::Run {

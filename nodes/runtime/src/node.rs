@@ -495,6 +495,7 @@ fn main_wrapper(
     description: NodeDescription,
     body: impl FnOnce(Running) -> Result<(), RuntimeError>,
 ) -> std::process::ExitCode {
+    crate::memory::tune_allocator();
     init_tracing();
     signals::install();
     let cli = match parse_cli() {
