@@ -1,9 +1,30 @@
 //! Whole-graph runs on one machine: exactly-once delivery under back-pressure, live-mode drops,
 //! crash reports, restart policy, and no orphans when the launcher is killed.
 
+use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use evseg_tests::{Launcher, free_port, read_json, wait_no_processes, write};
+
+/// Writes `text` as `dir/graph.yaml`; returns it and the run folder to use.
+fn graph_file(dir: &Path, text: &str) -> (PathBuf, PathBuf) {
+    (write(dir, "graph.yaml", text), dir.join("run"))
+}
+
+/// Starts `evseg run graph --out run -q` in `dir`.
+fn launch(dir: &Path, graph: &Path, out: &Path) -> Launcher {
+    Launcher::start(
+        dir,
+        &[
+            "run",
+            graph.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "-q",
+        ],
+        "a",
+    )
+}
 
 fn graph(port: u16, mode: &str, rate: u64, seconds: f64, delay_ms: f64, extra_slicer: &str) -> String {
     format!(
@@ -36,19 +57,9 @@ nodes:
 fn every_event_arrives_exactly_once_in_order_with_a_slow_stage() {
     let dir = tempfile::tempdir().unwrap();
     let port = free_port();
-    let g = write(
-        dir.path(),
-        "graph.yaml",
-        &graph(port, "lockstep", 200_000, 1.0, 15.0, ""),
-    );
-    let out = dir.path().join("run");
+    let (g, out) = graph_file(dir.path(), &graph(port, "lockstep", 200_000, 1.0, 15.0, ""));
     let start = Instant::now();
-    let run = Launcher::start(
-        dir.path(),
-        &["run", g.to_str().unwrap(), "--out", out.to_str().unwrap(), "-q"],
-        "a",
-    )
-    .wait(Duration::from_secs(120));
+    let run = launch(dir.path(), &g, &out).wait(Duration::from_secs(120));
     assert!(run.status.success(), "run failed:\n{}", run.stderr);
     let sent = read_json(&out.join("source-source.json"))["digest"].clone();
     let seen = read_json(&out.join("inspect-inspect.json"));
@@ -67,18 +78,8 @@ fn every_event_arrives_exactly_once_in_order_with_a_slow_stage() {
 fn live_mode_drops_oldest_and_counts_the_drops() {
     let dir = tempfile::tempdir().unwrap();
     let port = free_port();
-    let g = write(
-        dir.path(),
-        "graph.yaml",
-        &graph(port, "live", 100_000, 1.0, 40.0, ""),
-    );
-    let out = dir.path().join("run");
-    let run = Launcher::start(
-        dir.path(),
-        &["run", g.to_str().unwrap(), "--out", out.to_str().unwrap(), "-q"],
-        "a",
-    )
-    .wait(Duration::from_secs(120));
+    let (g, out) = graph_file(dir.path(), &graph(port, "live", 100_000, 1.0, 40.0, ""));
+    let run = launch(dir.path(), &g, &out).wait(Duration::from_secs(120));
     assert!(run.status.success(), "run failed:\n{}", run.stderr);
     let sent = read_json(&out.join("source-source.json"))["digest"].clone();
     let seen = read_json(&out.join("inspect-inspect.json"));
@@ -106,14 +107,8 @@ fn a_crashing_node_is_reported_and_everything_stops() {
     let port = free_port();
     // A negative window makes the slicer refuse to start.
     let text = graph(port, "lockstep", 100_000, 100.0, 0.0, "").replace("window_ms: 20", "window_ms: -5");
-    let g = write(dir.path(), "graph.yaml", &text);
-    let out = dir.path().join("run");
-    let run = Launcher::start(
-        dir.path(),
-        &["run", g.to_str().unwrap(), "--out", out.to_str().unwrap(), "-q"],
-        "a",
-    )
-    .wait(Duration::from_secs(60));
+    let (g, out) = graph_file(dir.path(), &text);
+    let run = launch(dir.path(), &g, &out).wait(Duration::from_secs(60));
     assert!(!run.status.success());
     let slicer_line = text.lines().position(|l| l.contains("id: slicer")).unwrap() + 1;
     let origin = format!("graph.yaml:{slicer_line}:");
@@ -137,17 +132,8 @@ fn a_crashing_node_is_reported_and_everything_stops() {
 fn a_killed_node_is_reported_with_its_signal() {
     let dir = tempfile::tempdir().unwrap();
     let port = free_port();
-    let g = write(
-        dir.path(),
-        "graph.yaml",
-        &graph(port, "lockstep", 100_000, 1000.0, 50.0, ""),
-    );
-    let out = dir.path().join("run");
-    let launcher = Launcher::start(
-        dir.path(),
-        &["run", g.to_str().unwrap(), "--out", out.to_str().unwrap(), "-q"],
-        "a",
-    );
+    let (g, out) = graph_file(dir.path(), &graph(port, "lockstep", 100_000, 1000.0, 50.0, ""));
+    let launcher = launch(dir.path(), &g, &out);
     let needle = out.join("config").join("slicer.json");
     let start = Instant::now();
     let pid = loop {
@@ -181,14 +167,8 @@ fn restart_policy_restarts_then_gives_up() {
         "    params: { window_ms: -5 }\n    restart: { policy: on-failure, max: 2 }\n",
     );
     assert!(text.contains("on-failure"));
-    let g = write(dir.path(), "graph.yaml", &text);
-    let out = dir.path().join("run");
-    let run = Launcher::start(
-        dir.path(),
-        &["run", g.to_str().unwrap(), "--out", out.to_str().unwrap(), "-q"],
-        "a",
-    )
-    .wait(Duration::from_secs(60));
+    let (g, out) = graph_file(dir.path(), &text);
+    let run = launch(dir.path(), &g, &out).wait(Duration::from_secs(60));
     assert!(!run.status.success());
     assert!(
         run.stderr.contains("restart 1 of 2") && run.stderr.contains("restart 2 of 2"),
@@ -202,17 +182,8 @@ fn restart_policy_restarts_then_gives_up() {
 fn killing_the_launcher_leaves_no_orphans() {
     let dir = tempfile::tempdir().unwrap();
     let port = free_port();
-    let g = write(
-        dir.path(),
-        "graph.yaml",
-        &graph(port, "lockstep", 100_000, 1000.0, 50.0, ""),
-    );
-    let out = dir.path().join("run");
-    let mut launcher = Launcher::start(
-        dir.path(),
-        &["run", g.to_str().unwrap(), "--out", out.to_str().unwrap(), "-q"],
-        "a",
-    );
+    let (g, out) = graph_file(dir.path(), &graph(port, "lockstep", 100_000, 1000.0, 50.0, ""));
+    let mut launcher = launch(dir.path(), &g, &out);
     let needle = out.to_str().unwrap().to_string();
     let start = Instant::now();
     while evseg_tests::processes_with(&format!("{needle}/config")).len() < 3 {
@@ -259,8 +230,7 @@ fn an_evimo2_folder_runs_through_the_graph_into_the_evaluator() {
                 "mode: lockstep\nzenoh:\n  machines:\n    local: {{ listen: [\"tcp/127.0.0.1:{port}\"] }}"
             ),
         );
-    let g = write(dir.path(), "graph.yaml", &graph);
-    let out = dir.path().join("run");
+    let (g, out) = graph_file(dir.path(), &graph);
     let path = format!("source.path={}", seq.display());
     let run = Launcher::start(
         dir.path(),
