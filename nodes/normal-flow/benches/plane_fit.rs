@@ -1,0 +1,52 @@
+//! Plane-fit normal flow throughput on a simulator slice.
+//!
+//! `cargo bench -p evseg-normal-flow --bench plane_fit`. The slice (preset "two-objects",
+//! 640x480, the first 0.1 s) is simulated once, outside the timing loop. Each iteration runs a
+//! fresh estimator (empty surfaces, as at the start of a run) over every event of the slice;
+//! criterion reports events per second (the target is >= 3 M events/s on one core). The
+//! estimator's construction (per-pixel Jacobian table) is excluded.
+
+use std::hint::black_box;
+use std::time::Duration;
+
+use criterion::{BatchSize, Criterion, Throughput, criterion_group, criterion_main};
+use evseg_normal_flow::{PlaneFitEstimator, PlaneFitParams};
+use evseg_schemas::NormalFlow;
+use evseg_sim::{Simulator, preset};
+
+const SLICE_S: f64 = 0.1;
+
+fn bench(c: &mut Criterion) {
+    let cfg = preset("two-objects", 1).expect("preset exists");
+    let mut sim = Simulator::new(cfg).expect("valid preset");
+    let camera = sim.camera_info();
+    let events = sim.next_chunk(SLICE_S).events;
+    println!("two-objects: {} events in {SLICE_S} s", events.len());
+    let mut group = c.benchmark_group("plane_fit_two_objects_0.1s");
+    group
+        .sample_size(20)
+        .measurement_time(Duration::from_secs(8))
+        .warm_up_time(Duration::from_secs(1))
+        .throughput(Throughput::Elements(events.len() as u64));
+    for (name, radius) in [("radius2", 2), ("radius1", 1)] {
+        let params = PlaneFitParams {
+            radius,
+            ..PlaneFitParams::default()
+        };
+        let fresh = PlaneFitEstimator::new(&camera, params).expect("valid parameters");
+        group.bench_function(name, |b| {
+            b.iter_batched(
+                || (fresh.clone(), NormalFlow::default()),
+                |(mut est, mut out)| {
+                    est.process_into(&events, &mut out).expect("consistent columns");
+                    black_box(out.confidence.len())
+                },
+                BatchSize::LargeInput,
+            )
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);

@@ -1,0 +1,291 @@
+//! The causal plane-fit estimator: a surface of active events per polarity, kept across slices,
+//! and one plane fit per event.
+
+use evseg_geometry::Camera;
+use evseg_schemas::{CameraInfo, Events, NormalFlow};
+
+use crate::fit::{Neighbourhood, PlaneFit, fit_plane};
+use crate::params::{ParamsError, PlaneFitParams};
+
+/// Errors of the estimator.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum EstimatorError {
+    /// Bad settings.
+    #[error(transparent)]
+    Params(#[from] ParamsError),
+    /// The camera has no pixels.
+    #[error("camera has an empty sensor ({width} x {height} pixels)")]
+    EmptySensor {
+        /// Width, pixels.
+        width: u16,
+        /// Height, pixels.
+        height: u16,
+    },
+    /// The four event columns have different lengths.
+    #[error("event columns have different lengths (t {t}, x {x}, y {y}, p {p})")]
+    Columns {
+        /// Length of `t`.
+        t: usize,
+        /// Length of `x`.
+        x: usize,
+        /// Length of `y`.
+        y: usize,
+        /// Length of `p`.
+        p: usize,
+    },
+}
+
+/// Counters over every event seen so far.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct EstimatorStats {
+    /// Events offered.
+    pub events: u64,
+    /// Events with a valid estimate (confidence > 0).
+    pub valid: u64,
+    /// Events outside the sensor, ignored (no surface update, confidence 0).
+    pub out_of_sensor: u64,
+    /// Events with a non-finite timestamp, ignored.
+    pub bad_time: u64,
+    /// Events older than an event processed before them (input not time-ordered); still
+    /// processed, but the surface never moves back in time.
+    pub out_of_order: u64,
+}
+
+/// One event's estimate in pixel units.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PixelEstimate {
+    /// Normal flow, pixels per second (0 when invalid).
+    pub flow_px: [f64; 2],
+    /// Confidence in [0, 1] (0 = invalid).
+    pub confidence: f64,
+}
+
+impl PixelEstimate {
+    /// No estimate.
+    pub const INVALID: Self = Self {
+        flow_px: [0.0, 0.0],
+        confidence: 0.0,
+    };
+}
+
+/// Local plane-fit normal flow (Benosman et al. 2014), causal and stateful: events are processed
+/// in the order given, each one first written to the surface of active events of its polarity
+/// (latest timestamp per pixel) and then fitted with its same-polarity neighbours. The surfaces
+/// persist between calls, so consecutive slices continue each other.
+#[derive(Debug, Clone)]
+pub struct PlaneFitEstimator {
+    params: PlaneFitParams,
+    camera: CameraInfo,
+    width: usize,
+    height: usize,
+    /// Latest timestamp per pixel, seconds, row-major; index 0 = OFF, 1 = ON.
+    /// `NEG_INFINITY` where no event has been seen.
+    surface: [Vec<f64>; 2],
+    /// Pixel flow to normalized flow per pixel, see [`jacobian_table`].
+    jacobian: Vec<[f32; 4]>,
+    nb: Neighbourhood,
+    last_t: f64,
+    stats: EstimatorStats,
+}
+
+impl PlaneFitEstimator {
+    /// An estimator for `camera` with empty surfaces.
+    pub fn new(camera: &CameraInfo, params: PlaneFitParams) -> Result<Self, EstimatorError> {
+        params.validate()?;
+        let (width, height) = (camera.width as usize, camera.height as usize);
+        if width == 0 || height == 0 {
+            return Err(EstimatorError::EmptySensor {
+                width: camera.width,
+                height: camera.height,
+            });
+        }
+        let jacobian = jacobian_table(camera);
+        Ok(Self {
+            params,
+            camera: camera.clone(),
+            width,
+            height,
+            surface: [
+                vec![f64::NEG_INFINITY; width * height],
+                vec![f64::NEG_INFINITY; width * height],
+            ],
+            jacobian,
+            nb: Neighbourhood::default(),
+            last_t: f64::NEG_INFINITY,
+            stats: EstimatorStats::default(),
+        })
+    }
+
+    /// The settings in use.
+    pub fn params(&self) -> &PlaneFitParams {
+        &self.params
+    }
+
+    /// The camera the estimator was built for.
+    pub fn camera(&self) -> &CameraInfo {
+        &self.camera
+    }
+
+    /// Counters so far.
+    pub fn stats(&self) -> EstimatorStats {
+        self.stats
+    }
+
+    /// Forgets every event seen (empty surfaces, counters kept).
+    pub fn reset(&mut self) {
+        for s in &mut self.surface {
+            s.fill(f64::NEG_INFINITY);
+        }
+        self.last_t = f64::NEG_INFINITY;
+    }
+
+    /// Processes `events` in order and returns their normal flow in normalized units per second,
+    /// aligned with them (confidence 0 and flow 0 where there is no valid estimate).
+    pub fn process(&mut self, events: &Events) -> Result<NormalFlow, EstimatorError> {
+        let mut out = NormalFlow::default();
+        self.process_into(events, &mut out)?;
+        Ok(out)
+    }
+
+    /// As [`process`](Self::process), writing into `out` (cleared first; reuses its buffers).
+    pub fn process_into(&mut self, events: &Events, out: &mut NormalFlow) -> Result<(), EstimatorError> {
+        check_columns(events)?;
+        let n = events.len();
+        out.nx.clear();
+        out.ny.clear();
+        out.confidence.clear();
+        out.nx.reserve(n);
+        out.ny.reserve(n);
+        out.confidence.reserve(n);
+        for i in 0..n {
+            let est = self.push_event(events.t[i], events.x[i], events.y[i], events.p[i]);
+            let (nx, ny) = if est.confidence > 0.0 {
+                let idx = events.y[i] as usize * self.width + events.x[i] as usize;
+                let [j00, j01, j10, j11] = self.jacobian[idx];
+                let [fu, fv] = [est.flow_px[0] as f32, est.flow_px[1] as f32];
+                (j00 * fu + j01 * fv, j10 * fu + j11 * fv)
+            } else {
+                (0.0, 0.0)
+            };
+            out.nx.push(nx);
+            out.ny.push(ny);
+            out.confidence.push(est.confidence as f32);
+        }
+        Ok(())
+    }
+
+    /// Processes `events` in order and returns their normal flow in pixels per second.
+    pub fn process_pixels(&mut self, events: &Events) -> Result<Vec<PixelEstimate>, EstimatorError> {
+        check_columns(events)?;
+        Ok((0..events.len())
+            .map(|i| self.push_event(events.t[i], events.x[i], events.y[i], events.p[i]))
+            .collect())
+    }
+
+    /// Adds one event (`t` seconds, pixel `(x, y)`, polarity `p`, non-zero = ON) to its surface
+    /// and fits its plane.
+    pub fn push_event(&mut self, t: f64, x: u16, y: u16, p: u8) -> PixelEstimate {
+        self.stats.events += 1;
+        let (xu, yu) = (x as usize, y as usize);
+        if xu >= self.width || yu >= self.height {
+            self.stats.out_of_sensor += 1;
+            return PixelEstimate::INVALID;
+        }
+        if !t.is_finite() {
+            self.stats.bad_time += 1;
+            return PixelEstimate::INVALID;
+        }
+        if t < self.last_t {
+            self.stats.out_of_order += 1;
+        } else {
+            self.last_t = t;
+        }
+        let pol = usize::from(p != 0);
+        let w = self.width;
+        let surface = &mut self.surface[pol];
+        let own = &mut surface[yu * w + xu];
+        *own = own.max(t);
+        let r = self.params.radius;
+        let (x0, x1) = (xu.saturating_sub(r), (xu + r).min(self.width - 1));
+        let (y0, y1) = (yu.saturating_sub(r), (yu + r).min(self.height - 1));
+        let (dt_min, dt_max) = (self.params.dt_min_s, self.params.dt_max_s);
+        let nb = &mut self.nb;
+        nb.clear();
+        for yy in y0..=y1 {
+            let row = &surface[yy * w + x0..=yy * w + x1];
+            let dy = yy as f64 - yu as f64;
+            for (k, &ts) in row.iter().enumerate() {
+                let xx = x0 + k;
+                let age = t - ts;
+                let own_pixel = xx == xu && yy == yu;
+                if own_pixel || (age >= dt_min && age <= dt_max) {
+                    nb.push(xx as f64 - xu as f64, dy, if own_pixel { 0.0 } else { -age });
+                }
+            }
+        }
+        let estimate = fit_plane(
+            nb,
+            self.params.outlier_s,
+            self.params.max_refits,
+            self.params.min_points,
+        )
+        .and_then(|fit| self.judge(&fit));
+        match estimate {
+            Some(e) => {
+                self.stats.valid += 1;
+                e
+            }
+            None => PixelEstimate::INVALID,
+        }
+    }
+
+    /// Turns a fit into an estimate, or `None` when it is too fast or flat. Confidence is the
+    /// inlier share times `1 - rms / outlier_s` (1 for a perfect plane through every point).
+    fn judge(&self, fit: &PlaneFit) -> Option<PixelEstimate> {
+        let flow = fit.normal_flow_px()?;
+        let speed = fit.speed_px_s();
+        if speed.is_nan() || speed > self.params.max_speed_px_s {
+            return None;
+        }
+        let inlier_share = fit.inliers as f64 / fit.points as f64;
+        let quality = (1.0 - fit.rms_s / self.params.outlier_s).clamp(0.0, 1.0);
+        let confidence = inlier_share * quality;
+        if confidence.is_nan() || confidence <= 0.0 {
+            return None;
+        }
+        Some(PixelEstimate {
+            flow_px: flow,
+            confidence,
+        })
+    }
+}
+
+/// The Jacobian d(normalized)/d(pixel) of every pixel, row-major, each `[j00, j01, j10, j11]`
+/// (normalized flow = `[j00 fu + j01 fv, j10 fu + j11 fv]` for pixel flow `(fu, fv)`), from
+/// [`Camera::pixel_flow_to_normalized`] (undistortion included).
+pub fn jacobian_table(camera: &CameraInfo) -> Vec<[f32; 4]> {
+    let cam = Camera::new(camera);
+    let (width, height) = (camera.width as usize, camera.height as usize);
+    let mut jacobian = Vec::with_capacity(width * height);
+    for v in 0..height {
+        for u in 0..width {
+            let (u, v) = (u as f64, v as f64);
+            let [j00, j10] = cam.pixel_flow_to_normalized(u, v, 1.0, 0.0);
+            let [j01, j11] = cam.pixel_flow_to_normalized(u, v, 0.0, 1.0);
+            jacobian.push([j00 as f32, j01 as f32, j10 as f32, j11 as f32]);
+        }
+    }
+    jacobian
+}
+
+pub(crate) fn check_columns(events: &Events) -> Result<(), EstimatorError> {
+    if events.is_consistent() {
+        return Ok(());
+    }
+    Err(EstimatorError::Columns {
+        t: events.t.len(),
+        x: events.x.len(),
+        y: events.y.len(),
+        p: events.p.len(),
+    })
+}

@@ -1,0 +1,294 @@
+//! Least-squares plane `t = gx dx + gy dy + c` through points of a time surface, with iterative
+//! rejection of points whose time residual is too large.
+//!
+//! Coordinates are pixel offsets from the event (`dx`, `dy`), times are seconds relative to the
+//! event (`dt <= 0` for older neighbours). `(gx, gy)` is the gradient of the time surface, s/px;
+//! a moving edge reaches pixels further along its motion later, so the gradient points along the
+//! motion and the normal flow is `(gx, gy) / (gx^2 + gy^2)` px/s (METHOD_NOTES §2 writes the same
+//! plane as `a x + b y + t + d = 0`, i.e. `(a, b) = -(gx, gy)` and `v = -(a, b) / (a^2 + b^2)`).
+
+use crate::params::MAX_RADIUS;
+
+/// Most points a neighbourhood can hold: the largest window, `(2 MAX_RADIUS + 1)^2`.
+pub const MAX_POINTS: usize = (2 * MAX_RADIUS + 1) * (2 * MAX_RADIUS + 1);
+
+/// Points of one fit, fixed size so that no event allocates.
+#[derive(Debug, Clone)]
+pub struct Neighbourhood {
+    dx: [f64; MAX_POINTS],
+    dy: [f64; MAX_POINTS],
+    dt: [f64; MAX_POINTS],
+    len: usize,
+}
+
+impl Default for Neighbourhood {
+    fn default() -> Self {
+        Self {
+            dx: [0.0; MAX_POINTS],
+            dy: [0.0; MAX_POINTS],
+            dt: [0.0; MAX_POINTS],
+            len: 0,
+        }
+    }
+}
+
+impl Neighbourhood {
+    /// Removes every point.
+    #[inline]
+    pub fn clear(&mut self) {
+        self.len = 0;
+    }
+
+    /// Number of points.
+    #[inline]
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    /// True when there is no point.
+    #[inline]
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    /// Adds a point at pixel offset `(dx, dy)` with time `dt` seconds relative to the event;
+    /// returns false (and ignores it) when the neighbourhood is full.
+    #[inline]
+    pub fn push(&mut self, dx: f64, dy: f64, dt: f64) -> bool {
+        if self.len == MAX_POINTS {
+            return false;
+        }
+        self.dx[self.len] = dx;
+        self.dy[self.len] = dy;
+        self.dt[self.len] = dt;
+        self.len += 1;
+        true
+    }
+}
+
+/// A fitted plane `t = gx dx + gy dy + c` (seconds, pixel offsets).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PlaneFit {
+    /// Time-surface gradient along x, seconds per pixel.
+    pub gx: f64,
+    /// Time-surface gradient along y, seconds per pixel.
+    pub gy: f64,
+    /// Plane time at the event's pixel, seconds relative to the event.
+    pub c: f64,
+    /// Points kept after outlier rejection.
+    pub inliers: usize,
+    /// Points offered to the fit.
+    pub points: usize,
+    /// Root-mean-square time residual of the inliers, seconds.
+    pub rms_s: f64,
+}
+
+impl PlaneFit {
+    /// The normal flow, pixels per second: `(gx, gy) / (gx^2 + gy^2)`; `None` for a flat plane.
+    pub fn normal_flow_px(&self) -> Option<[f64; 2]> {
+        let g2 = self.gx * self.gx + self.gy * self.gy;
+        if !g2.is_finite() || g2 <= 0.0 {
+            return None;
+        }
+        Some([self.gx / g2, self.gy / g2])
+    }
+
+    /// Speed across the edge, pixels per second (`1 / |g|`; infinite for a flat plane).
+    pub fn speed_px_s(&self) -> f64 {
+        1.0 / (self.gx * self.gx + self.gy * self.gy).sqrt()
+    }
+}
+
+/// Sums of the normal equations of the plane fit.
+#[derive(Default, Clone, Copy)]
+struct Sums {
+    n: f64,
+    sx: f64,
+    sy: f64,
+    sxx: f64,
+    sxy: f64,
+    syy: f64,
+    st: f64,
+    sxt: f64,
+    syt: f64,
+}
+
+impl Sums {
+    #[inline]
+    fn add(&mut self, x: f64, y: f64, t: f64, sign: f64) {
+        self.n += sign;
+        self.sx += sign * x;
+        self.sy += sign * y;
+        self.sxx += sign * x * x;
+        self.sxy += sign * x * y;
+        self.syy += sign * y * y;
+        self.st += sign * t;
+        self.sxt += sign * x * t;
+        self.syt += sign * y * t;
+    }
+
+    /// Solves `[sxx sxy sx; sxy syy sy; sx sy n] [gx gy c] = [sxt syt st]` by the adjugate.
+    /// The matrix has integer entries (pixel offsets), so a non-singular one has `|det| >= 1`;
+    /// below 0.5 the points are collinear (or fewer than 3) and there is no plane.
+    #[inline]
+    fn solve(&self) -> Option<[f64; 3]> {
+        let (a, b, c) = (self.sxx, self.sxy, self.sx);
+        let (d, e) = (self.syy, self.sy);
+        let f = self.n;
+        // Symmetric matrix [a b c; b d e; c e f].
+        let c00 = d * f - e * e;
+        let c01 = c * e - b * f;
+        let c02 = b * e - c * d;
+        let c11 = a * f - c * c;
+        let c12 = b * c - a * e;
+        let c22 = a * d - b * b;
+        let det = a * c00 + b * c01 + c * c02;
+        if det.abs() < 0.5 {
+            return None;
+        }
+        let (r0, r1, r2) = (self.sxt, self.syt, self.st);
+        let inv = 1.0 / det;
+        Some([
+            (c00 * r0 + c01 * r1 + c02 * r2) * inv,
+            (c01 * r0 + c11 * r1 + c12 * r2) * inv,
+            (c02 * r0 + c12 * r1 + c22 * r2) * inv,
+        ])
+    }
+}
+
+/// Fits the plane to `nb`, then repeatedly keeps the points with `|residual| <= outlier_s` of the
+/// current plane and refits them, until the kept set stops changing (at most `max_refits`
+/// refits). The kept set is chosen afresh from all points each time, so a good point rejected
+/// while a gross outlier still tilted the plane comes back once the outlier is gone. `None` when
+/// fewer than `min_points` points are kept or they do not span a plane.
+pub fn fit_plane(
+    nb: &Neighbourhood,
+    outlier_s: f64,
+    max_refits: usize,
+    min_points: usize,
+) -> Option<PlaneFit> {
+    let n = nb.len;
+    let min_points = min_points.max(3);
+    if n < min_points {
+        return None;
+    }
+    let mut used = [true; MAX_POINTS];
+    let mut sums = Sums::default();
+    for i in 0..n {
+        sums.add(nb.dx[i], nb.dy[i], nb.dt[i], 1.0);
+    }
+    let mut kept = n;
+    let mut sol = sums.solve()?;
+    for _ in 0..max_refits {
+        let mut changed = false;
+        for (i, used) in used.iter_mut().enumerate().take(n) {
+            let r = sol[0] * nb.dx[i] + sol[1] * nb.dy[i] + sol[2] - nb.dt[i];
+            let inlier = r.abs() <= outlier_s;
+            if inlier != *used {
+                *used = inlier;
+                changed = true;
+                let sign = if inlier { 1.0 } else { -1.0 };
+                sums.add(nb.dx[i], nb.dy[i], nb.dt[i], sign);
+                if inlier {
+                    kept += 1;
+                } else {
+                    kept -= 1;
+                }
+            }
+        }
+        if !changed {
+            break;
+        }
+        if kept < min_points {
+            return None;
+        }
+        sol = sums.solve()?;
+    }
+    let mut ss = 0.0;
+    for (i, &used) in used.iter().enumerate().take(n) {
+        if used {
+            let r = sol[0] * nb.dx[i] + sol[1] * nb.dy[i] + sol[2] - nb.dt[i];
+            ss += r * r;
+        }
+    }
+    Some(PlaneFit {
+        gx: sol[0],
+        gy: sol[1],
+        c: sol[2],
+        inliers: kept,
+        points: n,
+        rms_s: (ss / kept as f64).sqrt(),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn window(r: i32, f: impl Fn(f64, f64) -> f64) -> Neighbourhood {
+        let mut nb = Neighbourhood::default();
+        for dy in -r..=r {
+            for dx in -r..=r {
+                assert!(nb.push(dx as f64, dy as f64, f(dx as f64, dy as f64)));
+            }
+        }
+        nb
+    }
+
+    #[test]
+    fn exact_plane_is_recovered() {
+        let nb = window(2, |x, y| 0.002 * x - 0.001 * y + 0.0005);
+        let fit = fit_plane(&nb, 0.005, 3, 5).expect("plane");
+        assert!((fit.gx - 0.002).abs() < 1e-12 && (fit.gy + 0.001).abs() < 1e-12);
+        assert!((fit.c - 0.0005).abs() < 1e-12);
+        assert_eq!((fit.inliers, fit.points), (25, 25));
+        assert!(fit.rms_s < 1e-12);
+        let [vx, vy] = fit.normal_flow_px().expect("flow");
+        // v = g / |g|^2 = (0.002, -0.001) / 5e-6 = (400, -200) px/s.
+        assert!((vx - 400.0).abs() < 1e-6 && (vy + 200.0).abs() < 1e-6);
+        assert!((fit.speed_px_s() - 1.0 / 5e-6f64.sqrt()).abs() < 1e-6);
+    }
+
+    #[test]
+    fn outlier_is_rejected() {
+        let mut nb = window(2, |x, _| 0.001 * x);
+        // An old timestamp from a previous edge, 50 ms before.
+        nb.dt[3] = -0.05;
+        let fit = fit_plane(&nb, 0.005, 3, 5).expect("plane");
+        assert_eq!(fit.inliers, 24);
+        assert!((fit.gx - 0.001).abs() < 1e-12 && fit.gy.abs() < 1e-12);
+    }
+
+    #[test]
+    fn too_few_or_collinear_points_give_no_plane() {
+        let mut nb = Neighbourhood::default();
+        for i in 0..4 {
+            nb.push(i as f64, 0.0, 0.001 * i as f64);
+        }
+        assert!(fit_plane(&nb, 0.005, 3, 5).is_none(), "4 points < min_points 5");
+        nb.push(4.0, 0.0, 0.004);
+        assert!(
+            fit_plane(&nb, 0.005, 3, 5).is_none(),
+            "collinear points span no plane"
+        );
+        nb.push(0.0, 1.0, 0.0);
+        assert!(fit_plane(&nb, 0.005, 3, 5).is_some());
+    }
+
+    #[test]
+    fn flat_plane_has_no_flow() {
+        let nb = window(1, |_, _| 0.0);
+        let fit = fit_plane(&nb, 0.005, 3, 5).expect("plane");
+        assert!(fit.normal_flow_px().is_none());
+        assert!(fit.speed_px_s().is_infinite());
+    }
+
+    #[test]
+    fn full_neighbourhood_refuses_more_points() {
+        let mut nb = window(3, |_, _| 0.0);
+        assert_eq!(nb.len(), MAX_POINTS);
+        assert!(!nb.push(0.0, 0.0, 0.0));
+        nb.clear();
+        assert!(nb.is_empty());
+    }
+}

@@ -1,0 +1,25 @@
+//! Per-event normal flow from events by local plane fits (Benosman et al. 2014, constants from
+//! METHOD_NOTES §2), and a scorer against true optical flow.
+//!
+//! - [`PlaneFitEstimator`]: keeps a surface of active events per polarity (latest timestamp per
+//!   pixel, seconds) across slices; for every event, in time order, it updates the surface and
+//!   fits the plane `t = gx dx + gy dy + c` to the same-polarity neighbours of a `(2 r + 1)^2`
+//!   window whose age is within `[dt_min, dt_max]`, rejecting points with a time residual above
+//!   `outlier_s` and refitting. The normal flow is `(gx, gy) / (gx^2 + gy^2)` pixels per second
+//!   (pointing along the motion), converted to normalized units per second with the camera
+//!   Jacobian at the event's pixel ([`evseg_geometry::Camera::pixel_flow_to_normalized`]).
+//!   Invalid fits have confidence 0 and flow 0.
+//! - [`score`]: sign-correct rate, magnitude error, circle angle error and coverage, at object
+//!   boundaries and elsewhere.
+
+#![deny(missing_docs)]
+
+pub mod estimator;
+pub mod fit;
+pub mod params;
+pub mod score;
+
+pub use estimator::{EstimatorError, EstimatorStats, PixelEstimate, PlaneFitEstimator, jacobian_table};
+pub use fit::{Neighbourhood, PlaneFit, fit_plane};
+pub use params::{MAX_RADIUS, ParamsError, PlaneFitParams};
+pub use score::{Score, ScoreParams, Scorer};

@@ -1,0 +1,202 @@
+//! `evseg-normal-flow`: per-event normal flow of each slice by local plane fits; with the
+//! optional `truth` input wired, also scores it (per slice in the log, for the run in
+//! `normal-flow-score-<node>.json` in the run folder).
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use evseg_normal_flow::{PlaneFitEstimator, PlaneFitParams, Score, ScoreParams, Scorer};
+use evseg_runtime::describe::Describe;
+use evseg_runtime::{BoxError, Inputs, NodeConfig, Outputs, Stage, run_stage};
+use evseg_schemas::{NormalFlow, Slice, Truth};
+use serde::Serialize;
+
+struct NormalFlowNode {
+    node: String,
+    run_dir: PathBuf,
+    params: PlaneFitParams,
+    estimator: Option<PlaneFitEstimator>,
+    scorer: Option<Scorer>,
+    slices: u64,
+}
+
+/// What the node writes at the end of a run with truth.
+#[derive(Serialize)]
+struct RunReport<'a> {
+    node: &'a str,
+    slices: u64,
+    radius: usize,
+    dt_min_ms: f64,
+    dt_max_ms: f64,
+    min_points: usize,
+    outlier_ms: f64,
+    max_speed_px_s: f64,
+    events: u64,
+    valid: u64,
+    out_of_sensor: u64,
+    bad_time: u64,
+    out_of_order: u64,
+    score: Score,
+}
+
+impl Stage for NormalFlowNode {
+    fn process(&mut self, input: &Inputs, out: &mut Outputs) -> Result<(), BoxError> {
+        let slice: Slice = input.get("slices")?;
+        let (t_start, t_end) = input.span_of("slices").unwrap_or(input.span());
+        let rebuild = match &self.estimator {
+            Some(e) => e.camera() != &slice.camera,
+            None => true,
+        };
+        if rebuild {
+            if self.estimator.is_some() {
+                tracing::warn!(
+                    seq = input.seq(),
+                    "camera changed: surfaces of active events restarted"
+                );
+            }
+            self.estimator = Some(PlaneFitEstimator::new(&slice.camera, self.params)?);
+        }
+        let Some(estimator) = self.estimator.as_mut() else {
+            return Ok(());
+        };
+        let before = estimator.stats();
+        let flow: NormalFlow = estimator.process(&slice.events)?;
+        let after = estimator.stats();
+        let ignored = (after.out_of_sensor - before.out_of_sensor) + (after.bad_time - before.bad_time);
+        if ignored > 0 {
+            tracing::warn!(
+                seq = input.seq(),
+                ignored,
+                "events outside the sensor or with a bad time ignored"
+            );
+        }
+        out.send("flow", input.seq(), t_start, t_end, &flow)?;
+        self.slices += 1;
+        if let Some(truth) = input.get_opt::<Truth>("truth")? {
+            if self.scorer.is_none() || rebuild {
+                self.scorer = Some(Scorer::new(&slice.camera, ScoreParams::default()));
+            }
+            if let Some(scorer) = self.scorer.as_mut() {
+                let s = scorer.add_slice(&slice.events, &flow, &truth)?;
+                tracing::info!(
+                    seq = input.seq(),
+                    events = s.all.events,
+                    coverage = s.all.coverage,
+                    sign_correct = s.all.sign_correct_rate,
+                    sign_correct_boundary = s.boundary.sign_correct_rate,
+                    circle_angle_deg_median = s.all.circle_angle_error_deg_median,
+                    "normal-flow score"
+                );
+            }
+        }
+        Ok(())
+    }
+
+    fn finish(&mut self, _out: &mut Outputs) -> Result<(), BoxError> {
+        let Some(scorer) = &self.scorer else {
+            return Ok(());
+        };
+        let stats = self.estimator.as_ref().map(|e| e.stats()).unwrap_or_default();
+        let p = &self.params;
+        let report = RunReport {
+            node: &self.node,
+            slices: self.slices,
+            radius: p.radius,
+            dt_min_ms: p.dt_min_s * 1e3,
+            dt_max_ms: p.dt_max_s * 1e3,
+            min_points: p.min_points,
+            outlier_ms: p.outlier_s * 1e3,
+            max_speed_px_s: p.max_speed_px_s,
+            events: stats.events,
+            valid: stats.valid,
+            out_of_sensor: stats.out_of_sensor,
+            bad_time: stats.bad_time,
+            out_of_order: stats.out_of_order,
+            score: scorer.summary(),
+        };
+        let path = self.run_dir.join(format!("normal-flow-score-{}.json", self.node));
+        let json = serde_json::to_string_pretty(&report)?;
+        std::fs::write(&path, json).map_err(|e| format!("cannot write {}: {e}", path.display()))?;
+        let s = &report.score.all;
+        tracing::info!(
+            path = %path.display(),
+            coverage = s.coverage,
+            sign_correct = s.sign_correct_rate,
+            circle_angle_deg_median = s.circle_angle_error_deg_median,
+            "normal-flow run score written"
+        );
+        Ok(())
+    }
+}
+
+fn main() -> ExitCode {
+    let d = PlaneFitParams::default();
+    let description = Describe::new(
+        "evseg-normal-flow",
+        "Per-event normal flow by local plane fits on the surface of active events (Benosman et al. 2014)",
+    )
+    .input::<Slice>(
+        "slices",
+        "slices of events, in order (the surfaces persist across slices)",
+    )
+    .optional_input::<Truth>(
+        "truth",
+        "ground truth of the slices; when wired, the flow is scored per slice and for the run",
+    )
+    .output::<NormalFlow>(
+        "flow",
+        "normal flow per event, normalized units/s, aligned with the slice",
+    )
+    .param(
+        "radius",
+        d.radius as u64,
+        "window half-width, pixels (2 = 5x5, 1 = 3x3)",
+    )
+    .param(
+        "dt_min_ms",
+        d.dt_min_s * 1e3,
+        "neighbours younger than this are left out, ms",
+    )
+    .param(
+        "dt_max_ms",
+        d.dt_max_s * 1e3,
+        "neighbours older than this are left out, ms",
+    )
+    .param("min_points", d.min_points as u64, "fewest points of a plane fit")
+    .param(
+        "outlier_ms",
+        d.outlier_s * 1e3,
+        "points with a larger time residual are rejected, ms",
+    )
+    .param(
+        "max_refits",
+        d.max_refits as u64,
+        "refits after outlier rejection, at most",
+    )
+    .param(
+        "max_speed_px_s",
+        d.max_speed_px_s,
+        "faster fits are invalid, pixels/s",
+    )
+    .build();
+    run_stage(description, |cfg: &NodeConfig| {
+        let params = PlaneFitParams {
+            radius: cfg.param::<usize>("radius")?,
+            dt_min_s: cfg.param::<f64>("dt_min_ms")? * 1e-3,
+            dt_max_s: cfg.param::<f64>("dt_max_ms")? * 1e-3,
+            min_points: cfg.param::<usize>("min_points")?,
+            outlier_s: cfg.param::<f64>("outlier_ms")? * 1e-3,
+            max_refits: cfg.param::<usize>("max_refits")?,
+            max_speed_px_s: cfg.param::<f64>("max_speed_px_s")?,
+        };
+        params.validate()?;
+        Ok(NormalFlowNode {
+            node: cfg.node.clone(),
+            run_dir: cfg.run_dir.clone(),
+            params,
+            estimator: None,
+            scorer: None,
+            slices: 0,
+        })
+    })
+}

@@ -1,0 +1,106 @@
+//! Settings of the local plane fit.
+
+/// Settings of [`PlaneFitEstimator`](crate::PlaneFitEstimator). Times are seconds, distances
+/// pixels, speeds pixels per second.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PlaneFitParams {
+    /// Half-width of the square neighbourhood, pixels: the window is `(2 r + 1)^2` pixels.
+    /// Default 2 (5 x 5), the larger of the two windows in METHOD_NOTES §2 (3 x 3 or 5 x 5); 1 is
+    /// the 3 x 3 option. At most [`MAX_RADIUS`].
+    pub radius: usize,
+    /// Neighbours younger than this (age `t_event - t_neighbour`, seconds) are left out.
+    /// Default 0: METHOD_NOTES §2 quotes `[3 ms, 300 ms]` from the reference C code, where the
+    /// lower bound drops events *more recent* than 3 ms. Applied literally it removes every
+    /// neighbour on the same edge and, for edges faster than `2 r / 3 ms` (667 px/s at r = 2),
+    /// every neighbour at all; on the simulator presets it lowered coverage without improving
+    /// the sign-correct rate (see the crate README), so the default keeps all recent neighbours.
+    pub dt_min_s: f64,
+    /// Neighbours older than this (seconds) are left out. Default 0.3 s, the upper bound of
+    /// METHOD_NOTES §2 (`[3 ms, 300 ms]`).
+    pub dt_max_s: f64,
+    /// Fewest surface points (the event included) a plane is fitted to, before and after outlier
+    /// rejection. Default 5: METHOD_NOTES §2 says "at least 3 points (better 5 or more)".
+    pub min_points: usize,
+    /// Points whose time residual exceeds this (seconds) are rejected and the plane refitted.
+    /// Default 0.005 s, METHOD_NOTES §2 ("reject points with |residual| > 5 ms").
+    pub outlier_s: f64,
+    /// Refits after outlier rejection, at most. Default 3: the notes refit "until the parameters
+    /// stop changing"; the fit stops earlier as soon as the inlier set is stable, and 3 bounds
+    /// the work per event (the task's limit).
+    pub max_refits: usize,
+    /// Fits whose normal speed exceeds this (pixels per second) are invalid. Default 20 000 px/s:
+    /// above it the whole 5 x 5 window is crossed in 0.2 ms, where timestamp jitter dominates the
+    /// fit (the reference C code rejects speeds above `1 / dt_min`).
+    pub max_speed_px_s: f64,
+}
+
+/// Largest supported [`PlaneFitParams::radius`] (a 7 x 7 window; fixed-size buffers).
+pub const MAX_RADIUS: usize = 3;
+
+impl Default for PlaneFitParams {
+    fn default() -> Self {
+        Self {
+            radius: 2,
+            dt_min_s: 0.0,
+            dt_max_s: 0.3,
+            min_points: 5,
+            outlier_s: 0.005,
+            max_refits: 3,
+            max_speed_px_s: 20_000.0,
+        }
+    }
+}
+
+/// Invalid settings.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ParamsError {
+    /// Radius 0 or above [`MAX_RADIUS`].
+    #[error("radius must be 1..={MAX_RADIUS} pixels, got {0}")]
+    Radius(usize),
+    /// `min_points` below 3 (a plane needs 3 points) or above the window size.
+    #[error("min_points must be between 3 and {window} (the window's pixels), got {got}")]
+    MinPoints {
+        /// The value given.
+        got: usize,
+        /// Pixels in the window.
+        window: usize,
+    },
+    /// A time or speed that must be finite and positive (or >= 0) is not.
+    #[error("{name} must be a finite number {rule}, got {value}")]
+    Range {
+        /// Parameter name.
+        name: &'static str,
+        /// The rule broken.
+        rule: &'static str,
+        /// The value given.
+        value: f64,
+    },
+}
+
+impl PlaneFitParams {
+    /// Checks every field; the error names the first bad one.
+    pub fn validate(&self) -> Result<(), ParamsError> {
+        if self.radius == 0 || self.radius > MAX_RADIUS {
+            return Err(ParamsError::Radius(self.radius));
+        }
+        let window = (2 * self.radius + 1).pow(2);
+        if self.min_points < 3 || self.min_points > window {
+            return Err(ParamsError::MinPoints {
+                got: self.min_points,
+                window,
+            });
+        }
+        let checks: [(&'static str, f64, bool, &'static str); 4] = [
+            ("dt_min", self.dt_min_s, self.dt_min_s >= 0.0, ">= 0"),
+            ("dt_max", self.dt_max_s, self.dt_max_s > self.dt_min_s, "> dt_min"),
+            ("outlier", self.outlier_s, self.outlier_s > 0.0, "> 0"),
+            ("max_speed", self.max_speed_px_s, self.max_speed_px_s > 0.0, "> 0"),
+        ];
+        for (name, value, ok, rule) in checks {
+            if !value.is_finite() || !ok {
+                return Err(ParamsError::Range { name, rule, value });
+            }
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,285 @@
+//! Known answers: straight edges moving at known velocities, generated analytically (a pixel
+//! fires when the edge line, moving along its unit normal `n` at `s` px/s, reaches its centre:
+//! `t = (n . x - d0) / s`, rounded to 1 µs like a sensor clock).
+
+use evseg_normal_flow::{PlaneFitEstimator, PlaneFitParams};
+use evseg_schemas::{CameraInfo, Events};
+
+const W: u16 = 64;
+const H: u16 = 64;
+const F: f64 = 100.0;
+
+fn camera() -> CameraInfo {
+    CameraInfo::pinhole(W, H, F, "synthetic")
+}
+
+/// Events of an edge with unit normal at `angle_deg` moving at `speed` px/s, starting outside
+/// the sensor so that every pixel fires once, polarity `p`, time-ordered.
+fn edge_events(angle_deg: f64, speed: f64, p: u8) -> Events {
+    let (nx, ny) = (angle_deg.to_radians().cos(), angle_deg.to_radians().sin());
+    let proj = |x: f64, y: f64| nx * x + ny * y;
+    let corners = [(0.0, 0.0), (W as f64, 0.0), (0.0, H as f64), (W as f64, H as f64)];
+    let d0 = corners
+        .iter()
+        .map(|&(x, y)| proj(x, y))
+        .fold(f64::INFINITY, f64::min)
+        - 1.0;
+    let mut list = Vec::new();
+    for y in 0..H {
+        for x in 0..W {
+            let t = (proj(x as f64, y as f64) - d0) / speed;
+            list.push(((t * 1e6).round() * 1e-6, x, y));
+        }
+    }
+    list.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let mut ev = Events::with_capacity(list.len());
+    for (t, x, y) in list {
+        ev.push(t, x, y, p);
+    }
+    ev
+}
+
+/// True when pixel `(x, y)` has a full window inside the sensor and the edge had passed at
+/// least `r + 1` pixels of the sensor before reaching it (so that the window behind it is filled).
+fn checkable(x: u16, y: u16, r: u16, angle_deg: f64) -> bool {
+    let m = r + 1;
+    if x < m || y < m || x + m >= W || y + m >= H {
+        return false;
+    }
+    let (nx, ny) = (angle_deg.to_radians().cos(), angle_deg.to_radians().sin());
+    // Behind the pixel along -n, r + 1 pixels are inside the sensor.
+    let bx = x as f64 - nx * (r as f64 + 1.5);
+    let by = y as f64 - ny * (r as f64 + 1.5);
+    bx >= 0.0 && by >= 0.0 && bx < W as f64 && by < H as f64
+}
+
+/// Runs the estimator over an edge and checks every checkable event: valid, sign-correct and
+/// within 5% of `speed * n` (pixels and, through the pinhole camera, normalized units).
+fn check_edge(angle_deg: f64, speed: f64, radius: usize) {
+    let params = PlaneFitParams {
+        radius,
+        ..PlaneFitParams::default()
+    };
+    let events = edge_events(angle_deg, speed, 1);
+    let mut est = PlaneFitEstimator::new(&camera(), params).expect("valid");
+    let mut norm = est.clone();
+    let px = est.process_pixels(&events).expect("consistent");
+    let flow = norm.process(&events).expect("consistent");
+    let (nx, ny) = (angle_deg.to_radians().cos(), angle_deg.to_radians().sin());
+    let truth = [speed * nx, speed * ny];
+    let mut checked = 0;
+    for (i, &e) in px.iter().enumerate() {
+        if !checkable(events.x[i], events.y[i], radius as u16, angle_deg) {
+            continue;
+        }
+        checked += 1;
+        assert!(
+            e.confidence > 0.5,
+            "angle {angle_deg}: event {i} confidence {}",
+            e.confidence
+        );
+        let [vx, vy] = e.flow_px;
+        assert!(
+            vx * truth[0] + vy * truth[1] > 0.0,
+            "angle {angle_deg}: sign wrong at {i}"
+        );
+        let err = (vx - truth[0]).hypot(vy - truth[1]);
+        assert!(
+            err < 0.05 * speed,
+            "angle {angle_deg}: flow ({vx:.1}, {vy:.1}) vs true ({:.1}, {:.1})",
+            truth[0],
+            truth[1]
+        );
+        // Normalized output: pinhole, so pixel flow / focal length.
+        let (fx, fy) = (f64::from(flow.nx[i]) * F, f64::from(flow.ny[i]) * F);
+        assert!((fx - vx).abs() < 1e-3 * speed && (fy - vy).abs() < 1e-3 * speed);
+        assert_eq!(flow.confidence[i], e.confidence as f32);
+    }
+    assert!(
+        checked > 1500,
+        "only {checked} events checked at angle {angle_deg}"
+    );
+}
+
+#[test]
+fn vertical_edge_moving_right_gives_its_speed() {
+    check_edge(0.0, 200.0, 2);
+}
+
+#[test]
+fn diagonal_edge_gives_its_speed_along_the_normal() {
+    check_edge(45.0, 500.0, 2);
+}
+
+#[test]
+fn every_direction_is_sign_correct_and_within_5_percent() {
+    for k in 0..12 {
+        check_edge(15.0 + 30.0 * k as f64, 300.0, 2);
+    }
+}
+
+#[test]
+fn radius_one_window_works_too() {
+    for angle in [0.0, 120.0, 250.0] {
+        check_edge(angle, 800.0, 1);
+    }
+}
+
+#[test]
+fn surfaces_persist_across_slices() {
+    let events = edge_events(30.0, 400.0, 0);
+    let camera = camera();
+    let mut whole = PlaneFitEstimator::new(&camera, PlaneFitParams::default()).expect("valid");
+    let all = whole.process(&events).expect("consistent");
+    let mut split = PlaneFitEstimator::new(&camera, PlaneFitParams::default()).expect("valid");
+    let mid = events.len() / 2;
+    let mut first = Events::default();
+    first.extend_from(&events, 0..mid);
+    let mut second = Events::default();
+    second.extend_from(&events, mid..events.len());
+    let a = split.process(&first).expect("consistent");
+    let valid_first = split.stats().valid;
+    let b = split.process(&second).expect("consistent");
+    let valid_second = split.stats().valid - valid_first;
+    assert_eq!([a.nx.clone(), b.nx.clone()].concat(), all.nx);
+    assert_eq!(
+        [a.confidence.clone(), b.confidence.clone()].concat(),
+        all.confidence
+    );
+    assert_eq!(whole.stats(), split.stats());
+    // A fresh estimator on the second half alone lacks the history for its first events.
+    let mut fresh = PlaneFitEstimator::new(&camera, PlaneFitParams::default()).expect("valid");
+    let c = fresh.process(&second).expect("consistent");
+    assert!(
+        fresh.stats().valid < valid_second,
+        "{} vs {valid_second}",
+        fresh.stats().valid
+    );
+    assert_ne!(c.confidence, b.confidence);
+}
+
+#[test]
+fn polarities_do_not_mix() {
+    // ON edge only: OFF events at the same pixels later see no OFF neighbours.
+    let on = edge_events(0.0, 200.0, 1);
+    let mut est = PlaneFitEstimator::new(&camera(), PlaneFitParams::default()).expect("valid");
+    est.process(&on).expect("consistent");
+    let mut off = Events::default();
+    off.push(10.0, 30, 30, 0);
+    let out = est.process(&off).expect("consistent");
+    assert_eq!(out.confidence, vec![0.0]);
+    assert_eq!((out.nx[0], out.ny[0]), (0.0, 0.0));
+}
+
+#[test]
+fn too_few_points_are_invalid_not_guessed() {
+    let mut ev = Events::default();
+    // Four isolated events and a pair of neighbours: never 5 same-polarity points in a window.
+    for (i, (x, y)) in [(5, 5), (20, 20), (40, 10), (10, 50), (30, 30), (31, 30)]
+        .into_iter()
+        .enumerate()
+    {
+        ev.push(0.001 * i as f64, x, y, 1);
+    }
+    let mut est = PlaneFitEstimator::new(&camera(), PlaneFitParams::default()).expect("valid");
+    let out = est.process(&ev).expect("consistent");
+    assert!(out.confidence.iter().all(|&c| c == 0.0));
+    assert!(out.nx.iter().chain(&out.ny).all(|&v| v == 0.0));
+    assert_eq!(est.stats().valid, 0);
+    assert_eq!(est.stats().events, 6);
+}
+
+#[test]
+fn neighbours_older_than_dt_max_are_not_used() {
+    // 1 px/s: the pixels behind the edge are 1 s old, beyond dt_max = 0.3 s; only the pixels of
+    // the edge itself (a line) remain, which span no plane.
+    let slow = edge_events(0.0, 1.0, 1);
+    let mut est = PlaneFitEstimator::new(&camera(), PlaneFitParams::default()).expect("valid");
+    est.process(&slow).expect("consistent");
+    assert_eq!(est.stats().valid, 0);
+    // With dt_max above 1 s the same stream is measured.
+    let params = PlaneFitParams {
+        dt_max_s: 3.5,
+        ..PlaneFitParams::default()
+    };
+    let mut est = PlaneFitEstimator::new(&camera(), params).expect("valid");
+    let px = est.process_pixels(&slow).expect("consistent");
+    let i = (0..slow.len())
+        .find(|&i| slow.x[i] == 32 && slow.y[i] == 32)
+        .expect("pixel");
+    assert!((px[i].flow_px[0] - 1.0).abs() < 0.05 && px[i].flow_px[1].abs() < 0.05);
+}
+
+#[test]
+fn faster_than_max_speed_is_invalid() {
+    let fast = edge_events(0.0, 50_000.0, 1);
+    let mut est = PlaneFitEstimator::new(&camera(), PlaneFitParams::default()).expect("valid");
+    est.process(&fast).expect("consistent");
+    assert_eq!(est.stats().valid, 0);
+    let params = PlaneFitParams {
+        max_speed_px_s: 100_000.0,
+        ..PlaneFitParams::default()
+    };
+    let mut est = PlaneFitEstimator::new(&camera(), params).expect("valid");
+    est.process(&fast).expect("consistent");
+    assert!(est.stats().valid > 1000);
+}
+
+#[test]
+fn malformed_events_are_counted_and_ignored() {
+    let mut ev = edge_events(0.0, 200.0, 1);
+    let n = ev.len();
+    let last = ev.t[n - 1];
+    ev.push(last, W, 3, 1);
+    ev.push(last, 3, u16::MAX, 1);
+    ev.push(f64::NAN, 3, 3, 1);
+    ev.push(last - 0.1, 40, 40, 1);
+    let mut est = PlaneFitEstimator::new(&camera(), PlaneFitParams::default()).expect("valid");
+    let out = est.process(&ev).expect("consistent");
+    assert_eq!(out.nx.len(), n + 4);
+    assert_eq!(&out.confidence[n..n + 3], &[0.0, 0.0, 0.0]);
+    let s = est.stats();
+    assert_eq!((s.out_of_sensor, s.bad_time, s.out_of_order), (2, 1, 1));
+    // Column lengths that disagree are an error, not a panic.
+    ev.p.pop();
+    assert!(est.process(&ev).is_err());
+}
+
+#[test]
+fn bad_parameters_are_refused() {
+    let cam = camera();
+    for params in [
+        PlaneFitParams {
+            radius: 0,
+            ..PlaneFitParams::default()
+        },
+        PlaneFitParams {
+            radius: 9,
+            ..PlaneFitParams::default()
+        },
+        PlaneFitParams {
+            min_points: 2,
+            ..PlaneFitParams::default()
+        },
+        PlaneFitParams {
+            radius: 1,
+            min_points: 10,
+            ..PlaneFitParams::default()
+        },
+        PlaneFitParams {
+            dt_max_s: f64::NAN,
+            ..PlaneFitParams::default()
+        },
+        PlaneFitParams {
+            outlier_s: -1.0,
+            ..PlaneFitParams::default()
+        },
+    ] {
+        assert!(
+            PlaneFitEstimator::new(&cam, params).is_err(),
+            "{params:?} accepted"
+        );
+    }
+    let empty = CameraInfo::pinhole(0, 10, 100.0, "empty");
+    assert!(PlaneFitEstimator::new(&empty, PlaneFitParams::default()).is_err());
+}
