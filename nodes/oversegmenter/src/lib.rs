@@ -1,0 +1,232 @@
+//! Over-segmentation of a slice (the paper's section 3.2, "Initial Normal Flow Clustering"):
+//! k-means on the per-event features `[x, y, lambda * tau * nx, lambda * tau * ny]`.
+//!
+//! Units (the paper does not give them, so they are chosen here and documented):
+//! - `x, y`: undistorted normalized coordinates of the event's pixel (focal length 1);
+//! - `(nx, ny)`: the event's normal flow vector, normalized units per second;
+//! - `tau` ([`OversegParams::flow_time_scale_s`], default 1 s) turns the flow into a distance.
+//!
+//! With `tau = 1 s` the features are, up to the common factor `f` (focal length in pixels), the
+//! same as "undistorted pixel coordinates and flow in pixels per second", the units of the public
+//! normal-flow code the paper builds on; k-means is invariant to a common scale, so `lambda = 0.5`
+//! means: 1 px/s of flow difference weighs as much as 0.5 px of distance. On a 640 px wide
+//! sensor with flows of a few hundred px/s, position and motion then contribute comparably.
+//!
+//! Events without a valid flow (confidence not above [`OversegParams::min_confidence`], or a
+//! non-finite component) are not clustered; their id is `u16::MAX`.
+
+pub mod kmeans;
+pub mod rng;
+
+use evseg_geometry::{Camera, UndistortTable};
+use evseg_schemas::{CameraInfo, Clusters, Events, NormalFlow};
+
+pub use kmeans::{KMeans, KMeansParams, kmeans};
+
+/// Id of an event that was not clustered.
+pub const UNASSIGNED: u16 = u16::MAX;
+
+/// Over-segmentation settings.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct OversegParams {
+    /// Number of clusters (default 30, the paper's section 3.2).
+    pub k: usize,
+    /// Weight of the flow features against position (default 0.5, the paper's section 3.2).
+    pub lambda: f64,
+    /// Seconds that turn flow (normalized units/s) into a distance (default 1 s; see the crate
+    /// docs for why this makes the paper's `lambda` meaningful).
+    pub flow_time_scale_s: f64,
+    /// Flow with confidence at or below this is invalid (default 0: the NormalFlow convention
+    /// "0 = no estimate").
+    pub min_confidence: f32,
+    /// Most Lloyd iterations (see [`KMeansParams::max_iter`]).
+    pub max_iter: usize,
+    /// Random seed (seeding, subsampling); the same seed gives the same clusters.
+    pub seed: u64,
+    /// Largest subsample used for seeding and iterations (see [`KMeansParams::max_samples`]).
+    pub max_samples: usize,
+}
+
+impl Default for OversegParams {
+    fn default() -> Self {
+        let km = KMeansParams::default();
+        Self {
+            k: 30,
+            lambda: 0.5,
+            flow_time_scale_s: 1.0,
+            min_confidence: 0.0,
+            max_iter: km.max_iter,
+            seed: km.seed,
+            max_samples: km.max_samples,
+        }
+    }
+}
+
+/// Invalid parameters or malformed input.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum OversegError {
+    /// A parameter is out of range.
+    #[error("parameter {name} = {value} is invalid: {why}")]
+    Param {
+        /// Parameter name.
+        name: &'static str,
+        /// Its value, printed.
+        value: String,
+        /// What is allowed.
+        why: &'static str,
+    },
+    /// The event columns have different lengths.
+    #[error("slice events have columns of different lengths")]
+    EventColumns,
+    /// The flow columns have different lengths, or a different length from the events.
+    #[error("normal flow has nx/ny/confidence lengths {nx}/{ny}/{confidence} for {events} events")]
+    FlowLength {
+        /// Length of `nx`.
+        nx: usize,
+        /// Length of `ny`.
+        ny: usize,
+        /// Length of `confidence`.
+        confidence: usize,
+        /// Events in the slice.
+        events: usize,
+    },
+    /// An event lies outside the sensor.
+    #[error("event {index} at pixel ({x}, {y}) is outside the {width}x{height} sensor")]
+    EventOutside {
+        /// Event index in the slice.
+        index: usize,
+        /// Column, pixels.
+        x: u16,
+        /// Row, pixels.
+        y: u16,
+        /// Sensor width, pixels.
+        width: u16,
+        /// Sensor height, pixels.
+        height: u16,
+    },
+}
+
+/// Checks that `flow` is aligned with `events`.
+pub fn check_lengths(events: &Events, flow: &NormalFlow) -> Result<(), OversegError> {
+    if !events.is_consistent() {
+        return Err(OversegError::EventColumns);
+    }
+    let n = events.len();
+    if flow.nx.len() != n || flow.ny.len() != n || flow.confidence.len() != n {
+        return Err(OversegError::FlowLength {
+            nx: flow.nx.len(),
+            ny: flow.ny.len(),
+            confidence: flow.confidence.len(),
+            events: n,
+        });
+    }
+    Ok(())
+}
+
+/// The over-segmentation stage; keeps the undistortion table of the last camera seen.
+#[derive(Debug, Clone)]
+pub struct Oversegmenter {
+    params: OversegParams,
+    table: Option<(CameraInfo, UndistortTable)>,
+}
+
+impl Oversegmenter {
+    /// A stage with `params`, checked.
+    pub fn new(params: OversegParams) -> Result<Self, OversegError> {
+        let bad = |name, value: String, why| Err(OversegError::Param { name, value, why });
+        if params.k == 0 || params.k >= UNASSIGNED as usize {
+            return bad("k", params.k.to_string(), "must be in 1..65535");
+        }
+        if !(params.lambda.is_finite() && params.lambda >= 0.0) {
+            return bad("lambda", params.lambda.to_string(), "must be finite and >= 0");
+        }
+        if !(params.flow_time_scale_s.is_finite() && params.flow_time_scale_s >= 0.0) {
+            return bad(
+                "flow_time_scale_s",
+                params.flow_time_scale_s.to_string(),
+                "must be finite and >= 0",
+            );
+        }
+        if params.max_samples == 0 {
+            return bad("max_samples", "0".into(), "must be positive");
+        }
+        if params.min_confidence.is_nan() {
+            return bad("min_confidence", "NaN".into(), "must be a number");
+        }
+        Ok(Self { params, table: None })
+    }
+
+    /// The settings.
+    pub fn params(&self) -> &OversegParams {
+        &self.params
+    }
+
+    fn table(&mut self, camera: &CameraInfo) -> &UndistortTable {
+        if self.table.as_ref().is_none_or(|(c, _)| c != camera) {
+            self.table = Some((camera.clone(), Camera::new(camera).undistort_table()));
+        }
+        match &self.table {
+            Some((_, t)) => t,
+            None => unreachable!("table set just above"),
+        }
+    }
+
+    /// Clusters the events of one slice (`camera`, `events`) with their normal `flow`.
+    pub fn segment(
+        &mut self,
+        camera: &CameraInfo,
+        events: &Events,
+        flow: &NormalFlow,
+    ) -> Result<Clusters, OversegError> {
+        check_lengths(events, flow)?;
+        let p = self.params;
+        let scale = p.lambda * p.flow_time_scale_s;
+        let table = self.table(camera);
+        let mut feats = Vec::with_capacity(events.len());
+        let mut index = Vec::with_capacity(events.len());
+        for i in 0..events.len() {
+            let (u, v) = (events.x[i], events.y[i]);
+            let Some([x, y]) = table.get(u, v) else {
+                return Err(OversegError::EventOutside {
+                    index: i,
+                    x: u,
+                    y: v,
+                    width: table.width,
+                    height: table.height,
+                });
+            };
+            let (nx, ny, c) = (flow.nx[i], flow.ny[i], flow.confidence[i]);
+            if !(c > p.min_confidence && nx.is_finite() && ny.is_finite()) {
+                continue;
+            }
+            feats.push([
+                f64::from(x),
+                f64::from(y),
+                scale * f64::from(nx),
+                scale * f64::from(ny),
+            ]);
+            index.push(i);
+        }
+        let km = kmeans(
+            &feats,
+            &KMeansParams {
+                k: p.k,
+                max_iter: p.max_iter,
+                seed: p.seed,
+                max_samples: p.max_samples,
+            },
+        );
+        let mut id = vec![UNASSIGNED; events.len()];
+        for (&i, &a) in index.iter().zip(&km.assignment) {
+            // a < centers.len() <= k < u16::MAX (checked in `new`).
+            id[i] = a as u16;
+        }
+        Ok(Clusters {
+            id,
+            count: km.centers.len() as u16,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests;

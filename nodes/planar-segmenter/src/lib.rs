@@ -1,0 +1,344 @@
+//! Preliminary foreground/background segregation (the paper's section 3.3).
+//!
+//! Per slice:
+//! 1. Every event with a valid normal flow `(nx, ny)` (normalized units/s) gives the unit normal
+//!    direction `n0 = (nx, ny) / |(nx, ny)|` and length `n = |(nx, ny)|`.
+//! 2. With the slice's IMU rotation rate `w` (rad/s, camera frame) the rotational part is removed:
+//!    `n_derot = n - (B(x) w) . n0`.
+//! 3. The 8-parameter planar model is fitted: `(C(x)^T n0) . a = n_derot` (least squares,
+//!    optionally robust; see [`Robust`]).
+//! 4. Residual `r = n_derot - (C(x)^T n0) . a` per event (normalized units/s).
+//! 5. `|r|` is smoothed with a Gaussian on the pixel grid ([`smooth`]).
+//! 6. 2-means on the smoothed magnitudes; the cluster with the lower centre is background.
+//!
+//! # The model parameters `a`
+//! For a plane `1/Z = (alpha x + beta y + gamma) / d` and camera motion `(t, w)` the flow is
+//! `C(x) a` with (the paper's `a`, divided by `d`, with its 4th entry's sign corrected as in
+//! `evseg_geometry::motion`'s test):
+//! `a = ((-d wy + tz alpha), (d wx + tz beta), (tz gamma - tx alpha), (d wz - tx beta),
+//!       (-d wy - tx gamma), (tz gamma - ty beta), (-d wz - ty alpha), (d wx - ty gamma)) / d`.
+//! The rotational flow `B(x) w` lies in the span of `C(x)` (it is the `d`-terms above), so after
+//! derotation the fitted `a` is the translational/planar part only, i.e. the same formula with
+//! `w = 0`: `a = (tz alpha, tz beta, tz gamma - tx alpha, -tx beta, -tx gamma,
+//! tz gamma - ty beta, -ty alpha, -ty gamma) / d` (normalized units/s). Without a rotation rate
+//! (no IMU, or [`PlanarParams::derotate`] off) `a` includes the rotation terms.
+//!
+//! # Deviations from the paper, all parameters
+//! - The fit is robust by default (Huber IRLS); the paper says "least squares", available as
+//!   [`Robust::LeastSquares`].
+//! - 2-means always splits in two; when the two centres are closer than
+//!   [`PlanarParams::min_center_gap`] the slice is taken as all background (a scene without a
+//!   moving object would otherwise have half its noise called foreground).
+
+pub mod fit;
+pub mod smooth;
+pub mod two_means;
+
+use evseg_geometry::{Camera, UndistortTable, rotational_flow};
+use evseg_schemas::{CameraInfo, Events, NormalFlow, Residuals};
+
+pub use fit::{Equation, FitParams, Robust, fit_planar};
+pub use smooth::SmoothGrid;
+pub use two_means::{TwoMeans, two_means};
+
+/// Settings of the planar segmenter.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PlanarParams {
+    /// Flow with confidence at or below this is invalid (default 0: the NormalFlow convention
+    /// "0 = no estimate").
+    pub min_confidence: f32,
+    /// Subtract the IMU rotational flow before the fit when the slice has a rotation rate
+    /// (default true, the paper's section 3.3).
+    pub derotate: bool,
+    /// Least-squares settings.
+    pub fit: FitParams,
+    /// Side of a smoothing-grid cell, pixels (default 2: halves the grid work, well below the
+    /// smoothing scale).
+    pub cell_px: u16,
+    /// Standard deviation of the Gaussian smoothing, pixels (default 5: not given in the paper;
+    /// a few pixels removes per-event flow noise without spreading an object's residual far
+    /// past its edges on 346-640 px sensors).
+    pub sigma_px: f64,
+    /// Smallest distance between the 2-means centres, normalized units/s, for a foreground to
+    /// exist (default 0.02: about 10 px/s at f = 500 px, below the per-event accuracy of
+    /// estimated normal flow).
+    pub min_center_gap: f64,
+    /// Most 2-means iterations (default 100; 1-D Lloyd converges in a handful).
+    pub two_means_iter: usize,
+    /// Classify events without valid flow by the smoothed residual at their pixel when it has at
+    /// least [`PlanarParams::min_support`] support (default true); otherwise they are background.
+    pub classify_invalid: bool,
+    /// Support needed to classify an event without flow (Gaussian-weighted count of valid
+    /// events around it, 1 = one event in the same cell; default 1).
+    pub min_support: f64,
+}
+
+impl Default for PlanarParams {
+    fn default() -> Self {
+        Self {
+            min_confidence: 0.0,
+            derotate: true,
+            fit: FitParams::default(),
+            cell_px: 2,
+            sigma_px: 5.0,
+            min_center_gap: 0.02,
+            two_means_iter: 100,
+            classify_invalid: true,
+            min_support: 1.0,
+        }
+    }
+}
+
+/// Invalid parameters or malformed input.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum PlanarError {
+    /// A parameter is out of range.
+    #[error("parameter {name} = {value} is invalid: {why}")]
+    Param {
+        /// Parameter name.
+        name: &'static str,
+        /// Its value, printed.
+        value: String,
+        /// What is allowed.
+        why: &'static str,
+    },
+    /// The event columns have different lengths.
+    #[error("slice events have columns of different lengths")]
+    EventColumns,
+    /// The flow columns have different lengths, or a different length from the events.
+    #[error("normal flow has nx/ny/confidence lengths {nx}/{ny}/{confidence} for {events} events")]
+    FlowLength {
+        /// Length of `nx`.
+        nx: usize,
+        /// Length of `ny`.
+        ny: usize,
+        /// Length of `confidence`.
+        confidence: usize,
+        /// Events in the slice.
+        events: usize,
+    },
+    /// An event lies outside the sensor.
+    #[error("event {index} at pixel ({x}, {y}) is outside the {width}x{height} sensor")]
+    EventOutside {
+        /// Event index in the slice.
+        index: usize,
+        /// Column, pixels.
+        x: u16,
+        /// Row, pixels.
+        y: u16,
+        /// Sensor width, pixels.
+        width: u16,
+        /// Sensor height, pixels.
+        height: u16,
+    },
+    /// The slice's rotation rate is not finite.
+    #[error("rotation rate {0:?} rad/s is not finite")]
+    Omega([f64; 3]),
+}
+
+/// Everything the segmenter computed for one slice.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PlanarResult {
+    /// The message: residual per event (NaN without valid flow), background flag, and the model
+    /// `a` (8 values, see the crate docs; empty when fewer than 8 events had valid flow or the
+    /// system was singular, in which case every event is background).
+    pub residuals: Residuals,
+    /// Smoothed `|r|` per event, normalized units/s (NaN where there was no support).
+    pub smoothed: Vec<f32>,
+    /// The 2-means split of the smoothed magnitudes (`None` without valid residuals).
+    pub split: Option<TwoMeans>,
+    /// True when a foreground was separated (centres at least `min_center_gap` apart).
+    pub has_foreground: bool,
+    /// Events with valid flow (equations of the fit).
+    pub fitted_events: usize,
+    /// True when the IMU rotation was subtracted.
+    pub derotated: bool,
+}
+
+/// The planar segmenter; keeps the undistortion table of the last camera seen.
+#[derive(Debug, Clone)]
+pub struct PlanarSegmenter {
+    params: PlanarParams,
+    table: Option<(CameraInfo, UndistortTable)>,
+}
+
+impl PlanarSegmenter {
+    /// A segmenter with `params`, checked.
+    pub fn new(params: PlanarParams) -> Result<Self, PlanarError> {
+        let bad = |name, value: String, why| Err(PlanarError::Param { name, value, why });
+        if params.cell_px == 0 {
+            return bad("cell_px", "0".into(), "must be >= 1");
+        }
+        if !(params.sigma_px.is_finite() && params.sigma_px >= 0.0) {
+            return bad("sigma_px", params.sigma_px.to_string(), "must be finite and >= 0");
+        }
+        if !(params.min_center_gap.is_finite() && params.min_center_gap >= 0.0) {
+            return bad(
+                "min_center_gap",
+                params.min_center_gap.to_string(),
+                "must be finite and >= 0",
+            );
+        }
+        if !(params.fit.ridge.is_finite() && params.fit.ridge >= 0.0) {
+            return bad("ridge", params.fit.ridge.to_string(), "must be finite and >= 0");
+        }
+        match params.fit.robust {
+            Robust::Huber { k: v } | Robust::Tukey { c: v } if !(v.is_finite() && v > 0.0) => {
+                return bad("robust threshold", v.to_string(), "must be finite and > 0");
+            }
+            _ => {}
+        }
+        if params.min_confidence.is_nan() || params.min_support.is_nan() {
+            return bad("min_confidence/min_support", "NaN".into(), "must be numbers");
+        }
+        Ok(Self { params, table: None })
+    }
+
+    /// The settings.
+    pub fn params(&self) -> &PlanarParams {
+        &self.params
+    }
+
+    fn table(&mut self, camera: &CameraInfo) -> &UndistortTable {
+        if self.table.as_ref().is_none_or(|(c, _)| c != camera) {
+            self.table = Some((camera.clone(), Camera::new(camera).undistort_table()));
+        }
+        match &self.table {
+            Some((_, t)) => t,
+            None => unreachable!("table set just above"),
+        }
+    }
+
+    /// Segments one slice: `events` seen by `camera`, their normal `flow`, and the slice's mean
+    /// rotation rate `omega` (rad/s, camera frame; `None` without IMU).
+    pub fn segment(
+        &mut self,
+        camera: &CameraInfo,
+        events: &Events,
+        flow: &NormalFlow,
+        omega: Option<[f64; 3]>,
+    ) -> Result<PlanarResult, PlanarError> {
+        check_lengths(events, flow)?;
+        if let Some(w) = omega
+            && !w.iter().all(|v| v.is_finite())
+        {
+            return Err(PlanarError::Omega(w));
+        }
+        let p = self.params;
+        let w = omega.filter(|_| p.derotate);
+        let table = self.table(camera);
+        let n = events.len();
+
+        // Equations of the events with valid flow.
+        let mut eqs = Vec::with_capacity(n);
+        let mut index = Vec::with_capacity(n);
+        for i in 0..n {
+            let (u, v) = (events.x[i], events.y[i]);
+            let Some([x, y]) = table.get(u, v) else {
+                return Err(PlanarError::EventOutside {
+                    index: i,
+                    x: u,
+                    y: v,
+                    width: table.width,
+                    height: table.height,
+                });
+            };
+            let (fx, fy, c) = (f64::from(flow.nx[i]), f64::from(flow.ny[i]), flow.confidence[i]);
+            let len = fx.hypot(fy);
+            if !(c > p.min_confidence && len.is_finite() && len > 0.0) {
+                continue;
+            }
+            let n0 = [fx / len, fy / len];
+            let (x, y) = (f64::from(x), f64::from(y));
+            let b = match w {
+                Some(w) => {
+                    let r = rotational_flow(x, y, w);
+                    len - (r[0] * n0[0] + r[1] * n0[1])
+                }
+                None => len,
+            };
+            eqs.push(Equation::new(x, y, n0, b));
+            index.push(i);
+        }
+
+        let mut residual = vec![f32::NAN; n];
+        let mut background = vec![true; n];
+        let mut smoothed = vec![f32::NAN; n];
+        let Some(a) = fit_planar(&eqs, &p.fit) else {
+            return Ok(PlanarResult {
+                residuals: Residuals {
+                    residual,
+                    background,
+                    model: vec![],
+                },
+                smoothed,
+                split: None,
+                has_foreground: false,
+                fitted_events: eqs.len(),
+                derotated: w.is_some(),
+            });
+        };
+
+        let mut grid = SmoothGrid::new(camera.width, camera.height, p.cell_px);
+        for (e, &i) in eqs.iter().zip(&index) {
+            let r = e.residual(&a);
+            residual[i] = r as f32;
+            grid.add(events.x[i], events.y[i], r.abs());
+        }
+        grid.blur(p.sigma_px);
+        let mut values = Vec::with_capacity(index.len());
+        let mut support = vec![0.0; n];
+        for i in 0..n {
+            if let Some((s, sup)) = grid.get(events.x[i], events.y[i]) {
+                smoothed[i] = s as f32;
+                support[i] = sup;
+            }
+        }
+        for &i in &index {
+            values.push(f64::from(smoothed[i]));
+        }
+        let split = two_means(&values, p.two_means_iter);
+        let has_foreground = split.is_some_and(|s| s.centers[1] - s.centers[0] >= p.min_center_gap);
+        if let (Some(s), true) = (split, has_foreground) {
+            for i in 0..n {
+                let valid = residual[i].is_finite();
+                let judged = valid || (p.classify_invalid && support[i] >= p.min_support);
+                if judged && f64::from(smoothed[i]) > s.threshold {
+                    background[i] = false;
+                }
+            }
+        }
+        Ok(PlanarResult {
+            residuals: Residuals {
+                residual,
+                background,
+                model: a.to_vec(),
+            },
+            smoothed,
+            split,
+            has_foreground,
+            fitted_events: eqs.len(),
+            derotated: w.is_some(),
+        })
+    }
+}
+
+/// Checks that `flow` is aligned with `events`.
+pub fn check_lengths(events: &Events, flow: &NormalFlow) -> Result<(), PlanarError> {
+    if !events.is_consistent() {
+        return Err(PlanarError::EventColumns);
+    }
+    let n = events.len();
+    if flow.nx.len() != n || flow.ny.len() != n || flow.confidence.len() != n {
+        return Err(PlanarError::FlowLength {
+            nx: flow.nx.len(),
+            ny: flow.ny.len(),
+            confidence: flow.confidence.len(),
+            events: n,
+        });
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,124 @@
+//! `evseg-planar-segmenter`: preliminary foreground/background split by the residuals of a
+//! planar normal-flow fit (paper section 3.3).
+
+use std::process::ExitCode;
+
+use evseg_planar_segmenter::{FitParams, PlanarParams, PlanarSegmenter, Robust};
+use evseg_runtime::describe::Describe;
+use evseg_runtime::{BoxError, Inputs, NodeConfig, Outputs, Stage, run_stage};
+use evseg_schemas::{NormalFlow, Residuals, Slice};
+
+struct Node(PlanarSegmenter);
+
+impl Stage for Node {
+    fn process(&mut self, input: &Inputs, out: &mut Outputs) -> Result<(), BoxError> {
+        let slice: Slice = input.get("slices")?;
+        let flow: NormalFlow = input.get("flow")?;
+        let r = self.0.segment(&slice.camera, &slice.events, &flow, slice.omega)?;
+        tracing::debug!(
+            slice = input.seq(),
+            fitted = r.fitted_events,
+            derotated = r.derotated,
+            foreground = r.has_foreground,
+            "planar fit"
+        );
+        let (t0, t1) = input.span();
+        out.send("residuals", input.seq(), t0, t1, &r.residuals)?;
+        Ok(())
+    }
+}
+
+fn robust_from(name: &str, threshold: Option<f64>) -> Result<Robust, BoxError> {
+    Ok(match name {
+        "least_squares" => Robust::LeastSquares,
+        "huber" => Robust::Huber {
+            k: threshold.unwrap_or(1.345),
+        },
+        "tukey" => Robust::Tukey {
+            c: threshold.unwrap_or(4.685),
+        },
+        other => {
+            return Err(format!("robust must be least_squares, huber or tukey, got {other:?}").into());
+        }
+    })
+}
+
+fn main() -> ExitCode {
+    let d = PlanarParams::default();
+    let description = Describe::new(
+        "evseg-planar-segmenter",
+        "Planar (8-parameter) normal-flow fit after IMU derotation; smoothed residuals, 2-means \
+         into background/foreground (paper section 3.3)",
+    )
+    .input::<Slice>("slices", "event slices (omega: IMU rotation rate, camera frame)")
+    .input::<NormalFlow>("flow", "per-event normal flow of the same slices")
+    .output::<Residuals>(
+        "residuals",
+        "residual per event (normalized units/s, NaN without flow), background flag, model = the \
+         8 translational plane-flow parameters a (empty when the fit failed)",
+    )
+    .param(
+        "min_confidence",
+        f64::from(d.min_confidence),
+        "flow at or below this confidence is invalid",
+    )
+    .param(
+        "derotate",
+        d.derotate,
+        "subtract the IMU rotational flow before the fit",
+    )
+    .param(
+        "robust",
+        "huber",
+        "least_squares (the paper), huber or tukey (iteratively reweighted)",
+    )
+    .param(
+        "robust_threshold",
+        serde_json::Value::Null,
+        "weight threshold in robust standard deviations (default huber 1.345, tukey 4.685)",
+    )
+    .param("robust_iterations", d.fit.iterations, "reweighting rounds")
+    .param("ridge", d.fit.ridge, "Tikhonov regularization per equation")
+    .param("cell_px", d.cell_px, "smoothing grid cell, pixels")
+    .param(
+        "sigma_px",
+        d.sigma_px,
+        "Gaussian smoothing standard deviation, pixels",
+    )
+    .param(
+        "min_center_gap",
+        d.min_center_gap,
+        "2-means centres closer than this (normalized units/s) = no foreground",
+    )
+    .param("two_means_iter", d.two_means_iter, "most 2-means iterations")
+    .param(
+        "classify_invalid",
+        d.classify_invalid,
+        "label events without flow by the smoothed residual around them",
+    )
+    .param(
+        "min_support",
+        d.min_support,
+        "support needed to label an event without flow",
+    )
+    .build();
+    run_stage(description, |cfg: &NodeConfig| {
+        let robust: String = cfg.param("robust")?;
+        let params = PlanarParams {
+            min_confidence: cfg.param("min_confidence")?,
+            derotate: cfg.param("derotate")?,
+            fit: FitParams {
+                robust: robust_from(&robust, cfg.param_opt("robust_threshold")?)?,
+                iterations: cfg.param("robust_iterations")?,
+                ridge: cfg.param("ridge")?,
+            },
+            cell_px: cfg.param("cell_px")?,
+            sigma_px: cfg.param("sigma_px")?,
+            min_center_gap: cfg.param("min_center_gap")?,
+            two_means_iter: cfg.param("two_means_iter")?,
+            classify_invalid: cfg.param("classify_invalid")?,
+            min_support: cfg.param("min_support")?,
+        };
+        Ok(Node(PlanarSegmenter::new(params)?))
+    })
+}

@@ -1,0 +1,304 @@
+use super::*;
+use evseg_geometry::{planar_flow, translational_flow};
+
+fn camera() -> CameraInfo {
+    CameraInfo::pinhole(320, 240, 250.0, "test")
+}
+
+/// SplitMix64 (tests only): uniform in [0, 1).
+struct Rng(u64);
+impl Rng {
+    fn next(&mut self) -> f64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
+const T: [f64; 3] = [0.3, -0.1, 0.5];
+const W: [f64; 3] = [0.05, -0.1, 0.2];
+/// Plane `1/Z = (alpha x + beta y + gamma) / d`.
+const PLANE: (f64, f64, f64, f64) = (0.1, -0.2, 1.0, 3.0);
+
+fn plane_inv_z(x: f64, y: f64) -> f64 {
+    (PLANE.0 * x + PLANE.1 * y + PLANE.2) / PLANE.3
+}
+
+/// Expected translational model `a` (crate docs, w = 0).
+fn expected_a() -> [f64; 8] {
+    let (al, be, ga, d) = PLANE;
+    [
+        T[2] * al,
+        T[2] * be,
+        T[2] * ga - T[0] * al,
+        -T[0] * be,
+        -T[0] * ga,
+        T[2] * ga - T[1] * be,
+        -T[1] * al,
+        -T[1] * ga,
+    ]
+    .map(|v| v / d)
+}
+
+/// `n` events at random pixels; flow `u(x, y, in_object)`; a random gradient direction n0 per
+/// event gives the normal flow vector `(u . n0) n0`, plus Gaussian-ish noise of `noise` along n0.
+/// Events in the 60x60 px square at (200, 60) are "object" when `object` is set.
+fn scene(
+    n: usize,
+    object: bool,
+    noise: f64,
+    u: impl Fn(f64, f64, bool) -> [f64; 2],
+) -> (Events, NormalFlow, Vec<bool>) {
+    let cam = Camera::new(&camera());
+    let mut rng = Rng(42);
+    let (mut ev, mut fl, mut truth) = (Events::with_capacity(n), NormalFlow::default(), vec![]);
+    for i in 0..n {
+        let (pu, pv) = ((rng.next() * 320.0) as u16, (rng.next() * 240.0) as u16);
+        let in_obj = object && (200..260).contains(&pu) && (60..120).contains(&pv);
+        let [x, y] = cam.pixel_to_normalized(f64::from(pu), f64::from(pv));
+        let flow = u(x, y, in_obj);
+        let th = rng.next() * std::f64::consts::TAU;
+        let n0 = [th.cos(), th.sin()];
+        // Sum of 4 uniforms: roughly Gaussian, standard deviation `noise`.
+        let e = noise * ((0..4).map(|_| rng.next()).sum::<f64>() - 2.0) * 3f64.sqrt();
+        let len = flow[0] * n0[0] + flow[1] * n0[1] + e;
+        ev.push(i as f64 * 1e-6, pu, pv, 1);
+        fl.nx.push((len * n0[0]) as f32);
+        fl.ny.push((len * n0[1]) as f32);
+        fl.confidence.push(1.0);
+        truth.push(in_obj);
+    }
+    (ev, fl, truth)
+}
+
+fn camera_flow(x: f64, y: f64, _: bool) -> [f64; 2] {
+    let tr = translational_flow(x, y, T, plane_inv_z(x, y));
+    let ro = rotational_flow(x, y, W);
+    [tr[0] + ro[0], tr[1] + ro[1]]
+}
+
+/// The camera's flow on the plane, except inside the object: a box 1.5 m away moving with
+/// (-1, 0.4, 0) m/s relative to the camera, seen with the same camera rotation.
+fn flow_with_object(x: f64, y: f64, obj: bool) -> [f64; 2] {
+    if !obj {
+        return camera_flow(x, y, false);
+    }
+    let tr = translational_flow(x, y, [T[0] + 1.0, T[1] - 0.4, T[2]], 1.0 / 1.5);
+    let ro = rotational_flow(x, y, W);
+    [tr[0] + ro[0], tr[1] + ro[1]]
+}
+
+fn ls() -> PlanarParams {
+    PlanarParams {
+        fit: FitParams {
+            robust: Robust::LeastSquares,
+            ..Default::default()
+        },
+        ..Default::default()
+    }
+}
+
+#[test]
+fn plane_gives_zero_residuals_the_expected_model_and_all_background() {
+    let (ev, fl, _) = scene(3000, false, 0.0, camera_flow);
+    for params in [ls(), PlanarParams::default()] {
+        let mut s = PlanarSegmenter::new(params).unwrap();
+        let r = s.segment(&camera(), &ev, &fl, Some(W)).unwrap();
+        assert!(r.derotated);
+        assert_eq!(r.fitted_events, 3000);
+        let max_r = r.residuals.residual.iter().fold(0f32, |m, v| m.max(v.abs()));
+        assert!(max_r < 1e-5, "max residual {max_r}");
+        for (a, e) in r.residuals.model.iter().zip(expected_a()) {
+            assert!(
+                (a - e).abs() < 1e-5,
+                "{:?} vs {:?}",
+                r.residuals.model,
+                expected_a()
+            );
+        }
+        assert!(!r.has_foreground);
+        assert!(r.residuals.background.iter().all(|&b| b));
+    }
+}
+
+#[test]
+fn noisy_plane_is_still_all_background() {
+    // 0.005 normalized units/s = 1.25 px/s at f = 250.
+    let (ev, fl, _) = scene(3000, false, 0.005, camera_flow);
+    let r = PlanarSegmenter::new(PlanarParams::default())
+        .unwrap()
+        .segment(&camera(), &ev, &fl, Some(W))
+        .unwrap();
+    let bg = r.residuals.background.iter().filter(|&&b| b).count();
+    assert_eq!(bg, 3000, "split {:?}", r.split);
+}
+
+fn check_object_found(params: PlanarParams, noise: f64) {
+    let (ev, fl, truth) = scene(6000, true, noise, flow_with_object);
+    let r = PlanarSegmenter::new(params)
+        .unwrap()
+        .segment(&camera(), &ev, &fl, Some(W))
+        .unwrap();
+    let obj = truth.iter().filter(|&&t| t).count();
+    let fg_hit = (0..ev.len())
+        .filter(|&i| truth[i] && !r.residuals.background[i])
+        .count();
+    let bg_hit = (0..ev.len())
+        .filter(|&i| !truth[i] && r.residuals.background[i])
+        .count();
+    let (fg_rate, bg_rate) = (
+        fg_hit as f64 / obj as f64,
+        bg_hit as f64 / (ev.len() - obj) as f64,
+    );
+    assert!(obj > 150, "object has {obj} events");
+    assert!(r.has_foreground);
+    assert!(fg_rate > 0.9, "object events called foreground: {fg_rate}");
+    assert!(bg_rate > 0.9, "background events called background: {bg_rate}");
+    // The object's raw residuals are far larger than the background's.
+    let mean_abs = |want: bool| {
+        let v: Vec<f64> = (0..ev.len())
+            .filter(|&i| truth[i] == want)
+            .map(|i| f64::from(r.residuals.residual[i]).abs())
+            .collect();
+        v.iter().sum::<f64>() / v.len() as f64
+    };
+    assert!(
+        mean_abs(true) > 5.0 * mean_abs(false),
+        "{} {}",
+        mean_abs(true),
+        mean_abs(false)
+    );
+}
+
+#[test]
+fn moving_object_is_foreground_with_robust_fit() {
+    check_object_found(PlanarParams::default(), 0.01);
+}
+
+#[test]
+fn moving_object_is_foreground_with_plain_least_squares() {
+    check_object_found(ls(), 0.01);
+}
+
+#[test]
+fn robust_fit_recovers_the_background_model_despite_the_object() {
+    let (ev, fl, _) = scene(6000, true, 0.0, flow_with_object);
+    let r = PlanarSegmenter::new(PlanarParams::default())
+        .unwrap()
+        .segment(&camera(), &ev, &fl, Some(W))
+        .unwrap();
+    let a = &r.residuals.model;
+    let err: f64 = a
+        .iter()
+        .zip(expected_a())
+        .map(|(a, e)| (a - e).powi(2))
+        .sum::<f64>()
+        .sqrt();
+    assert!(err < 0.01, "model {a:?} vs {:?}", expected_a());
+}
+
+#[test]
+fn rotation_is_removed_with_omega_and_absorbed_without() {
+    let rot = |x: f64, y: f64, _: bool| rotational_flow(x, y, W);
+    let (ev, fl, _) = scene(2000, false, 0.0, rot);
+    let mut s = PlanarSegmenter::new(ls()).unwrap();
+    let r = s.segment(&camera(), &ev, &fl, Some(W)).unwrap();
+    assert!(r.residuals.residual.iter().all(|v| v.abs() < 1e-5));
+    assert!(
+        r.residuals.model.iter().all(|v| v.abs() < 1e-5),
+        "{:?}",
+        r.residuals.model
+    );
+    // Without the IMU the plane model takes the rotation: a = (-wy, wx, 0, wz, -wy, 0, -wz, wx).
+    let r = s.segment(&camera(), &ev, &fl, None).unwrap();
+    assert!(!r.derotated);
+    let want = [-W[1], W[0], 0.0, W[2], -W[1], 0.0, -W[2], W[0]];
+    for (a, e) in r.residuals.model.iter().zip(want) {
+        assert!((a - e).abs() < 1e-5, "{:?}", r.residuals.model);
+    }
+    // And planar_flow of that model is the rotational flow.
+    let f = planar_flow(0.2, -0.1, &want);
+    let g = rotational_flow(0.2, -0.1, W);
+    assert!((f[0] - g[0]).abs() < 1e-12 && (f[1] - g[1]).abs() < 1e-12);
+}
+
+#[test]
+fn invalid_flow_gives_nan_and_too_few_events_give_no_model() {
+    let (ev, mut fl, _) = scene(500, false, 0.0, camera_flow);
+    for i in (0..500).step_by(2) {
+        fl.confidence[i] = 0.0;
+    }
+    let mut s = PlanarSegmenter::new(PlanarParams::default()).unwrap();
+    let r = s.segment(&camera(), &ev, &fl, Some(W)).unwrap();
+    assert_eq!(r.fitted_events, 250);
+    for i in 0..500 {
+        assert_eq!(r.residuals.residual[i].is_nan(), i % 2 == 0);
+    }
+    assert_eq!(r.residuals.model.len(), 8);
+    let few = 5;
+    let mut ev5 = Events::default();
+    ev5.extend_from(&ev, 0..few);
+    let fl5 = NormalFlow {
+        nx: fl.nx[..few].to_vec(),
+        ny: fl.ny[..few].to_vec(),
+        confidence: vec![1.0; few],
+    };
+    let r = s.segment(&camera(), &ev5, &fl5, Some(W)).unwrap();
+    assert!(r.residuals.model.is_empty());
+    assert!(r.residuals.background.iter().all(|&b| b));
+    let r = s
+        .segment(&camera(), &Events::default(), &NormalFlow::default(), None)
+        .unwrap();
+    assert!(r.residuals.residual.is_empty() && r.residuals.model.is_empty());
+}
+
+#[test]
+fn malformed_input_is_an_error() {
+    let (mut ev, mut fl, _) = scene(20, false, 0.0, camera_flow);
+    let mut s = PlanarSegmenter::new(PlanarParams::default()).unwrap();
+    assert!(matches!(
+        s.segment(&camera(), &ev, &fl, Some([f64::NAN, 0.0, 0.0])),
+        Err(PlanarError::Omega(_))
+    ));
+    fl.nx.push(0.0);
+    assert!(matches!(
+        s.segment(&camera(), &ev, &fl, None),
+        Err(PlanarError::FlowLength {
+            nx: 21,
+            events: 20,
+            ..
+        })
+    ));
+    fl.nx.pop();
+    ev.y[7] = 240;
+    assert!(matches!(
+        s.segment(&camera(), &ev, &fl, None),
+        Err(PlanarError::EventOutside { index: 7, y: 240, .. })
+    ));
+    ev.t.pop();
+    assert_eq!(
+        s.segment(&camera(), &ev, &fl, None),
+        Err(PlanarError::EventColumns)
+    );
+    for p in [
+        PlanarParams {
+            cell_px: 0,
+            ..Default::default()
+        },
+        PlanarParams {
+            sigma_px: -1.0,
+            ..Default::default()
+        },
+        PlanarParams {
+            fit: FitParams {
+                robust: Robust::Huber { k: 0.0 },
+                ..Default::default()
+            },
+            ..Default::default()
+        },
+    ] {
+        assert!(matches!(PlanarSegmenter::new(p), Err(PlanarError::Param { .. })));
+    }
+}
