@@ -2,7 +2,7 @@
 //!
 //! `cargo run --release -p evseg-normal-flow --example score_presets -- [options] [presets...]`
 //! Options: `--seconds S` (default 0.5), `--slice-ms M` (default 30), `--radius R`,
-//! `--dt-min-ms X`, `--dt-max-ms X`, `--min-confidence C`, `--json` (one JSON line per preset).
+//! `--dt-min-ms X`, `--dt-max-ms X`, `--min-confidence C` (estimator's, default 0.5), `--json` (one JSON line per preset).
 //! Default presets: one-object, two-objects, fast-rotation (seed 1).
 
 use evseg_normal_flow::{PlaneFitEstimator, PlaneFitParams, ScoreParams, Scorer};
@@ -15,7 +15,7 @@ fn value<T: std::str::FromStr>(args: &mut impl Iterator<Item = String>, flag: &s
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut params = PlaneFitParams::default();
-    let mut score_params = ScoreParams::default();
+    let score_params = ScoreParams::default();
     let (mut seconds, mut slice_s, mut json) = (0.5, 0.03, false);
     let mut presets = Vec::new();
     let mut args = std::env::args().skip(1);
@@ -26,7 +26,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             "--radius" => params.radius = value(&mut args, &a)?,
             "--dt-min-ms" => params.dt_min_s = value::<f64>(&mut args, &a)? * 1e-3,
             "--dt-max-ms" => params.dt_max_s = value::<f64>(&mut args, &a)? * 1e-3,
-            "--min-confidence" => score_params.min_confidence = value(&mut args, &a)?,
+            "--min-confidence" => params.min_confidence = value(&mut args, &a)?,
             "--json" => json = true,
             _ => presets.push(a),
         }

@@ -239,8 +239,9 @@ impl PlaneFitEstimator {
         }
     }
 
-    /// Turns a fit into an estimate, or `None` when it is too fast or flat. Confidence is the
-    /// inlier share times `1 - rms / outlier_s` (1 for a perfect plane through every point).
+    /// Turns a fit into an estimate, or `None` when it is too fast, flat, or its confidence is at
+    /// or below `min_confidence` (and never 0). Confidence is the inlier share times
+    /// `1 - rms / outlier_s` (1 for a perfect plane through every point).
     fn judge(&self, fit: &PlaneFit) -> Option<PixelEstimate> {
         let flow = fit.normal_flow_px()?;
         let speed = fit.speed_px_s();
@@ -250,7 +251,7 @@ impl PlaneFitEstimator {
         let inlier_share = fit.inliers as f64 / fit.points as f64;
         let quality = (1.0 - fit.rms_s / self.params.outlier_s).clamp(0.0, 1.0);
         let confidence = inlier_share * quality;
-        if confidence.is_nan() || confidence <= 0.0 {
+        if confidence.is_nan() || confidence <= self.params.min_confidence.max(0.0) {
             return None;
         }
         Some(PixelEstimate {

@@ -31,6 +31,7 @@ struct RunReport<'a> {
     min_points: usize,
     outlier_ms: f64,
     max_speed_px_s: f64,
+    min_confidence: f64,
     events: u64,
     valid: u64,
     out_of_sensor: u64,
@@ -107,6 +108,7 @@ impl Stage for NormalFlowNode {
             min_points: p.min_points,
             outlier_ms: p.outlier_s * 1e3,
             max_speed_px_s: p.max_speed_px_s,
+            min_confidence: p.min_confidence,
             events: stats.events,
             valid: stats.valid,
             out_of_sensor: stats.out_of_sensor,
@@ -178,6 +180,11 @@ fn main() -> ExitCode {
         d.max_speed_px_s,
         "faster fits are invalid, pixels/s",
     )
+    .param(
+        "min_confidence",
+        d.min_confidence,
+        "fits with a confidence at or below this are invalid, [0, 1)",
+    )
     .build();
     run_stage(description, |cfg: &NodeConfig| {
         let params = PlaneFitParams {
@@ -188,6 +195,7 @@ fn main() -> ExitCode {
             outlier_s: cfg.param::<f64>("outlier_ms")? * 1e-3,
             max_refits: cfg.param::<usize>("max_refits")?,
             max_speed_px_s: cfg.param::<f64>("max_speed_px_s")?,
+            min_confidence: cfg.param::<f64>("min_confidence")?,
         };
         params.validate()?;
         Ok(NormalFlowNode {

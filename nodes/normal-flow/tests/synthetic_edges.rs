@@ -274,6 +274,10 @@ fn bad_parameters_are_refused() {
             outlier_s: -1.0,
             ..PlaneFitParams::default()
         },
+        PlaneFitParams {
+            min_confidence: 1.0,
+            ..PlaneFitParams::default()
+        },
     ] {
         assert!(
             PlaneFitEstimator::new(&cam, params).is_err(),
