@@ -37,8 +37,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             .to_vec();
     }
     println!(
-        "{params:?}, min_confidence {}, {seconds} s per preset",
-        score_params.min_confidence
+        "{params:?}, {seconds} s per preset, slices of {} ms",
+        slice_s * 1e3
     );
     for name in &presets {
         let mut sim = Simulator::new(preset(name, 1)?)?;
