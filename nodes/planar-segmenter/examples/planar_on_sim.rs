@@ -49,6 +49,8 @@ struct Score {
     iou_sum: f64,
     inter: usize,
     union: usize,
+    predicted: usize,
+    truth: usize,
     events: usize,
 }
 
@@ -113,6 +115,8 @@ fn main() -> anyhow::Result<()> {
                     let (p, t) = (!bg, *obj != 0);
                     inter += usize::from(p && t);
                     union += usize::from(p || t);
+                    score.predicted += usize::from(p);
+                    score.truth += usize::from(t);
                 }
                 score.slices += 1;
                 score.iou_sum += inter as f64 / union.max(1) as f64;
@@ -124,10 +128,12 @@ fn main() -> anyhow::Result<()> {
         for ((v, _), s) in variants.iter().zip(&scores) {
             println!(
                 "{name:12} seed {seed} {v:14} slices with objects {:4}  mean IoU {:.3}  pooled IoU {:.3}  \
-                 events/slice {:.0}",
+                 precision {:.3}  recall {:.3}  events/slice {:.0}",
                 s.slices,
                 s.iou_sum / s.slices.max(1) as f64,
                 s.inter as f64 / s.union.max(1) as f64,
+                s.inter as f64 / s.predicted.max(1) as f64,
+                s.inter as f64 / s.truth.max(1) as f64,
                 s.events as f64 / s.slices.max(1) as f64
             );
         }
