@@ -24,8 +24,11 @@
 //! (no IMU, or [`PlanarParams::derotate`] off) `a` includes the rotation terms.
 //!
 //! # Deviations from the paper, all parameters
-//! - The fit is robust by default (Huber IRLS); the paper says "least squares", available as
-//!   [`Robust::LeastSquares`].
+//! - The fit is plain least squares by default, as in the paper; Huber or Tukey IRLS are options
+//!   ([`Robust`]). Measured with `examples/planar_on_sim.rs` (ideal flow, seed 1, 1.5 s, 30 ms
+//!   slices), pooled IoU one-object 0.37 (LS) / 0.34 (Huber) / 0.32 (Tukey), two-objects
+//!   0.18 / 0.11 / 0.11: the room is not a plane, and the robust fits follow the dominant
+//!   surface more tightly, calling more of the other background surfaces foreground.
 //! - 2-means always splits in two; when the two centres are closer than
 //!   [`PlanarParams::min_center_gap`] the slice is taken as all background (a scene without a
 //!   moving object would otherwise have half its noise called foreground).

@@ -69,7 +69,7 @@ fn main() -> ExitCode {
     )
     .param(
         "robust",
-        "huber",
+        "least_squares",
         "least_squares (the paper), huber or tukey (iteratively reweighted)",
     )
     .param(
