@@ -135,3 +135,27 @@ impl NodeConfig {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn malformed_or_missing_config_files_are_named_in_the_error() {
+        let dir = std::env::temp_dir().join(format!("evseg-config-test-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let bad = dir.join("bad.json");
+        std::fs::write(&bad, b"{\"instance\": 3, ").unwrap();
+        let err = NodeConfig::load(&bad).unwrap_err().to_string();
+        assert!(
+            err.contains("bad.json") && err.contains("invalid node config"),
+            "{err}"
+        );
+        let missing = dir.join("missing.json");
+        let err = NodeConfig::load(&missing).unwrap_err().to_string();
+        assert!(err.contains("missing.json"), "{err}");
+        std::fs::write(&bad, [0xffu8, 0xfe, 0x00]).unwrap();
+        assert!(NodeConfig::load(&bad).is_err());
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}
