@@ -16,6 +16,7 @@
 //! The wire format lives in [`codec`] alone; the key layout in [`keys`]; node self-descriptions
 //! (`--describe`) in [`describe`].
 
+pub mod align;
 pub mod codec;
 pub mod columns;
 pub mod describe;

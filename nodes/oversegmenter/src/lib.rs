@@ -19,6 +19,7 @@ pub mod kmeans;
 pub mod rng;
 
 use evseg_geometry::{Camera, UndistortTable};
+use evseg_schemas::align::{AlignError, check_flow};
 use evseg_schemas::{CameraInfo, Clusters, Events, NormalFlow};
 
 pub use kmeans::{KMeans, KMeansParams, kmeans};
@@ -75,52 +76,9 @@ pub enum OversegError {
         /// What is allowed.
         why: &'static str,
     },
-    /// The event columns have different lengths.
-    #[error("slice events have columns of different lengths")]
-    EventColumns,
-    /// The flow columns have different lengths, or a different length from the events.
-    #[error("normal flow has nx/ny/confidence lengths {nx}/{ny}/{confidence} for {events} events")]
-    FlowLength {
-        /// Length of `nx`.
-        nx: usize,
-        /// Length of `ny`.
-        ny: usize,
-        /// Length of `confidence`.
-        confidence: usize,
-        /// Events in the slice.
-        events: usize,
-    },
-    /// An event lies outside the sensor.
-    #[error("event {index} at pixel ({x}, {y}) is outside the {width}x{height} sensor")]
-    EventOutside {
-        /// Event index in the slice.
-        index: usize,
-        /// Column, pixels.
-        x: u16,
-        /// Row, pixels.
-        y: u16,
-        /// Sensor width, pixels.
-        width: u16,
-        /// Sensor height, pixels.
-        height: u16,
-    },
-}
-
-/// Checks that `flow` is aligned with `events`.
-pub fn check_lengths(events: &Events, flow: &NormalFlow) -> Result<(), OversegError> {
-    if !events.is_consistent() {
-        return Err(OversegError::EventColumns);
-    }
-    let n = events.len();
-    if flow.nx.len() != n || flow.ny.len() != n || flow.confidence.len() != n {
-        return Err(OversegError::FlowLength {
-            nx: flow.nx.len(),
-            ny: flow.ny.len(),
-            confidence: flow.confidence.len(),
-            events: n,
-        });
-    }
-    Ok(())
+    /// A per-event input does not fit its slice.
+    #[error(transparent)]
+    Input(#[from] AlignError),
 }
 
 /// The over-segmentation stage; keeps the undistortion table of the last camera seen.
@@ -178,7 +136,7 @@ impl Oversegmenter {
         events: &Events,
         flow: &NormalFlow,
     ) -> Result<Clusters, OversegError> {
-        check_lengths(events, flow)?;
+        check_flow(events, flow)?;
         let p = self.params;
         let scale = p.lambda * p.flow_time_scale_s;
         let table = self.table(camera);
@@ -187,13 +145,14 @@ impl Oversegmenter {
         for i in 0..events.len() {
             let (u, v) = (events.x[i], events.y[i]);
             let Some([x, y]) = table.get(u, v) else {
-                return Err(OversegError::EventOutside {
+                return Err(AlignError::EventOutside {
                     index: i,
                     x: u,
                     y: v,
                     width: table.width,
                     height: table.height,
-                });
+                }
+                .into());
             };
             let (nx, ny, c) = (flow.nx[i], flow.ny[i], flow.confidence[i]);
             if !(c > p.min_confidence && nx.is_finite() && ny.is_finite()) {

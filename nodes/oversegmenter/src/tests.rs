@@ -1,5 +1,6 @@
 use super::*;
 use crate::rng::SplitMix64;
+use evseg_schemas::align::AlignError;
 
 fn camera() -> CameraInfo {
     CameraInfo::pinhole(320, 240, 250.0, "test")
@@ -111,27 +112,30 @@ fn malformed_input_is_an_error() {
     let mut s = Oversegmenter::new(OversegParams::default()).unwrap();
     assert!(matches!(
         s.segment(&camera(), &ev, &fl),
-        Err(OversegError::FlowLength {
+        Err(OversegError::Input(AlignError::FlowLength {
             confidence: 9,
             events: 10,
             ..
-        })
+        }))
     ));
     let (mut ev, fl) = slice(10, |_| (1.0, 0.0, 1.0));
     ev.x[3] = 320;
     let e = s.segment(&camera(), &ev, &fl).unwrap_err();
     assert_eq!(
         e,
-        OversegError::EventOutside {
+        OversegError::Input(AlignError::EventOutside {
             index: 3,
             x: 320,
             y: ev.y[3],
             width: 320,
             height: 240
-        }
+        })
     );
     ev.p.pop();
-    assert_eq!(s.segment(&camera(), &ev, &fl), Err(OversegError::EventColumns));
+    assert_eq!(
+        s.segment(&camera(), &ev, &fl),
+        Err(OversegError::Input(AlignError::EventColumns))
+    );
     for p in [
         OversegParams {
             k: 0,

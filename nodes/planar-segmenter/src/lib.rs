@@ -38,6 +38,7 @@ pub mod smooth;
 pub mod two_means;
 
 use evseg_geometry::{Camera, UndistortTable, rotational_flow};
+use evseg_schemas::align::{AlignError, check_flow};
 use evseg_schemas::{CameraInfo, Events, NormalFlow, Residuals};
 
 pub use fit::{Equation, FitParams, Robust, fit_planar};
@@ -105,35 +106,9 @@ pub enum PlanarError {
         /// What is allowed.
         why: &'static str,
     },
-    /// The event columns have different lengths.
-    #[error("slice events have columns of different lengths")]
-    EventColumns,
-    /// The flow columns have different lengths, or a different length from the events.
-    #[error("normal flow has nx/ny/confidence lengths {nx}/{ny}/{confidence} for {events} events")]
-    FlowLength {
-        /// Length of `nx`.
-        nx: usize,
-        /// Length of `ny`.
-        ny: usize,
-        /// Length of `confidence`.
-        confidence: usize,
-        /// Events in the slice.
-        events: usize,
-    },
-    /// An event lies outside the sensor.
-    #[error("event {index} at pixel ({x}, {y}) is outside the {width}x{height} sensor")]
-    EventOutside {
-        /// Event index in the slice.
-        index: usize,
-        /// Column, pixels.
-        x: u16,
-        /// Row, pixels.
-        y: u16,
-        /// Sensor width, pixels.
-        width: u16,
-        /// Sensor height, pixels.
-        height: u16,
-    },
+    /// A per-event input does not fit its slice.
+    #[error(transparent)]
+    Input(#[from] AlignError),
     /// The slice's rotation rate is not finite.
     #[error("rotation rate {0:?} rad/s is not finite")]
     Omega([f64; 3]),
@@ -221,7 +196,7 @@ impl PlanarSegmenter {
         flow: &NormalFlow,
         omega: Option<[f64; 3]>,
     ) -> Result<PlanarResult, PlanarError> {
-        check_lengths(events, flow)?;
+        check_flow(events, flow)?;
         if let Some(w) = omega
             && !w.iter().all(|v| v.is_finite())
         {
@@ -238,13 +213,14 @@ impl PlanarSegmenter {
         for i in 0..n {
             let (u, v) = (events.x[i], events.y[i]);
             let Some([x, y]) = table.get(u, v) else {
-                return Err(PlanarError::EventOutside {
+                return Err(AlignError::EventOutside {
                     index: i,
                     x: u,
                     y: v,
                     width: table.width,
                     height: table.height,
-                });
+                }
+                .into());
             };
             let (fx, fy, c) = (f64::from(flow.nx[i]), f64::from(flow.ny[i]), flow.confidence[i]);
             let len = fx.hypot(fy);
@@ -324,23 +300,6 @@ impl PlanarSegmenter {
             derotated: w.is_some(),
         })
     }
-}
-
-/// Checks that `flow` is aligned with `events`.
-pub fn check_lengths(events: &Events, flow: &NormalFlow) -> Result<(), PlanarError> {
-    if !events.is_consistent() {
-        return Err(PlanarError::EventColumns);
-    }
-    let n = events.len();
-    if flow.nx.len() != n || flow.ny.len() != n || flow.confidence.len() != n {
-        return Err(PlanarError::FlowLength {
-            nx: flow.nx.len(),
-            ny: flow.ny.len(),
-            confidence: flow.confidence.len(),
-            events: n,
-        });
-    }
-    Ok(())
 }
 
 #[cfg(test)]

@@ -1,5 +1,6 @@
 use super::*;
 use evseg_geometry::{planar_flow, translational_flow};
+use evseg_schemas::align::AlignError;
 
 fn camera() -> CameraInfo {
     CameraInfo::pinhole(320, 240, 250.0, "test")
@@ -275,22 +276,26 @@ fn malformed_input_is_an_error() {
     fl.nx.push(0.0);
     assert!(matches!(
         s.segment(&camera(), &ev, &fl, None),
-        Err(PlanarError::FlowLength {
+        Err(PlanarError::Input(AlignError::FlowLength {
             nx: 21,
             events: 20,
             ..
-        })
+        }))
     ));
     fl.nx.pop();
     ev.y[7] = 240;
     assert!(matches!(
         s.segment(&camera(), &ev, &fl, None),
-        Err(PlanarError::EventOutside { index: 7, y: 240, .. })
+        Err(PlanarError::Input(AlignError::EventOutside {
+            index: 7,
+            y: 240,
+            ..
+        }))
     ));
     ev.t.pop();
     assert_eq!(
         s.segment(&camera(), &ev, &fl, None),
-        Err(PlanarError::EventColumns)
+        Err(PlanarError::Input(AlignError::EventColumns))
     );
     for p in [
         PlanarParams {
