@@ -184,5 +184,27 @@ mod tests {
             Some([(-319.5f64 / 500.0) as f32, (-239.5f64 / 500.0) as f32])
         );
         assert_eq!(t.get(640, 0), None);
+        let mut cache = TableCache::default();
+        assert_eq!(cache.get(&cam.info).get(0, 0), t.get(0, 0));
+        let other = CameraInfo::pinhole(4, 2, 1.0, "o");
+        assert_eq!(cache.get(&other).width, 4, "a new camera rebuilds the table");
+    }
+}
+
+/// The undistortion table of the last camera seen, rebuilt only when the camera changes (stages
+/// get the calibration with every slice).
+#[derive(Debug, Clone, Default)]
+pub struct TableCache(Option<(CameraInfo, UndistortTable)>);
+
+impl TableCache {
+    /// The table for `camera`.
+    pub fn get(&mut self, camera: &CameraInfo) -> &UndistortTable {
+        if self.0.as_ref().is_some_and(|(c, _)| c != camera) {
+            self.0 = None;
+        }
+        &self
+            .0
+            .get_or_insert_with(|| (camera.clone(), Camera::new(camera).undistort_table()))
+            .1
     }
 }

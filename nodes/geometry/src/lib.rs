@@ -14,5 +14,5 @@ pub mod camera;
 pub mod lsq;
 pub mod motion;
 
-pub use camera::{Camera, UndistortTable};
+pub use camera::{Camera, TableCache, UndistortTable};
 pub use motion::{a_matrix, b_matrix, c_matrix, planar_flow, rotational_flow, translational_flow};

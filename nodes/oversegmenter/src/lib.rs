@@ -18,7 +18,7 @@
 pub mod kmeans;
 pub mod rng;
 
-use evseg_geometry::{Camera, UndistortTable};
+use evseg_geometry::TableCache;
 use evseg_schemas::align::{AlignError, check_flow};
 use evseg_schemas::{CameraInfo, Clusters, Events, NormalFlow};
 
@@ -85,7 +85,7 @@ pub enum OversegError {
 #[derive(Debug, Clone)]
 pub struct Oversegmenter {
     params: OversegParams,
-    table: Option<(CameraInfo, UndistortTable)>,
+    table: TableCache,
 }
 
 impl Oversegmenter {
@@ -111,22 +111,15 @@ impl Oversegmenter {
         if params.min_confidence.is_nan() {
             return bad("min_confidence", "NaN".into(), "must be a number");
         }
-        Ok(Self { params, table: None })
+        Ok(Self {
+            params,
+            table: TableCache::default(),
+        })
     }
 
     /// The settings.
     pub fn params(&self) -> &OversegParams {
         &self.params
-    }
-
-    fn table(&mut self, camera: &CameraInfo) -> &UndistortTable {
-        if self.table.as_ref().is_none_or(|(c, _)| c != camera) {
-            self.table = Some((camera.clone(), Camera::new(camera).undistort_table()));
-        }
-        match &self.table {
-            Some((_, t)) => t,
-            None => unreachable!("table set just above"),
-        }
     }
 
     /// Clusters the events of one slice (`camera`, `events`) with their normal `flow`.
@@ -139,7 +132,7 @@ impl Oversegmenter {
         check_flow(events, flow)?;
         let p = self.params;
         let scale = p.lambda * p.flow_time_scale_s;
-        let table = self.table(camera);
+        let table = self.table.get(camera);
         let mut feats = Vec::with_capacity(events.len());
         let mut index = Vec::with_capacity(events.len());
         for i in 0..events.len() {

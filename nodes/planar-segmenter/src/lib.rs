@@ -37,7 +37,7 @@ pub mod fit;
 pub mod smooth;
 pub mod two_means;
 
-use evseg_geometry::{Camera, UndistortTable, rotational_flow};
+use evseg_geometry::{TableCache, rotational_flow};
 use evseg_schemas::align::{AlignError, check_flow};
 use evseg_schemas::{CameraInfo, Events, NormalFlow, Residuals};
 
@@ -137,7 +137,7 @@ pub struct PlanarResult {
 #[derive(Debug, Clone)]
 pub struct PlanarSegmenter {
     params: PlanarParams,
-    table: Option<(CameraInfo, UndistortTable)>,
+    table: TableCache,
 }
 
 impl PlanarSegmenter {
@@ -169,22 +169,15 @@ impl PlanarSegmenter {
         if params.min_confidence.is_nan() || params.min_support.is_nan() {
             return bad("min_confidence/min_support", "NaN".into(), "must be numbers");
         }
-        Ok(Self { params, table: None })
+        Ok(Self {
+            params,
+            table: TableCache::default(),
+        })
     }
 
     /// The settings.
     pub fn params(&self) -> &PlanarParams {
         &self.params
-    }
-
-    fn table(&mut self, camera: &CameraInfo) -> &UndistortTable {
-        if self.table.as_ref().is_none_or(|(c, _)| c != camera) {
-            self.table = Some((camera.clone(), Camera::new(camera).undistort_table()));
-        }
-        match &self.table {
-            Some((_, t)) => t,
-            None => unreachable!("table set just above"),
-        }
     }
 
     /// Segments one slice: `events` seen by `camera`, their normal `flow`, and the slice's mean
@@ -204,7 +197,7 @@ impl PlanarSegmenter {
         }
         let p = self.params;
         let w = omega.filter(|_| p.derotate);
-        let table = self.table(camera);
+        let table = self.table.get(camera);
         let n = events.len();
 
         // Equations of the events with valid flow.

@@ -1,4 +1,5 @@
 use super::*;
+use evseg_geometry::Camera;
 use evseg_geometry::{planar_flow, translational_flow};
 use evseg_schemas::align::AlignError;
 
