@@ -273,10 +273,43 @@ pub struct Segmentation {
     pub label: Vec<u32>,
     /// The segments.
     pub segments: Vec<Segment>,
+    /// Camera egomotion estimated on the final background (paper section 3.5, last paragraph).
+    pub egomotion: Egomotion,
 }
 
 impl Message for Segmentation {
     const SCHEMA: &'static str = "evseg.Segmentation";
+    /// v2: `egomotion` added.
+    const VERSION: u16 = 2;
+}
+
+/// The background merger's coarse segmentation of a slice (paper section 3.4), aligned with the
+/// slice's events: the over-segmentation clusters judged background are merged into group 0, the
+/// others are kept as groups of their own for the hierarchical merger.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct CoarseSegmentation {
+    /// Group per event: 0 = merged background, `g >= 1` = over-segmentation cluster `g - 1`,
+    /// [`CoarseSegmentation::UNASSIGNED`] = no cluster (no valid flow).
+    #[serde(with = "crate::columns::u32s")]
+    pub group: Vec<u32>,
+    /// Residual normal flow per event under the refined background motion, normalized units/s
+    /// (NaN without valid flow).
+    #[serde(with = "crate::columns::f32s")]
+    pub residual: Vec<f32>,
+    /// Per group (index = group number): fraction of its events that lie on the persistent
+    /// background map, in [0, 1] (NaN for a group without events).
+    pub map_overlap: Vec<f32>,
+    /// Camera egomotion estimated by the linear SVM on the coarse background.
+    pub egomotion: Egomotion,
+}
+
+impl CoarseSegmentation {
+    /// Group value of an event that belongs to no group.
+    pub const UNASSIGNED: u32 = u32::MAX;
+}
+
+impl Message for CoarseSegmentation {
+    const SCHEMA: &'static str = "evseg.CoarseSegmentation";
     const VERSION: u16 = 1;
 }
 
@@ -423,6 +456,7 @@ pub const ALL_SCHEMAS: &[(&str, u16)] = &[
     (NormalFlow::SCHEMA, NormalFlow::VERSION),
     (Clusters::SCHEMA, Clusters::VERSION),
     (Residuals::SCHEMA, Residuals::VERSION),
+    (CoarseSegmentation::SCHEMA, CoarseSegmentation::VERSION),
     (Segmentation::SCHEMA, Segmentation::VERSION),
     (Tracks::SCHEMA, Tracks::VERSION),
     (Truth::SCHEMA, Truth::VERSION),

@@ -4,15 +4,24 @@
 //!   equidistant), and a per-pixel undistortion table for the hot loops;
 //! - [`motion`]: the motion-field matrices `A(x)`, `B(x)` (translation and rotation) and the
 //!   planar-scene matrix `C(x)`, with the flows they give;
-//! - [`lsq`]: small dense least squares (normal equations with Tikhonov regularization).
+//! - [`lsq`]: small dense least squares (normal equations with Tikhonov regularization);
+//! - [`assignment`]: optimal one-to-one assignment (Hungarian), for matching labels to objects
+//!   (evaluator) and segments to tracks (tracker).
 //!
 //! Normalized coordinates: undistorted, focal length 1, camera frame x right, y down, z forward.
 //! Flows in normalized coordinates per second; rotation rates in rad/s; translations in the units
 //! the caller chose (m/s with depth in m, or "per unit depth").
 
+pub mod assignment;
 pub mod camera;
 pub mod lsq;
 pub mod motion;
+pub mod samples;
+pub mod svm;
+pub mod translation;
 
 pub use camera::{Camera, TableCache, UndistortTable};
 pub use motion::{a_matrix, b_matrix, c_matrix, planar_flow, rotational_flow, translational_flow};
+pub use samples::{FlowSample, flow_samples};
+pub use svm::{SvmDirection, SvmParams, translation_direction};
+pub use translation::TranslationFit;

@@ -37,8 +37,8 @@ pub mod fit;
 pub mod smooth;
 pub mod two_means;
 
-use evseg_geometry::{TableCache, rotational_flow};
-use evseg_schemas::align::{AlignError, check_flow};
+use evseg_geometry::{TableCache, flow_samples};
+use evseg_schemas::align::AlignError;
 use evseg_schemas::{CameraInfo, Events, NormalFlow, Residuals};
 
 pub use fit::{Equation, FitParams, Robust, fit_planar};
@@ -189,7 +189,6 @@ impl PlanarSegmenter {
         flow: &NormalFlow,
         omega: Option<[f64; 3]>,
     ) -> Result<PlanarResult, PlanarError> {
-        check_flow(events, flow)?;
         if let Some(w) = omega
             && !w.iter().all(|v| v.is_finite())
         {
@@ -201,37 +200,12 @@ impl PlanarSegmenter {
         let n = events.len();
 
         // Equations of the events with valid flow.
-        let mut eqs = Vec::with_capacity(n);
-        let mut index = Vec::with_capacity(n);
-        for i in 0..n {
-            let (u, v) = (events.x[i], events.y[i]);
-            let Some([x, y]) = table.get(u, v) else {
-                return Err(AlignError::EventOutside {
-                    index: i,
-                    x: u,
-                    y: v,
-                    width: table.width,
-                    height: table.height,
-                }
-                .into());
-            };
-            let (fx, fy, c) = (f64::from(flow.nx[i]), f64::from(flow.ny[i]), flow.confidence[i]);
-            let len = fx.hypot(fy);
-            if !(c > p.min_confidence && len.is_finite() && len > 0.0) {
-                continue;
-            }
-            let n0 = [fx / len, fy / len];
-            let (x, y) = (f64::from(x), f64::from(y));
-            let b = match w {
-                Some(w) => {
-                    let r = rotational_flow(x, y, w);
-                    len - (r[0] * n0[0] + r[1] * n0[1])
-                }
-                None => len,
-            };
-            eqs.push(Equation::new(x, y, n0, b));
-            index.push(i);
-        }
+        let samples = flow_samples(table, events, flow, w, p.min_confidence)?;
+        let eqs: Vec<Equation> = samples
+            .iter()
+            .map(|s| Equation::new(s.x, s.y, s.n0, s.n_derot))
+            .collect();
+        let index: Vec<usize> = samples.iter().map(|s| s.index).collect();
 
         let mut residual = vec![f32::NAN; n];
         let mut background = vec![true; n];

@@ -1,6 +1,6 @@
 use super::*;
 use evseg_geometry::Camera;
-use evseg_geometry::{planar_flow, translational_flow};
+use evseg_geometry::{planar_flow, rotational_flow, translational_flow};
 use evseg_schemas::align::AlignError;
 
 fn camera() -> CameraInfo {
