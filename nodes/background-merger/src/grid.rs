@@ -1,0 +1,90 @@
+//! A coarse pixel grid (cells of `cell_px` x `cell_px` pixels) used for the warped background
+//! occupancy and the persistent background map.
+
+/// A grid of `f32` values over a `width` x `height` pixel sensor.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CellGrid {
+    /// Cell side, pixels.
+    pub cell_px: u16,
+    /// Cells per row.
+    pub cols: usize,
+    /// Rows of cells.
+    pub rows: usize,
+    /// Values, row-major.
+    pub values: Vec<f32>,
+}
+
+impl CellGrid {
+    /// A grid of zeros covering `width` x `height` pixels with cells of `cell_px` (>= 1) pixels.
+    pub fn new(width: u16, height: u16, cell_px: u16) -> Self {
+        let c = usize::from(cell_px.max(1));
+        let cols = usize::from(width).div_ceil(c).max(1);
+        let rows = usize::from(height).div_ceil(c).max(1);
+        Self {
+            cell_px: cell_px.max(1),
+            cols,
+            rows,
+            values: vec![0.0; cols * rows],
+        }
+    }
+
+    /// True when the grid was made for this sensor size and cell.
+    pub fn fits(&self, width: u16, height: u16, cell_px: u16) -> bool {
+        let c = usize::from(cell_px.max(1));
+        self.cell_px == cell_px.max(1)
+            && self.cols == usize::from(width).div_ceil(c).max(1)
+            && self.rows == usize::from(height).div_ceil(c).max(1)
+    }
+
+    /// Cell index of integer pixel `(x, y)`, `None` outside the grid.
+    pub fn cell(&self, x: u16, y: u16) -> Option<usize> {
+        let (cx, cy) = (usize::from(x / self.cell_px), usize::from(y / self.cell_px));
+        (cx < self.cols && cy < self.rows).then_some(cy * self.cols + cx)
+    }
+
+    /// Cell index of sub-pixel position `(x, y)` (pixels), `None` outside the grid.
+    pub fn cell_f(&self, x: f64, y: f64) -> Option<usize> {
+        if !(x.is_finite() && y.is_finite() && x >= 0.0 && y >= 0.0) {
+            return None;
+        }
+        let c = f64::from(self.cell_px);
+        let (cx, cy) = ((x / c) as usize, (y / c) as usize);
+        (cx < self.cols && cy < self.rows).then_some(cy * self.cols + cx)
+    }
+
+    /// The maximum over each cell's 3x3 neighbourhood (a one-cell dilation).
+    pub fn dilated(&self) -> Self {
+        let mut out = self.clone();
+        for cy in 0..self.rows {
+            for cx in 0..self.cols {
+                let mut m = f32::MIN;
+                for ny in cy.saturating_sub(1)..=(cy + 1).min(self.rows - 1) {
+                    for nx in cx.saturating_sub(1)..=(cx + 1).min(self.cols - 1) {
+                        m = m.max(self.values[ny * self.cols + nx]);
+                    }
+                }
+                out.values[cy * self.cols + cx] = m;
+            }
+        }
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cells_and_dilation() {
+        let mut g = CellGrid::new(10, 7, 4);
+        assert_eq!((g.cols, g.rows), (3, 2));
+        assert_eq!(g.cell(9, 6), Some(5));
+        assert_eq!(g.cell(12, 0), None);
+        assert_eq!(g.cell_f(-0.5, 1.0), None);
+        assert_eq!(g.cell_f(4.2, 4.0), Some(4));
+        g.values[0] = 1.0;
+        let d = g.dilated();
+        assert_eq!(d.values, vec![1.0, 1.0, 0.0, 1.0, 1.0, 0.0]);
+        assert!(g.fits(10, 7, 4) && !g.fits(10, 9, 4));
+    }
+}

@@ -1,0 +1,428 @@
+//! Coarse segment merging through temporal consistency (paper section 3.4).
+//!
+//! Per slice, with the over-segmentation clusters, the planar segmenter's background flags and
+//! (through a feedback input) the previous slice's final labels:
+//! 1. **Background prior per cluster.** The fraction of the cluster's events the planar
+//!    segmenter called background, averaged (weight [`BackgroundParams::warp_weight`]) with its
+//!    *warp score*: the previous slice's events are warped to now with the previous background's
+//!    planar motion ([`warp`]); the score is the fraction of the cluster's events that land on
+//!    warped previous background rather than warped previous foreground. The first slice, or a
+//!    cluster that lands on too few warped events, uses the planar vote alone ("Initialization").
+//!    Clusters with a prior of at least [`BackgroundParams::candidate_threshold`] are background
+//!    candidates.
+//! 2. **Egomotion.** The linear SVM on the candidates' derotated normal flow gives the camera's
+//!    translation direction `t` (METHOD_NOTES section 3).
+//! 3. **Residuals under the refined background motion.** Each cluster gets its own inverse depth
+//!    `rho >= 0` (least squares of `n_derot = rho (X . t)`, clamped at 0 by cheirality), and each
+//!    event the residual `r_new = n_derot - rho (X . t)`. The paper writes
+//!    `r_new = n - n(x, t_new, w)` without saying which depth; a per-cluster depth makes the
+//!    residual small for the background at *any* depth (a room is not one plane) and large for a
+//!    cluster whose flow no positive depth explains.
+//! 4. **Merging.** Candidates consistent with `t` (mean `|r_new|` at most
+//!    [`BackgroundParams::consistency_ratio`] of their mean `|n_derot|`, or below
+//!    [`BackgroundParams::consistency_floor`]) form group 0, the coarse background; every other
+//!    cluster stays a group of its own for the hierarchical merger.
+//! 5. **Persistent background map** ([`map`]): an EMA over image cells of the background
+//!    fraction, with a weight growing with the similarity of the current background to the map.
+//!    Each group's mean map value (before this slice's update) is published for the hierarchical
+//!    merger's background penalty.
+
+pub mod grid;
+pub mod map;
+pub mod params;
+pub mod warp;
+
+use evseg_geometry::{FlowSample, TableCache, flow_samples, translation_direction};
+use evseg_schemas::align::AlignError;
+use evseg_schemas::{CameraInfo, Clusters, CoarseSegmentation, Egomotion, Events, NormalFlow, Residuals};
+
+pub use grid::CellGrid;
+pub use map::{BackgroundMap, MapUpdate};
+pub use params::{BackgroundParams, ParamError};
+pub use warp::{PreviousSlice, WarpedPrevious, warp_previous};
+
+/// Malformed input.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum MergeError {
+    /// Per-event flow or events do not fit the slice.
+    #[error(transparent)]
+    Align(#[from] AlignError),
+    /// A per-event input has the wrong length.
+    #[error("{what} has {got} entries for {events} events")]
+    Length {
+        /// Which input.
+        what: &'static str,
+        /// Its length.
+        got: usize,
+        /// Events in the slice.
+        events: usize,
+    },
+    /// A cluster id is not below the cluster count.
+    #[error("event {index} has cluster id {id} but the over-segmentation has {count} clusters")]
+    ClusterId {
+        /// Event index.
+        index: usize,
+        /// The id.
+        id: u16,
+        /// Number of clusters.
+        count: u16,
+    },
+    /// The rotation rate is not finite.
+    #[error("rotation rate {0:?} rad/s is not finite")]
+    Omega([f64; 3]),
+}
+
+/// One slice's inputs.
+#[derive(Debug, Clone, Copy)]
+pub struct SliceInput<'a> {
+    /// Camera of the slice.
+    pub camera: &'a CameraInfo,
+    /// The events.
+    pub events: &'a Events,
+    /// The slice's window `[t_start, t_end)`, seconds.
+    pub span: (f64, f64),
+    /// IMU rotation rate, rad/s, camera frame.
+    pub omega: Option<[f64; 3]>,
+    /// Per-event normal flow.
+    pub flow: &'a NormalFlow,
+    /// Over-segmentation.
+    pub clusters: &'a Clusters,
+    /// Planar segmenter's residuals and background flags.
+    pub residuals: &'a Residuals,
+    /// The previous slice's final labels (0 = background), aligned with the previous slice's
+    /// events; `None` for the first slice or when unavailable.
+    pub previous_labels: Option<&'a [u32]>,
+}
+
+/// Per-cluster figures of one slice (for logs and tests).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct ClusterReport {
+    /// Events of the cluster.
+    pub events: usize,
+    /// Fraction the planar segmenter called background.
+    pub planar_background: f64,
+    /// Warp score, if enough events landed on warped previous events.
+    pub warp_score: Option<f64>,
+    /// Background candidate (step 1).
+    pub candidate: bool,
+    /// Mean `|r_new|` / mean `|n_derot|` (NaN without samples or without a translation).
+    pub relative_residual: f64,
+    /// Merged into the coarse background.
+    pub background: bool,
+}
+
+/// Everything computed for one slice.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MergeResult {
+    /// The message for the hierarchical merger.
+    pub coarse: CoarseSegmentation,
+    /// Per over-segmentation cluster.
+    pub clusters: Vec<ClusterReport>,
+    /// True when the previous slice's labels were warped in.
+    pub warped: bool,
+    /// Map update of this slice.
+    pub map: MapUpdate,
+}
+
+/// The background merger with its state across slices.
+#[derive(Debug, Clone)]
+pub struct BackgroundMerger {
+    params: BackgroundParams,
+    table: TableCache,
+    previous: Option<PreviousSlice>,
+    map: Option<BackgroundMap>,
+}
+
+impl BackgroundMerger {
+    /// A merger with checked `params`.
+    pub fn new(params: BackgroundParams) -> Result<Self, ParamError> {
+        params.validate()?;
+        Ok(Self {
+            params,
+            table: TableCache::default(),
+            previous: None,
+            map: None,
+        })
+    }
+
+    /// The settings.
+    pub fn params(&self) -> &BackgroundParams {
+        &self.params
+    }
+
+    /// The persistent background map, once a slice was processed.
+    pub fn map(&self) -> Option<&BackgroundMap> {
+        self.map.as_ref()
+    }
+
+    /// Processes one slice.
+    pub fn merge(&mut self, input: &SliceInput<'_>) -> Result<MergeResult, MergeError> {
+        let p = self.params;
+        let events = input.events;
+        let n = events.len();
+        check_lengths(input)?;
+        if let Some(w) = input.omega
+            && !w.iter().all(|v| v.is_finite())
+        {
+            return Err(MergeError::Omega(w));
+        }
+        let omega = input.omega.filter(|_| p.derotate);
+        let samples = flow_samples(
+            self.table.get(input.camera),
+            events,
+            input.flow,
+            omega,
+            p.min_confidence,
+        )?;
+        let k = usize::from(input.clusters.count);
+        let t_mid = 0.5 * (input.span.0 + input.span.1);
+
+        // 1. Background prior per cluster.
+        let warped = match (&self.previous, input.previous_labels) {
+            (Some(prev), Some(labels)) if prev.camera == *input.camera => {
+                let table = self.table.get(&prev.camera);
+                let w = warp_previous(prev, labels, table, t_mid, p.warp_cell_px);
+                if w.is_none() {
+                    tracing::warn!(
+                        labels = labels.len(),
+                        events = prev.x.len(),
+                        "previous labels do not fit the previous slice; not warped"
+                    );
+                }
+                w
+            }
+            _ => None,
+        };
+        let mut reports = vec![ClusterReport::default(); k];
+        let mut planar_bg = vec![0usize; k];
+        let mut hits = vec![(0.0f64, 0.0f64); k];
+        for i in 0..n {
+            let Some(c) = cluster_of(input.clusters, i) else {
+                continue;
+            };
+            reports[c].events += 1;
+            planar_bg[c] += usize::from(input.residuals.background[i]);
+            if let Some(w) = &warped
+                && let Some(cell) = w.background.cell(events.x[i], events.y[i])
+            {
+                let (b, f) = (w.background.values[cell] > 0.0, w.foreground.values[cell] > 0.0);
+                // An event on both kinds of warped cells votes half for each.
+                match (b, f) {
+                    (true, false) => hits[c].0 += 1.0,
+                    (false, true) => hits[c].1 += 1.0,
+                    (true, true) => {
+                        hits[c].0 += 0.5;
+                        hits[c].1 += 0.5;
+                    }
+                    (false, false) => {}
+                }
+            }
+        }
+        for (c, r) in reports.iter_mut().enumerate() {
+            if r.events == 0 {
+                continue;
+            }
+            r.planar_background = planar_bg[c] as f64 / r.events as f64;
+            let (b, f) = hits[c];
+            if b + f >= p.warp_min_hits as f64 {
+                r.warp_score = Some(b / (b + f));
+            }
+            let prior = match r.warp_score {
+                Some(s) => (1.0 - p.warp_weight) * r.planar_background + p.warp_weight * s,
+                None => r.planar_background,
+            };
+            r.candidate = prior >= p.candidate_threshold;
+        }
+
+        // 2-3. Egomotion from the candidates, residuals under it with a depth per cluster, and
+        // again from the candidates that it explains (the paper's "refined background motion").
+        let mut per_cluster: Vec<Vec<&FlowSample>> = vec![Vec::new(); k];
+        for s in &samples {
+            if let Some(c) = cluster_of(input.clusters, s.index) {
+                per_cluster[c].push(s);
+            }
+        }
+        let previous_direction = self.previous.as_ref().and_then(|prev| prev.direction);
+        let mut residual = vec![f32::NAN; n];
+        let mut direction = previous_direction;
+        let mut in_svm: Vec<bool> = reports.iter().map(|r| r.candidate).collect();
+        for round in 0..p.refine_rounds.max(1) {
+            let chosen: Vec<&FlowSample> = per_cluster
+                .iter()
+                .enumerate()
+                .filter(|(c, _)| in_svm[*c])
+                .flat_map(|(_, m)| m.iter().copied())
+                .collect();
+            let svm = (chosen.len() >= p.min_svm_events)
+                .then(|| translation_direction(chosen.iter().copied(), &p.svm))
+                .flatten();
+            direction = svm.map(|s| s.direction).or(previous_direction);
+            for (c, members) in per_cluster.iter().enumerate() {
+                let consistent = explain(members, direction, &p, &mut residual, &mut reports[c]);
+                reports[c].background = reports[c].candidate && consistent;
+            }
+            let next: Vec<bool> = reports.iter().map(|r| r.background).collect();
+            if next == in_svm || round + 1 == p.refine_rounds.max(1) {
+                break;
+            }
+            in_svm = next;
+        }
+
+        // 4. Groups: 0 = merged background, c + 1 = cluster c on its own.
+        let mut group = vec![CoarseSegmentation::UNASSIGNED; n];
+        for (i, g) in group.iter_mut().enumerate() {
+            if let Some(c) = cluster_of(input.clusters, i) {
+                *g = if reports[c].background { 0 } else { c as u32 + 1 };
+            }
+        }
+
+        // 5. Persistent map: mean value per group before the update, then the update.
+        let cam = input.camera;
+        let map = match &mut self.map {
+            Some(m) if m.grid.fits(cam.width, cam.height, p.map_cell_px) => m,
+            slot => slot.insert(BackgroundMap::new(cam.width, cam.height, p.map_cell_px)),
+        };
+        let mut overlap = vec![(0.0f64, 0usize); k + 1];
+        let mut cells = vec![(0u32, 0u32); map.grid.values.len()];
+        for (i, &g) in group.iter().enumerate() {
+            if g == CoarseSegmentation::UNASSIGNED {
+                continue;
+            }
+            if let Some(v) = map.value(events.x[i], events.y[i]) {
+                overlap[g as usize].0 += f64::from(v);
+                overlap[g as usize].1 += 1;
+            }
+            if let Some(c) = map.grid.cell(events.x[i], events.y[i]) {
+                cells[c].0 += u32::from(g == 0);
+                cells[c].1 += 1;
+            }
+        }
+        let current: Vec<Option<f32>> = cells
+            .iter()
+            .map(|&(bg, all)| (all > 0).then(|| bg as f32 / all as f32))
+            .collect();
+        let first = map.updates == 0;
+        let update = map.update(&current, p.map_threshold, p.alpha_min, p.alpha_max);
+        let map_overlap: Vec<f32> = overlap
+            .iter()
+            .enumerate()
+            .map(|(g, &(sum, count))| {
+                if count > 0 {
+                    (sum / count as f64) as f32
+                } else if first {
+                    // No map before the first slice: the group's own background vote.
+                    if g == 0 { 1.0 } else { 0.0 }
+                } else {
+                    f32::NAN
+                }
+            })
+            .collect();
+
+        let warped_in = warped.is_some();
+        self.previous = Some(PreviousSlice {
+            camera: input.camera.clone(),
+            x: events.x.clone(),
+            y: events.y.clone(),
+            samples,
+            omega,
+            t_mid,
+            direction,
+        });
+        Ok(MergeResult {
+            coarse: CoarseSegmentation {
+                group,
+                residual,
+                map_overlap,
+                egomotion: Egomotion {
+                    direction: direction.unwrap_or([0.0; 3]),
+                    omega: input.omega.unwrap_or([0.0; 3]),
+                    valid: direction.is_some(),
+                },
+            },
+            clusters: reports,
+            warped: warped_in,
+            map: update,
+        })
+    }
+}
+
+fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+/// Residuals of `members` (one cluster) under translation `direction` with the cluster's own
+/// inverse depth, written into `residual`; fills the report's relative residual and returns
+/// whether the cluster is consistent with the translation.
+fn explain(
+    members: &[&FlowSample],
+    direction: Option<[f64; 3]>,
+    p: &BackgroundParams,
+    residual: &mut [f32],
+    report: &mut ClusterReport,
+) -> bool {
+    if members.is_empty() {
+        report.relative_residual = f64::NAN;
+        return false;
+    }
+    let rho = direction.map(|t| inverse_depth(members, t));
+    let (mut sum_r, mut sum_n) = (0.0, 0.0);
+    for s in members {
+        let predicted = match (direction, rho) {
+            (Some(t), Some(rho)) => rho * dot(s.x_row(), t),
+            _ => 0.0,
+        };
+        let r = s.n_derot - predicted;
+        residual[s.index] = r as f32;
+        sum_r += r.abs();
+        sum_n += s.n_derot.abs();
+    }
+    let m = members.len() as f64;
+    report.relative_residual = if direction.is_some() && sum_n > 0.0 {
+        sum_r / sum_n
+    } else {
+        f64::NAN
+    };
+    direction.is_none() || sum_r / m <= p.consistency_floor || sum_r <= p.consistency_ratio * sum_n
+}
+
+/// Least-squares inverse depth of `members` under translation `t`, clamped at 0 (cheirality).
+fn inverse_depth(members: &[&FlowSample], t: [f64; 3]) -> f64 {
+    let (mut num, mut den) = (0.0, 0.0);
+    for s in members {
+        let q = dot(s.x_row(), t);
+        num += s.n_derot * q;
+        den += q * q;
+    }
+    if den > 0.0 { (num / den).max(0.0) } else { 0.0 }
+}
+
+fn cluster_of(clusters: &Clusters, i: usize) -> Option<usize> {
+    let id = clusters.id[i];
+    (id != u16::MAX).then_some(usize::from(id))
+}
+
+fn check_lengths(input: &SliceInput<'_>) -> Result<(), MergeError> {
+    let n = input.events.len();
+    let len = |what, got| {
+        if got == n {
+            Ok(())
+        } else {
+            Err(MergeError::Length { what, got, events: n })
+        }
+    };
+    len("clusters.id", input.clusters.id.len())?;
+    len("residuals.background", input.residuals.background.len())?;
+    for (index, &id) in input.clusters.id.iter().enumerate() {
+        if id != u16::MAX && id >= input.clusters.count {
+            return Err(MergeError::ClusterId {
+                index,
+                id,
+                count: input.clusters.count,
+            });
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,165 @@
+//! `evseg-background-merger`: coarse segment merging through temporal consistency (paper
+//! section 3.4): warps the previous slice's final segmentation (feedback input), estimates the
+//! camera translation direction by the linear SVM, merges the background clusters and keeps the
+//! persistent background map.
+
+use std::process::ExitCode;
+
+use evseg_background_merger::{BackgroundMerger, BackgroundParams, SliceInput};
+use evseg_geometry::SvmParams;
+use evseg_runtime::describe::Describe;
+use evseg_runtime::{BoxError, Inputs, NodeConfig, Outputs, Stage, run_stage};
+use evseg_schemas::{Clusters, CoarseSegmentation, NormalFlow, Residuals, Slice, Tracks};
+
+struct Node(BackgroundMerger);
+
+impl Stage for Node {
+    fn process(&mut self, input: &Inputs, out: &mut Outputs) -> Result<(), BoxError> {
+        let slice: Slice = input.get("slices")?;
+        let flow: NormalFlow = input.get("flow")?;
+        let clusters: Clusters = input.get("clusters")?;
+        let residuals: Residuals = input.get("residuals")?;
+        let previous: Option<Tracks> = input.get_opt("previous")?;
+        let span = input.span();
+        let r = self.0.merge(&SliceInput {
+            camera: &slice.camera,
+            events: &slice.events,
+            span,
+            omega: slice.omega,
+            flow: &flow,
+            clusters: &clusters,
+            residuals: &residuals,
+            previous_labels: previous.as_ref().map(|t| t.label.as_slice()),
+        })?;
+        tracing::debug!(
+            slice = input.seq(),
+            warped = r.warped,
+            background_clusters = r.clusters.iter().filter(|c| c.background).count(),
+            clusters = r.clusters.iter().filter(|c| c.events > 0).count(),
+            direction = ?r.coarse.egomotion.direction,
+            map_similarity = r.map.similarity,
+            "coarse merge"
+        );
+        out.send("coarse", input.seq(), span.0, span.1, &r.coarse)?;
+        Ok(())
+    }
+}
+
+fn main() -> ExitCode {
+    let d = BackgroundParams::default();
+    let description = Describe::new(
+        "evseg-background-merger",
+        "Warps the previous segmentation, SVM egomotion on the background candidates, merges \
+         background clusters, persistent background map (paper section 3.4)",
+    )
+    .input::<Slice>("slices", "event slices (omega: IMU rotation rate, camera frame)")
+    .input::<NormalFlow>("flow", "per-event normal flow")
+    .input::<Clusters>("clusters", "over-segmentation")
+    .input::<Residuals>("residuals", "planar segmenter's background flags")
+    .input::<Tracks>(
+        "previous",
+        "the tracker's output of the previous slice (wire with feedback: true)",
+    )
+    .output::<CoarseSegmentation>(
+        "coarse",
+        "group per event (0 = merged background, c+1 = cluster c), residuals under the SVM \
+         translation with a depth per cluster, map overlap per group, egomotion",
+    )
+    .param(
+        "min_confidence",
+        f64::from(d.min_confidence),
+        "flow at or below this confidence is invalid",
+    )
+    .param("derotate", d.derotate, "subtract the IMU rotational flow")
+    .param("svm_c", d.svm.c, "SVM cost C (squared hinge)")
+    .param(
+        "svm_max_iter",
+        d.svm.max_iter,
+        "most Newton iterations of the SVM",
+    )
+    .param(
+        "refine_rounds",
+        d.refine_rounds,
+        "rounds of SVM on the background -> residuals -> consistent candidates",
+    )
+    .param(
+        "min_svm_events",
+        d.min_svm_events,
+        "fewest background events for an SVM estimate",
+    )
+    .param(
+        "warp_cell_px",
+        d.warp_cell_px,
+        "cell of the warped previous-segmentation grid, pixels",
+    )
+    .param(
+        "warp_min_hits",
+        d.warp_min_hits,
+        "fewest events landing on warped previous events for a warp score",
+    )
+    .param(
+        "warp_weight",
+        d.warp_weight,
+        "weight of the warp score against the planar vote",
+    )
+    .param(
+        "candidate_threshold",
+        d.candidate_threshold,
+        "background prior at or above which a cluster is a background candidate",
+    )
+    .param(
+        "consistency_ratio",
+        d.consistency_ratio,
+        "mean |residual| / mean |derotated flow| at most this = consistent with the camera motion",
+    )
+    .param(
+        "consistency_floor",
+        d.consistency_floor,
+        "mean |residual| at most this (normalized units/s) = consistent",
+    )
+    .param(
+        "map_cell_px",
+        d.map_cell_px,
+        "cell of the persistent background map, pixels",
+    )
+    .param(
+        "alpha_min",
+        d.alpha_min,
+        "EMA weight when the slice disagrees with the map",
+    )
+    .param(
+        "alpha_max",
+        d.alpha_max,
+        "EMA weight when the slice agrees with the map",
+    )
+    .param(
+        "map_threshold",
+        f64::from(d.map_threshold),
+        "map value meaning background",
+    )
+    .build();
+    run_stage(description, |cfg: &NodeConfig| {
+        let params = BackgroundParams {
+            min_confidence: cfg.param("min_confidence")?,
+            derotate: cfg.param("derotate")?,
+            svm: SvmParams {
+                c: cfg.param("svm_c")?,
+                max_iter: cfg.param("svm_max_iter")?,
+                ..SvmParams::default()
+            },
+            refine_rounds: cfg.param("refine_rounds")?,
+            min_svm_events: cfg.param("min_svm_events")?,
+            warp_cell_px: cfg.param("warp_cell_px")?,
+            warp_min_hits: cfg.param("warp_min_hits")?,
+            warp_weight: cfg.param("warp_weight")?,
+            candidate_threshold: cfg.param("candidate_threshold")?,
+            consistency_ratio: cfg.param("consistency_ratio")?,
+            consistency_floor: cfg.param("consistency_floor")?,
+            map_cell_px: cfg.param("map_cell_px")?,
+            alpha_min: cfg.param("alpha_min")?,
+            alpha_max: cfg.param("alpha_max")?,
+            map_threshold: cfg.param("map_threshold")?,
+        };
+        Ok(Node(BackgroundMerger::new(params)?))
+    })
+}

@@ -1,0 +1,146 @@
+//! Settings of the background merger. The paper (section 3.4) gives the steps but none of these
+//! numbers; each default says where it came from.
+
+use evseg_geometry::SvmParams;
+
+/// Settings of [`crate::BackgroundMerger`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BackgroundParams {
+    /// Flow with confidence at or below this is invalid (default 0: the NormalFlow convention
+    /// "0 = no estimate").
+    pub min_confidence: f32,
+    /// Subtract the IMU rotational flow (default true; the SVM step needs derotated flow).
+    pub derotate: bool,
+    /// The egomotion SVM (C = 1, squared hinge: METHOD_NOTES section 3).
+    pub svm: SvmParams,
+    /// Rounds of "SVM on the background, residuals, background = consistent candidates"
+    /// (default 2: the second round drops the candidates the first translation does not explain,
+    /// such as an object the planar vote missed, from the SVM; a third changed nothing on the
+    /// test scenes).
+    pub refine_rounds: usize,
+    /// Fewest background events for an SVM estimate (default 30: the 3-parameter problem is
+    /// well posed with a few tens of spread-out samples); with fewer the previous direction is
+    /// kept.
+    pub min_svm_events: usize,
+    /// Cell of the warped previous-background occupancy grid, pixels (default 4: the warp's
+    /// accuracy at 30 ms slices is a few pixels).
+    pub warp_cell_px: u16,
+    /// Fewest events of a cluster that must land on warped previous events for its warp score
+    /// to count (default 10: below that the score is noise).
+    pub warp_min_hits: usize,
+    /// Weight of the warp score against the planar-residual vote in a cluster's background prior
+    /// (default 0.5: equal trust; the paper uses both without weights).
+    pub warp_weight: f64,
+    /// A cluster whose background prior (weighted mean of the fraction of its events the planar
+    /// segmenter called background and its warp score) is at least this is a background
+    /// candidate (default 0.5: the majority).
+    pub candidate_threshold: f64,
+    /// A cluster is consistent with the estimated camera translation when the mean absolute
+    /// residual of its events (after fitting the cluster's own inverse depth) is at most this
+    /// fraction of their mean absolute derotated flow (default 0.5: an object moving
+    /// independently leaves most of its flow unexplained, while the background at any depth
+    /// is explained up to the estimator's noise, about 20-40 % of its length)...
+    pub consistency_ratio: f64,
+    /// ...or at most this absolute mean residual, normalized units/s (default 0.02: about
+    /// 10 px/s at f = 500 px, the noise floor of estimated normal flow; covers a camera that
+    /// barely translates).
+    pub consistency_floor: f64,
+    /// Cell of the persistent background map, pixels (default 8: coarse enough to span the
+    /// camera's motion over a few slices).
+    pub map_cell_px: u16,
+    /// EMA weight of the current slice when it disagrees completely with the map (default 0.05).
+    pub alpha_min: f64,
+    /// EMA weight of the current slice when it agrees completely with the map (default 0.5).
+    /// The weight grows linearly with the similarity (IoU of background cells) between them, so a
+    /// slice whose separation failed barely changes the map (paper: "adaptive alpha based on
+    /// similarity").
+    pub alpha_max: f64,
+    /// A map cell is background when its value is at least this (default 0.5).
+    pub map_threshold: f32,
+}
+
+impl Default for BackgroundParams {
+    fn default() -> Self {
+        Self {
+            min_confidence: 0.0,
+            derotate: true,
+            svm: SvmParams::default(),
+            refine_rounds: 2,
+            min_svm_events: 30,
+            warp_cell_px: 4,
+            warp_min_hits: 10,
+            warp_weight: 0.5,
+            candidate_threshold: 0.5,
+            consistency_ratio: 0.5,
+            consistency_floor: 0.02,
+            map_cell_px: 8,
+            alpha_min: 0.05,
+            alpha_max: 0.5,
+            map_threshold: 0.5,
+        }
+    }
+}
+
+/// A parameter out of range.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("parameter {name} = {value} is invalid: {why}")]
+pub struct ParamError {
+    /// Parameter name.
+    pub name: &'static str,
+    /// Its value, printed.
+    pub value: String,
+    /// What is allowed.
+    pub why: &'static str,
+}
+
+impl BackgroundParams {
+    /// Checks every range.
+    pub fn validate(&self) -> Result<(), ParamError> {
+        let unit = |name, v: f64| {
+            if (0.0..=1.0).contains(&v) {
+                Ok(())
+            } else {
+                Err(ParamError {
+                    name,
+                    value: v.to_string(),
+                    why: "must be in [0, 1]",
+                })
+            }
+        };
+        unit("warp_weight", self.warp_weight)?;
+        unit("candidate_threshold", self.candidate_threshold)?;
+        unit("alpha_min", self.alpha_min)?;
+        unit("alpha_max", self.alpha_max)?;
+        unit("map_threshold", f64::from(self.map_threshold))?;
+        let nonneg = |name, v: f64| {
+            if v.is_finite() && v >= 0.0 {
+                Ok(())
+            } else {
+                Err(ParamError {
+                    name,
+                    value: v.to_string(),
+                    why: "must be finite and >= 0",
+                })
+            }
+        };
+        nonneg("consistency_ratio", self.consistency_ratio)?;
+        nonneg("consistency_floor", self.consistency_floor)?;
+        nonneg("svm_c", self.svm.c)?;
+        nonneg("min_confidence", f64::from(self.min_confidence))?;
+        if self.warp_cell_px == 0 || self.map_cell_px == 0 {
+            return Err(ParamError {
+                name: "warp_cell_px/map_cell_px",
+                value: "0".into(),
+                why: "must be >= 1",
+            });
+        }
+        if self.alpha_min > self.alpha_max {
+            return Err(ParamError {
+                name: "alpha_min",
+                value: self.alpha_min.to_string(),
+                why: "must not exceed alpha_max",
+            });
+        }
+        Ok(())
+    }
+}

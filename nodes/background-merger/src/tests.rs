@@ -1,0 +1,214 @@
+use super::*;
+use evseg_geometry::translational_flow;
+
+const F: f64 = 150.0;
+
+/// A 200x150 pinhole camera.
+fn camera() -> CameraInfo {
+    CameraInfo::pinhole(200, 150, F, "test")
+}
+
+/// Constructed slice: background pixels on a lattice at a depth that varies with the column
+/// (not a plane), seen by a camera translating along `t`; an object block (columns 120..160,
+/// rows 40..90) moving with its own translation `t_obj` at depth 1 when given. Clusters: a 4x3
+/// grid of spatial blocks for the background and one cluster for the object. The planar
+/// segmenter's flags are the truth.
+struct Constructed {
+    events: Events,
+    flow: NormalFlow,
+    clusters: Clusters,
+    residuals: Residuals,
+    object: Vec<bool>,
+}
+
+fn construct(t: [f64; 3], t_obj: Option<[f64; 3]>, t0: f64) -> Constructed {
+    let mut c = Constructed {
+        events: Events::default(),
+        flow: NormalFlow::default(),
+        clusters: Clusters {
+            id: vec![],
+            count: 13,
+        },
+        residuals: Residuals::default(),
+        object: vec![],
+    };
+    let cam = camera();
+    let mut k = 0u32;
+    for v in (0..150u16).step_by(3) {
+        for u in (0..200u16).step_by(3) {
+            k += 1;
+            let (x, y) = ((f64::from(u) - cam.cx) / F, (f64::from(v) - cam.cy) / F);
+            let on_object = t_obj.is_some() && (120..160).contains(&u) && (40..90).contains(&v);
+            let (tt, inv_z) = if on_object {
+                (t_obj.unwrap_or_default(), 1.0)
+            } else {
+                (
+                    t,
+                    0.3 + 0.7 * f64::from(u) / 200.0 + 0.2 * (f64::from(v) / 30.0).sin().abs(),
+                )
+            };
+            let fl = translational_flow(x, y, tt, inv_z);
+            let ang = f64::from(k) * 2.399963;
+            let n0 = [ang.cos(), ang.sin()];
+            let mut nl = fl[0] * n0[0] + fl[1] * n0[1];
+            let mut n0 = n0;
+            if nl < 0.0 {
+                nl = -nl;
+                n0 = [-n0[0], -n0[1]];
+            }
+            c.events.push(t0 + f64::from(k) * 1e-6, u, v, 1);
+            c.flow.nx.push((nl * n0[0]) as f32);
+            c.flow.ny.push((nl * n0[1]) as f32);
+            c.flow.confidence.push(1.0);
+            let id = if on_object { 12 } else { (u / 50) * 3 + (v / 50) };
+            c.clusters.id.push(id);
+            c.residuals.background.push(!on_object);
+            c.residuals.residual.push(0.0);
+            c.object.push(on_object);
+        }
+    }
+    c
+}
+
+fn angle_deg(a: [f64; 3], b: [f64; 3]) -> f64 {
+    let na = dot(a, a).sqrt();
+    let nb = dot(b, b).sqrt();
+    (dot(a, b) / (na * nb)).clamp(-1.0, 1.0).acos().to_degrees()
+}
+
+fn run(m: &mut BackgroundMerger, c: &Constructed, span: (f64, f64), prev: Option<&[u32]>) -> MergeResult {
+    m.merge(&SliceInput {
+        camera: &camera(),
+        events: &c.events,
+        span,
+        omega: Some([0.0; 3]),
+        flow: &c.flow,
+        clusters: &c.clusters,
+        residuals: &c.residuals,
+        previous_labels: prev,
+    })
+    .unwrap()
+}
+
+#[test]
+fn a_static_scene_at_many_depths_is_one_background_with_the_right_direction() {
+    let t = [0.4, 0.1, 0.3];
+    let c = construct(t, None, 0.0);
+    let mut m = BackgroundMerger::new(BackgroundParams::default()).unwrap();
+    let r = run(&mut m, &c, (0.0, 0.03), None);
+    assert!(r.coarse.group.iter().all(|&g| g == 0), "every cluster merged");
+    assert!(r.coarse.egomotion.valid);
+    assert!(
+        angle_deg(r.coarse.egomotion.direction, t) < 4.0,
+        "{:?}",
+        r.coarse.egomotion
+    );
+    // A per-cluster depth explains the background up to the depth variation inside a block.
+    for rep in r.clusters.iter().filter(|r| r.events > 0) {
+        assert!(rep.relative_residual < 0.3, "{rep:?}");
+    }
+}
+
+#[test]
+fn an_independently_moving_object_stays_apart_even_if_the_planar_vote_says_background() {
+    let t = [0.4, 0.0, 0.1];
+    let mut c = construct(t, Some([-0.5, 0.4, 0.0]), 0.0);
+    // The planar segmenter got the object wrong.
+    c.residuals.background.iter_mut().for_each(|b| *b = true);
+    let mut m = BackgroundMerger::new(BackgroundParams::default()).unwrap();
+    let r = run(&mut m, &c, (0.0, 0.03), None);
+    assert!(r.clusters[12].candidate);
+    assert!(!r.clusters[12].background, "{:?}", r.clusters[12]);
+    for (i, &g) in r.coarse.group.iter().enumerate() {
+        assert_eq!(g == 0, !c.object[i], "event {i}");
+    }
+    assert!(
+        angle_deg(r.coarse.egomotion.direction, t) < 5.0,
+        "{:?}",
+        r.coarse.egomotion
+    );
+    // The background group lies on the (fresh) map, the object not.
+    assert_eq!(r.coarse.map_overlap[0], 1.0);
+    assert_eq!(r.coarse.map_overlap[13], 0.0);
+}
+
+#[test]
+fn the_previous_segmentation_is_warped_in_and_corrects_a_wrong_planar_vote() {
+    let t = [0.4, 0.0, 0.1];
+    let t_obj = Some([-0.5, 0.4, 0.0]);
+    let mut m = BackgroundMerger::new(BackgroundParams::default()).unwrap();
+    let first = construct(t, t_obj, 0.0);
+    let r1 = run(&mut m, &first, (0.0, 0.03), None);
+    assert!(!r1.warped);
+    let labels: Vec<u32> = first.object.iter().map(|&o| u32::from(o)).collect();
+    // Second slice: the planar vote now calls the object background *and* part of the
+    // background foreground; the warp of the previous labels outvotes it for the background.
+    let mut second = construct(t, t_obj, 0.03);
+    for (i, b) in second.residuals.background.iter_mut().enumerate() {
+        *b = second.clusters.id[i] != 0;
+    }
+    let r2 = run(&mut m, &second, (0.03, 0.06), Some(&labels));
+    assert!(r2.warped);
+    let w0 = r2.clusters[0].warp_score.unwrap();
+    assert!(w0 > 0.9, "cluster 0 warp score {w0}");
+    assert!(r2.clusters[0].background);
+    let w12 = r2.clusters[12].warp_score.unwrap();
+    assert!(w12 < 0.6, "object warp score {w12}");
+    assert!(r2.map.similarity > 0.5);
+    // Labels of the wrong length are ignored (no warp), not a crash.
+    let r3 = run(&mut m, &second, (0.06, 0.09), Some(&labels[1..]));
+    assert!(!r3.warped);
+}
+
+#[test]
+fn malformed_input_is_an_error() {
+    let c = construct([0.1, 0.0, 0.0], None, 0.0);
+    let mut m = BackgroundMerger::new(BackgroundParams::default()).unwrap();
+    let mut bad = c.clusters.clone();
+    bad.id[3] = 40;
+    let err = m
+        .merge(&SliceInput {
+            camera: &camera(),
+            events: &c.events,
+            span: (0.0, 0.03),
+            omega: None,
+            flow: &c.flow,
+            clusters: &bad,
+            residuals: &c.residuals,
+            previous_labels: None,
+        })
+        .unwrap_err();
+    assert!(
+        matches!(err, MergeError::ClusterId { index: 3, id: 40, .. }),
+        "{err}"
+    );
+    bad.id.pop();
+    let err = m
+        .merge(&SliceInput {
+            camera: &camera(),
+            events: &c.events,
+            span: (0.0, 0.03),
+            omega: Some([f64::NAN, 0.0, 0.0]),
+            flow: &c.flow,
+            clusters: &bad,
+            residuals: &c.residuals,
+            previous_labels: None,
+        })
+        .unwrap_err();
+    assert!(
+        matches!(
+            err,
+            MergeError::Length {
+                what: "clusters.id",
+                ..
+            }
+        ),
+        "{err}"
+    );
+    let p = BackgroundParams {
+        alpha_min: 0.9,
+        alpha_max: 0.1,
+        ..BackgroundParams::default()
+    };
+    assert!(BackgroundMerger::new(p).is_err());
+}

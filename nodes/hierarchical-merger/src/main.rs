@@ -1,0 +1,125 @@
+//! `evseg-hierarchical-merger`: hierarchical merging of segments by motion similarity and the
+//! final background egomotion (paper section 3.5).
+
+use std::process::ExitCode;
+
+use evseg_geometry::SvmParams;
+use evseg_hierarchical_merger::{HierParams, HierarchicalMerger};
+use evseg_runtime::describe::Describe;
+use evseg_runtime::{BoxError, Inputs, NodeConfig, Outputs, Stage, run_stage};
+use evseg_schemas::{CoarseSegmentation, NormalFlow, Segmentation, Slice};
+
+struct Node(HierarchicalMerger);
+
+impl Stage for Node {
+    fn process(&mut self, input: &Inputs, out: &mut Outputs) -> Result<(), BoxError> {
+        let slice: Slice = input.get("slices")?;
+        let flow: NormalFlow = input.get("flow")?;
+        let coarse: CoarseSegmentation = input.get("coarse")?;
+        let r = self
+            .0
+            .merge(&slice.camera, &slice.events, &flow, slice.omega, &coarse)?;
+        tracing::debug!(
+            slice = input.seq(),
+            initial = r.initial_segments,
+            merges = r.merges,
+            dropped_small = r.dropped_small,
+            segments = r.segmentation.segments.len(),
+            "hierarchical merge"
+        );
+        let (t0, t1) = input.span();
+        out.send("segments", input.seq(), t0, t1, &r.segmentation)?;
+        Ok(())
+    }
+}
+
+fn main() -> ExitCode {
+    let d = HierParams::default();
+    let description = Describe::new(
+        "evseg-hierarchical-merger",
+        "Per-segment depth-1 translation, similarity merging of touching segments with the \
+         background penalty, final background egomotion by the SVM (paper section 3.5)",
+    )
+    .input::<Slice>("slices", "event slices (omega: IMU rotation rate, camera frame)")
+    .input::<NormalFlow>("flow", "per-event normal flow")
+    .input::<CoarseSegmentation>("coarse", "the background merger's groups")
+    .output::<Segmentation>(
+        "segments",
+        "label per event (0 = background), segments with translation (depth 1), egomotion",
+    )
+    .param(
+        "min_confidence",
+        f64::from(d.min_confidence),
+        "flow at or below this confidence is invalid",
+    )
+    .param("derotate", d.derotate, "subtract the IMU rotational flow")
+    .param(
+        "lambda",
+        d.lambda,
+        "Tikhonov regularization per event (paper: 1e-6)",
+    )
+    .param("lambda_r", d.lambda_r, "weight of the residual term (paper: 0.5)")
+    .param(
+        "background_penalty",
+        d.background_penalty,
+        "similarity penalty when only one segment lies on the background map",
+    )
+    .param(
+        "map_threshold",
+        f64::from(d.map_threshold),
+        "map value meaning background",
+    )
+    .param(
+        "merge_threshold",
+        d.merge_threshold,
+        "pairs merge while their similarity is at least this",
+    )
+    .param(
+        "touch_px",
+        f64::from(d.touch_px),
+        "bounding boxes this close touch, pixels",
+    )
+    .param(
+        "min_segment_fraction",
+        d.min_segment_fraction,
+        "smaller object segments (fraction of the slice's events) become background",
+    )
+    .param(
+        "min_segment_events",
+        d.min_segment_events,
+        "object segments with fewer events become background",
+    )
+    .param(
+        "fill_cell_px",
+        d.fill_cell_px,
+        "grid cell labelling events without flow, pixels",
+    )
+    .param("svm_c", d.svm.c, "SVM cost C (squared hinge)")
+    .param(
+        "min_svm_events",
+        d.min_svm_events,
+        "fewest background events for the final SVM",
+    )
+    .build();
+    run_stage(description, |cfg: &NodeConfig| {
+        let params = HierParams {
+            min_confidence: cfg.param("min_confidence")?,
+            derotate: cfg.param("derotate")?,
+            lambda: cfg.param("lambda")?,
+            lambda_r: cfg.param("lambda_r")?,
+            background_penalty: cfg.param("background_penalty")?,
+            map_threshold: cfg.param("map_threshold")?,
+            merge_threshold: cfg.param("merge_threshold")?,
+            touch_px: cfg.param("touch_px")?,
+            min_segment_fraction: cfg.param("min_segment_fraction")?,
+            min_segment_events: cfg.param("min_segment_events")?,
+            fill_cell_px: cfg.param("fill_cell_px")?,
+            svm: SvmParams {
+                c: cfg.param("svm_c")?,
+                ..SvmParams::default()
+            },
+            min_svm_events: cfg.param("min_svm_events")?,
+        };
+        Ok(Node(HierarchicalMerger::new(params)?))
+    })
+}

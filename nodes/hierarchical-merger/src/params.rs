@@ -1,0 +1,142 @@
+//! Settings of the hierarchical merger. `lambda` and `lambda_r` are the paper's (section 3.5);
+//! the paper gives no merge threshold, penalty size or minimum segment size, so each default
+//! says where it came from.
+
+use evseg_geometry::SvmParams;
+
+/// Settings of [`crate::HierarchicalMerger`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HierParams {
+    /// Flow with confidence at or below this is invalid (default 0: the NormalFlow convention).
+    pub min_confidence: f32,
+    /// Subtract the IMU rotational flow (default true).
+    pub derotate: bool,
+    /// Tikhonov regularization of a segment's depth-1 translation, per event (paper: 1e-6).
+    pub lambda: f64,
+    /// Weight of the residual term of the similarity (paper: 0.5); residuals in normalized
+    /// units/s.
+    pub lambda_r: f64,
+    /// Subtracted from the similarity when exactly one of the two segments lies on the
+    /// persistent background map (default 1: as large as the whole range of the motion term for
+    /// segments moving at right angles, so such a pair merges only with near-identical motion).
+    pub background_penalty: f64,
+    /// A segment lies on the map when its mean map value is at least this (default 0.5).
+    pub map_threshold: f32,
+    /// Pairs merge while their similarity is at least this (default -0.25: the motion term is
+    /// -|ti - tj|^2 / (|ti|^2 + |tj|^2), which is -0.2 for the same direction at depths 2:1 and
+    /// -1 at right angles; -0.25 merges the same motion at depth ratios up to about 2.3:1).
+    pub merge_threshold: f64,
+    /// Bounding boxes closer than this count as touching, pixels (default 2: neighbouring
+    /// k-means cells share a border, not pixels).
+    pub touch_px: f32,
+    /// A final object segment with fewer events than this fraction of the slice's events is
+    /// labelled background (default 0.005: below that it is flow noise, not an object, at the
+    /// event counts of 346-640 px sensors)...
+    pub min_segment_fraction: f64,
+    /// ...or fewer than this many events (default 20).
+    pub min_segment_events: usize,
+    /// Cell of the grid that labels events without flow by their labelled neighbours, pixels
+    /// (default 4).
+    pub fill_cell_px: u16,
+    /// The final egomotion SVM (METHOD_NOTES section 3).
+    pub svm: SvmParams,
+    /// Fewest background events for the final SVM (default 30); with fewer, the coarse stage's
+    /// direction is kept.
+    pub min_svm_events: usize,
+}
+
+impl Default for HierParams {
+    fn default() -> Self {
+        Self {
+            min_confidence: 0.0,
+            derotate: true,
+            lambda: 1e-6,
+            lambda_r: 0.5,
+            background_penalty: 1.0,
+            map_threshold: 0.5,
+            merge_threshold: -0.25,
+            touch_px: 2.0,
+            min_segment_fraction: 0.005,
+            min_segment_events: 20,
+            fill_cell_px: 4,
+            svm: SvmParams::default(),
+            min_svm_events: 30,
+        }
+    }
+}
+
+/// A parameter out of range.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("parameter {name} = {value} is invalid: {why}")]
+pub struct ParamError {
+    /// Parameter name.
+    pub name: &'static str,
+    /// Its value, printed.
+    pub value: String,
+    /// What is allowed.
+    pub why: &'static str,
+}
+
+impl HierParams {
+    /// Checks every range.
+    pub fn validate(&self) -> Result<(), ParamError> {
+        let check = |name, v: f64, ok: bool, why| {
+            if ok && v.is_finite() {
+                Ok(())
+            } else {
+                Err(ParamError {
+                    name,
+                    value: v.to_string(),
+                    why,
+                })
+            }
+        };
+        check(
+            "lambda",
+            self.lambda,
+            self.lambda >= 0.0,
+            "must be finite and >= 0",
+        )?;
+        check(
+            "lambda_r",
+            self.lambda_r,
+            self.lambda_r >= 0.0,
+            "must be finite and >= 0",
+        )?;
+        check(
+            "background_penalty",
+            self.background_penalty,
+            self.background_penalty >= 0.0,
+            "must be finite and >= 0",
+        )?;
+        check("merge_threshold", self.merge_threshold, true, "must be finite")?;
+        check("touch_px", f64::from(self.touch_px), true, "must be finite")?;
+        check(
+            "min_segment_fraction",
+            self.min_segment_fraction,
+            (0.0..=1.0).contains(&self.min_segment_fraction),
+            "must be in [0, 1]",
+        )?;
+        check(
+            "map_threshold",
+            f64::from(self.map_threshold),
+            (0.0..=1.0).contains(&self.map_threshold),
+            "must be in [0, 1]",
+        )?;
+        check("svm_c", self.svm.c, self.svm.c > 0.0, "must be finite and > 0")?;
+        check(
+            "min_confidence",
+            f64::from(self.min_confidence),
+            true,
+            "must be a number",
+        )?;
+        if self.fill_cell_px == 0 {
+            return Err(ParamError {
+                name: "fill_cell_px",
+                value: "0".into(),
+                why: "must be >= 1",
+            });
+        }
+        Ok(())
+    }
+}

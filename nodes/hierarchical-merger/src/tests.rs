@@ -1,0 +1,194 @@
+use super::*;
+use evseg_geometry::translational_flow;
+
+const F: f64 = 150.0;
+
+/// A block of events: `(x0, x1, y0, y1, group, translation)`, pixels and normalized units/s.
+type Block = (u16, u16, u16, u16, u32, [f64; 3]);
+
+fn camera() -> CameraInfo {
+    CameraInfo::pinhole(200, 150, F, "test")
+}
+
+/// Blocks of events `(x0, x1, y0, y1, group, t)` with flow of translation `t` at depth 1.
+fn build(blocks: &[Block], groups: usize) -> (Events, NormalFlow, CoarseSegmentation) {
+    let cam = camera();
+    let mut ev = Events::default();
+    let mut flow = NormalFlow::default();
+    let mut coarse = CoarseSegmentation {
+        map_overlap: vec![0.0; groups],
+        ..CoarseSegmentation::default()
+    };
+    coarse.map_overlap[0] = 1.0;
+    let mut k = 0u32;
+    for &(x0, x1, y0, y1, g, t) in blocks {
+        for v in (y0..y1).step_by(2) {
+            for u in (x0..x1).step_by(2) {
+                k += 1;
+                let (x, y) = ((f64::from(u) - cam.cx) / F, (f64::from(v) - cam.cy) / F);
+                let fl = translational_flow(x, y, t, 1.0);
+                let ang = f64::from(k) * 2.399963;
+                let (mut n0, mut nl) = ([ang.cos(), ang.sin()], 0.0);
+                nl += fl[0] * n0[0] + fl[1] * n0[1];
+                if nl < 0.0 {
+                    nl = -nl;
+                    n0 = [-n0[0], -n0[1]];
+                }
+                ev.push(f64::from(k) * 1e-6, u, v, 1);
+                flow.nx.push((nl * n0[0]) as f32);
+                flow.ny.push((nl * n0[1]) as f32);
+                flow.confidence.push(1.0);
+                coarse.group.push(g);
+                coarse.residual.push(0.0);
+            }
+        }
+    }
+    (ev, flow, coarse)
+}
+
+fn merge(blocks: &[Block], groups: usize) -> HierResult {
+    let (ev, flow, coarse) = build(blocks, groups);
+    let mut m = HierarchicalMerger::new(HierParams::default()).unwrap();
+    m.merge(&camera(), &ev, &flow, Some([0.0; 3]), &coarse).unwrap()
+}
+
+const BG: [f64; 3] = [0.3, 0.0, 0.1];
+
+#[test]
+fn two_touching_clusters_with_equal_translation_merge() {
+    let t = [-0.4, 0.3, 0.0];
+    let r = merge(
+        &[
+            (0, 200, 0, 40, 0, BG),
+            (100, 130, 60, 90, 1, t),
+            (130, 160, 60, 90, 2, t),
+        ],
+        3,
+    );
+    assert_eq!(r.merges, 1);
+    let s = &r.segmentation;
+    assert_eq!(s.segments.len(), 2, "{:?}", s.segments);
+    let obj = &s.segments[1];
+    assert_eq!(obj.label, 1);
+    for (got, want) in obj.translation.iter().zip(t) {
+        assert!((got - want).abs() < 1e-3, "{:?}", obj.translation);
+    }
+    assert!((obj.bbox[0] - 100.0).abs() < 1e-3 && obj.bbox[2] >= 158.0);
+    assert!(s.egomotion.valid);
+}
+
+#[test]
+fn different_translations_or_separate_boxes_do_not_merge() {
+    let r = merge(
+        &[
+            (0, 200, 0, 40, 0, BG),
+            (100, 130, 60, 90, 1, [-0.4, 0.3, 0.0]),
+            (130, 160, 60, 90, 2, [0.4, 0.3, 0.0]),
+            // Same motion as group 1, but far away.
+            (10, 40, 100, 130, 3, [-0.4, 0.3, 0.0]),
+        ],
+        4,
+    );
+    assert_eq!(r.merges, 0);
+    assert_eq!(r.segmentation.segments.len(), 4);
+    let labels: std::collections::BTreeSet<u32> = r.segmentation.label.iter().copied().collect();
+    assert_eq!(labels.into_iter().collect::<Vec<_>>(), vec![0, 1, 2, 3]);
+}
+
+#[test]
+fn the_background_penalty_keeps_an_object_with_background_like_motion_apart() {
+    // The object moves like the background at depth 1.5 (motion term -0.04); only the map says
+    // it is not background.
+    let t_obj = [BG[0] * 1.5, BG[1] * 1.5, BG[2] * 1.5];
+    let blocks = [(0, 200, 0, 62, 0, BG), (60, 100, 60, 100, 1, t_obj)];
+    let (ev, flow, coarse) = build(&blocks, 2);
+    let mut m = HierarchicalMerger::new(HierParams::default()).unwrap();
+    let r = m.merge(&camera(), &ev, &flow, None, &coarse).unwrap();
+    assert_eq!(r.merges, 0);
+    let mut on_map = coarse.clone();
+    on_map.map_overlap[1] = 1.0;
+    let r = m.merge(&camera(), &ev, &flow, None, &on_map).unwrap();
+    assert_eq!(r.merges, 1);
+    assert!(r.segmentation.label.iter().all(|&l| l == 0));
+}
+
+#[test]
+fn small_segments_become_background_and_unassigned_events_are_filled() {
+    let (mut ev, mut flow, mut coarse) = build(
+        &[(0, 200, 0, 150, 0, BG), (100, 104, 60, 64, 1, [-0.4, 0.3, 0.0])],
+        2,
+    );
+    // An event without flow among the background.
+    ev.push(1.0, 50, 50, 0);
+    flow.nx.push(0.0);
+    flow.ny.push(0.0);
+    flow.confidence.push(0.0);
+    coarse.group.push(CoarseSegmentation::UNASSIGNED);
+    coarse.residual.push(f32::NAN);
+    let mut m = HierarchicalMerger::new(HierParams::default()).unwrap();
+    let r = m.merge(&camera(), &ev, &flow, None, &coarse).unwrap();
+    assert_eq!(r.dropped_small, 1);
+    assert!(r.segmentation.label.iter().all(|&l| l == 0));
+    assert_eq!(r.segmentation.segments.len(), 1);
+    assert_eq!(r.segmentation.segments[0].events as usize, ev.len());
+}
+
+#[test]
+fn malformed_input_is_an_error() {
+    let (ev, flow, coarse) = build(&[(0, 20, 0, 20, 0, BG)], 1);
+    let mut m = HierarchicalMerger::new(HierParams::default()).unwrap();
+    let mut bad = coarse.clone();
+    bad.group[2] = 7;
+    let e = m.merge(&camera(), &ev, &flow, None, &bad).unwrap_err();
+    assert!(
+        matches!(
+            e,
+            HierError::Group {
+                index: 2,
+                group: 7,
+                ..
+            }
+        ),
+        "{e}"
+    );
+    bad.residual.pop();
+    let e = m.merge(&camera(), &ev, &flow, None, &bad).unwrap_err();
+    assert!(
+        matches!(
+            e,
+            HierError::Length {
+                what: "coarse.residual",
+                ..
+            }
+        ),
+        "{e}"
+    );
+    let e = m
+        .merge(&camera(), &ev, &flow, Some([f64::INFINITY, 0.0, 0.0]), &coarse)
+        .unwrap_err();
+    assert!(matches!(e, HierError::Omega(_)), "{e}");
+    let mut short = flow.clone();
+    short.nx.pop();
+    assert!(matches!(
+        m.merge(&camera(), &ev, &short, None, &coarse),
+        Err(HierError::Align(_))
+    ));
+    assert!(
+        HierarchicalMerger::new(HierParams {
+            lambda: -1.0,
+            ..HierParams::default()
+        })
+        .is_err()
+    );
+}
+
+#[test]
+fn similarity_matches_the_paper() {
+    let t = [1.0, 0.0, 0.0];
+    assert_eq!(similarity(t, t, 0.1, 0.1, 0.5), 0.0);
+    assert!((similarity(t, [2.0, 0.0, 0.0], 0.0, 0.0, 0.5) + 0.2).abs() < 1e-12);
+    assert!((similarity(t, [0.0, 1.0, 0.0], 0.0, 0.0, 0.5) + 1.0).abs() < 1e-12);
+    assert!((similarity(t, [-1.0, 0.0, 0.0], 0.2, 0.0, 0.5) + 2.0 + 0.02).abs() < 1e-12);
+    assert!(boxes_touch([0.0, 0.0, 10.0, 10.0], [11.0, 5.0, 20.0, 8.0], 2.0));
+    assert!(!boxes_touch([0.0, 0.0, 10.0, 10.0], [13.0, 5.0, 20.0, 8.0], 2.0));
+}
