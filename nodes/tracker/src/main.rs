@@ -1,0 +1,154 @@
+//! `evseg-tracker`: Kalman-filter tracks with stable ids for the merged segments of each slice
+//! (paper section 3.5, last paragraph).
+
+use std::process::ExitCode;
+
+use evseg_runtime::describe::Describe;
+use evseg_runtime::{BoxError, Inputs, NodeConfig, Outputs, Stage, run_stage};
+use evseg_schemas::describe::NodeDescription;
+use evseg_schemas::{Segmentation, Slice, Tracks};
+use evseg_tracker::{Tracker, TrackerParams};
+
+struct Node(Tracker);
+
+impl Stage for Node {
+    fn process(&mut self, input: &Inputs, out: &mut Outputs) -> Result<(), BoxError> {
+        let slice: Slice = input.get("slices")?;
+        let segmentation: Segmentation = input.get("segments")?;
+        let span = input.span();
+        let tracks = self
+            .0
+            .update(span, slice.events.len(), &segmentation)
+            .map_err(|e| format!("slice {}: {e}", input.seq()))?;
+        tracing::debug!(
+            slice = input.seq(),
+            published = tracks.tracks.len(),
+            live = self.0.live_tracks(),
+            "tracked"
+        );
+        out.send("tracks", input.seq(), span.0, span.1, &tracks)?;
+        Ok(())
+    }
+}
+
+fn description() -> NodeDescription {
+    let d = TrackerParams::default();
+    Describe::new(
+        "evseg-tracker",
+        "Kalman-filter (constant velocity, image centroid) tracker with Hungarian association: \
+         stable track ids per event, 0 = background (paper section 3.5)",
+    )
+    .input::<Slice>(
+        "slices",
+        "event slices (event count; the window comes from the envelope)",
+    )
+    .input::<Segmentation>(
+        "segments",
+        "merged segmentation of the same slices: per-event labels, segments, egomotion",
+    )
+    .output::<Tracks>(
+        "tracks",
+        "per-event track id (0 = background), confirmed tracks matched in the slice, egomotion",
+    )
+    .param(
+        "accel_std_px_s2",
+        d.accel_std_px_s2,
+        "process noise: white acceleration standard deviation, pixels/s^2",
+    )
+    .param(
+        "measurement_std_px",
+        d.measurement_std_px,
+        "segment centroid measurement noise standard deviation, pixels",
+    )
+    .param(
+        "initial_velocity_std_px_s",
+        d.initial_velocity_std_px_s,
+        "velocity standard deviation of a new track, pixels/s",
+    )
+    .param(
+        "gate_chi2",
+        d.gate_chi2,
+        "gate on the squared Mahalanobis distance (13.82 = chi2(2) 99.9 %)",
+    )
+    .param(
+        "max_distance_px",
+        d.max_distance_px,
+        "gate on the centroid distance, pixels",
+    )
+    .param(
+        "bbox_weight",
+        d.bbox_weight,
+        "weight of (1 - box IoU) in the matching cost",
+    )
+    .param(
+        "min_events",
+        d.min_events,
+        "least events for an unmatched segment to open a track (smaller ones become background)",
+    )
+    .param(
+        "max_missing_s",
+        d.max_missing_s,
+        "a track unmatched for longer than this (seconds) is dropped; ids are never reused",
+    )
+    .param(
+        "min_hits",
+        d.min_hits,
+        "matches before a track is listed in `tracks` (its events carry its id from the start)",
+    )
+    .build()
+}
+
+fn main() -> ExitCode {
+    run_stage(description(), |cfg: &NodeConfig| {
+        let params = TrackerParams {
+            accel_std_px_s2: cfg.param("accel_std_px_s2")?,
+            measurement_std_px: cfg.param("measurement_std_px")?,
+            initial_velocity_std_px_s: cfg.param("initial_velocity_std_px_s")?,
+            gate_chi2: cfg.param("gate_chi2")?,
+            max_distance_px: cfg.param("max_distance_px")?,
+            bbox_weight: cfg.param("bbox_weight")?,
+            min_events: cfg.param("min_events")?,
+            max_missing_s: cfg.param("max_missing_s")?,
+            min_hits: cfg.param("min_hits")?,
+        };
+        Ok(Node(Tracker::new(params)?))
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use evseg_schemas::Message;
+
+    #[test]
+    fn description_names_the_ports_and_every_parameter() {
+        let d = description();
+        assert_eq!(d.input("slices").map(|p| p.schema.as_str()), Some(Slice::SCHEMA));
+        assert_eq!(
+            d.input("segments").map(|p| p.schema.as_str()),
+            Some(Segmentation::SCHEMA)
+        );
+        assert_eq!(
+            d.output("tracks").map(|p| p.schema.as_str()),
+            Some(Tracks::SCHEMA)
+        );
+        let names: Vec<&str> = d.params.iter().map(|p| p.name.as_str()).collect();
+        assert_eq!(
+            names,
+            [
+                "accel_std_px_s2",
+                "measurement_std_px",
+                "initial_velocity_std_px_s",
+                "gate_chi2",
+                "max_distance_px",
+                "bbox_weight",
+                "min_events",
+                "max_missing_s",
+                "min_hits",
+            ]
+        );
+        let default_of = |n: &str| d.params.iter().find(|p| p.name == n).map(|p| p.default.clone());
+        assert_eq!(default_of("gate_chi2"), Some(13.82.into()));
+        assert_eq!(default_of("min_hits"), Some(1.into()));
+    }
+}

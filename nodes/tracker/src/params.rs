@@ -1,0 +1,104 @@
+//! Tracker parameters. The paper gives none of these values (section 3.5 only says "a Kalman
+//! Filter-based tracker"); each default says where it came from.
+
+use crate::error::TrackerError;
+
+/// Parameters of [`crate::Tracker`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct TrackerParams {
+    /// Standard deviation of the (piecewise constant, white) image-plane acceleration of an
+    /// object, pixels/s², the process noise of the constant-velocity model. Default 1000 px/s²:
+    /// hand-moved EVIMO2 objects reach a few hundred px/s and change speed within ~0.3 s; this
+    /// moves the predicted position by at most ~0.5 px (1σ) over one 30 ms slice.
+    pub accel_std_px_s2: f64,
+    /// Standard deviation of a segment centroid as a measurement of the object's position,
+    /// pixels. Default 4 px: a segment's centroid moves by a few pixels between slices when its
+    /// cluster boundaries change (over-segmentation cells are tens of pixels wide).
+    pub measurement_std_px: f64,
+    /// Standard deviation of the velocity of a new track (its velocity starts at 0), px/s.
+    /// Default 300 px/s: the typical image speed of EVIMO2 objects; with the 30 ms slices this
+    /// lets the second measurement of a track lie ~30 px (3σ) from the first.
+    pub initial_velocity_std_px_s: f64,
+    /// Gate on the squared Mahalanobis distance between a track's predicted centroid and a
+    /// segment centroid: pairs above it are never matched. Default 13.82, the 99.9 % quantile of
+    /// χ² with 2 degrees of freedom (a correct match falls outside once in 1000 slices).
+    pub gate_chi2: f64,
+    /// Second gate, on the Euclidean distance between predicted and measured centroid, pixels:
+    /// bounds the Mahalanobis gate of a track whose uncertainty grew while it was missing.
+    /// Default 100 px: about 1/6 of the EVIMO2 image width (640 px); more than 3 slices of
+    /// motion at 1000 px/s.
+    pub max_distance_px: f64,
+    /// Weight of the bounding-box term of the matching cost. Cost of a gated pair =
+    /// `d²/gate_chi2 + bbox_weight · (1 − IoU)`, where IoU is that of the track's last box moved
+    /// by the predicted displacement and the segment's box. Default 1: both terms count equally.
+    pub bbox_weight: f64,
+    /// Least number of events for an unmatched segment to open a new track; an unmatched
+    /// smaller segment is labelled background (0). Default 30: below this a segment's centroid
+    /// and box are not reliable (the over-segmenter's 30 clusters of a 30 ms slice hold several
+    /// hundred events each).
+    pub min_events: u32,
+    /// A track not matched for longer than this, seconds (slice centre time since its last
+    /// match), is dropped; its id is never reused. Default 0.5 s: an object that stops moving
+    /// produces no events and vanishes from the segmentation; half a second (~17 slices of
+    /// 30 ms) bridges short stops and occlusions without keeping stale tracks for long.
+    pub max_missing_s: f64,
+    /// Matches (slices) a track needs before it is confirmed and listed in `Tracks::tracks`.
+    /// A tentative track's events still carry its id (the evaluator scores per-event labels,
+    /// and the id stays the same after confirmation); a tentative track missed in a slice is
+    /// dropped at once. Default 1 (confirmed at creation, so every foreground label has its
+    /// `Track`, which the evaluator's object-motion score looks up); SORT (Bewley et al.,
+    /// ICIP 2016) uses 3.
+    pub min_hits: u32,
+}
+
+impl Default for TrackerParams {
+    fn default() -> Self {
+        Self {
+            accel_std_px_s2: 1000.0,
+            measurement_std_px: 4.0,
+            initial_velocity_std_px_s: 300.0,
+            gate_chi2: 13.82,
+            max_distance_px: 100.0,
+            bbox_weight: 1.0,
+            min_events: 30,
+            max_missing_s: 0.5,
+            min_hits: 1,
+        }
+    }
+}
+
+impl TrackerParams {
+    /// Checks every parameter's range.
+    pub fn validate(&self) -> Result<(), TrackerError> {
+        let bad = |name: &'static str, value: f64, reason: &'static str| TrackerError::InvalidParam {
+            name,
+            value,
+            reason,
+        };
+        let positive = [
+            ("measurement_std_px", self.measurement_std_px),
+            ("initial_velocity_std_px_s", self.initial_velocity_std_px_s),
+            ("gate_chi2", self.gate_chi2),
+            ("max_distance_px", self.max_distance_px),
+        ];
+        for (name, v) in positive {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(bad(name, v, "must be a finite number > 0"));
+            }
+        }
+        let non_negative = [
+            ("accel_std_px_s2", self.accel_std_px_s2),
+            ("bbox_weight", self.bbox_weight),
+            ("max_missing_s", self.max_missing_s),
+        ];
+        for (name, v) in non_negative {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(bad(name, v, "must be a finite number >= 0"));
+            }
+        }
+        if self.min_hits == 0 {
+            return Err(bad("min_hits", 0.0, "must be at least 1"));
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,491 @@
+//! Scenario tests of the tracker with known answers.
+
+use evseg_schemas::{Egomotion, Segment, Segmentation};
+
+use crate::{Tracker, TrackerError, TrackerParams};
+
+/// Slice length used by the scenarios, seconds (the slicer's default).
+const DT: f64 = 0.03;
+
+/// One object seen in a slice: segmentation label, centroid (pixels), event count.
+#[derive(Clone, Copy)]
+struct Obj {
+    label: u32,
+    centroid: [f64; 2],
+    events: u32,
+}
+
+/// A segmentation of `background` background events followed by each object's events, boxes
+/// 20x20 px around the centroids. Returns it with the slice's event count.
+fn frame(objs: &[Obj], background: usize) -> (usize, Segmentation) {
+    let mut label = vec![0u32; background];
+    let mut segments = Vec::new();
+    for o in objs {
+        label.extend(std::iter::repeat_n(o.label, o.events as usize));
+        let [x, y] = o.centroid;
+        segments.push(Segment {
+            label: o.label,
+            translation: [0.1 * f64::from(o.label), 0.0, 0.0],
+            centroid: o.centroid,
+            bbox: [
+                (x - 10.0) as f32,
+                (y - 10.0) as f32,
+                (x + 10.0) as f32,
+                (y + 10.0) as f32,
+            ],
+            events: o.events,
+        });
+    }
+    let n = label.len();
+    (
+        n,
+        Segmentation {
+            label,
+            segments,
+            egomotion: Egomotion::default(),
+        },
+    )
+}
+
+fn span(k: usize) -> (f64, f64) {
+    (k as f64 * DT, (k + 1) as f64 * DT)
+}
+
+/// The single track id carried by the events of segmentation label `label` (panics if they
+/// disagree, which the tracker must never produce).
+fn id_of(seg: &Segmentation, out: &evseg_schemas::Tracks, label: u32) -> u32 {
+    let ids: Vec<u32> = seg
+        .label
+        .iter()
+        .zip(&out.label)
+        .filter(|(l, _)| **l == label)
+        .map(|(_, id)| *id)
+        .collect();
+    assert!(!ids.is_empty(), "no events of label {label}");
+    assert!(
+        ids.iter().all(|&i| i == ids[0]),
+        "events of one segment got different ids"
+    );
+    ids[0]
+}
+
+fn position(start: [f64; 2], velocity: [f64; 2], k: usize) -> [f64; 2] {
+    let t = k as f64 * DT;
+    [start[0] + velocity[0] * t, start[1] + velocity[1] * t]
+}
+
+#[test]
+fn two_objects_on_straight_lines_keep_their_ids() -> Result<(), TrackerError> {
+    let mut tracker = Tracker::new(TrackerParams::default())?;
+    let (va, vb) = ([300.0, 0.0], [-200.0, 100.0]);
+    let (mut id_a, mut id_b) = (0, 0);
+    for k in 0..20 {
+        // The segmenter's labels change from slice to slice (they are per-slice cluster numbers),
+        // and the segment order flips: the tracker must not rely on either.
+        let (la, lb) = if k % 2 == 0 { (3, 7) } else { (9, 2) };
+        let a = Obj {
+            label: la,
+            centroid: position([50.0, 50.0], va, k),
+            events: 200,
+        };
+        let b = Obj {
+            label: lb,
+            centroid: position([300.0, 200.0], vb, k),
+            events: 150,
+        };
+        let objs = if k % 3 == 0 { vec![b, a] } else { vec![a, b] };
+        let (n, seg) = frame(&objs, 500);
+        let out = tracker.update(span(k), n, &seg)?;
+        assert_eq!(out.label.len(), n);
+        assert!(
+            out.label[..500].iter().all(|&l| l == 0),
+            "background events must stay 0"
+        );
+        let (ia, ib) = (id_of(&seg, &out, la), id_of(&seg, &out, lb));
+        if k == 0 {
+            // New ids in segment order, starting at 1 (slice 0 lists B first).
+            assert_eq!((ia, ib), (2, 1));
+            (id_a, id_b) = (ia, ib);
+        }
+        assert_eq!((ia, ib), (id_a, id_b), "slice {k}");
+        assert_eq!(out.tracks.len(), 2);
+        // Tracks come sorted by id: B (1) then A (2).
+        let ta = &out.tracks[1];
+        assert_eq!(ta.id, id_a);
+        assert_eq!(ta.age, k as u32);
+        assert_eq!(ta.events, 200);
+        assert_eq!(ta.translation, [0.1 * f64::from(la), 0.0, 0.0]);
+        assert_eq!(
+            ta.bbox,
+            seg.segments
+                .iter()
+                .find(|s| s.label == la)
+                .map(|s| s.bbox)
+                .unwrap_or_default()
+        );
+    }
+    // After 20 noise-free slices the filtered velocities are the true ones.
+    let out_v: Vec<[f64; 2]> = {
+        let k = 20;
+        let a = Obj {
+            label: 1,
+            centroid: position([50.0, 50.0], va, k),
+            events: 200,
+        };
+        let b = Obj {
+            label: 2,
+            centroid: position([300.0, 200.0], vb, k),
+            events: 150,
+        };
+        let (n, seg) = frame(&[a, b], 0);
+        tracker
+            .update(span(k), n, &seg)?
+            .tracks
+            .iter()
+            .map(|t| t.velocity)
+            .collect()
+    };
+    for (v, truth) in out_v.iter().zip([vb, va]) {
+        assert!(
+            (v[0] - truth[0]).abs() < 5.0 && (v[1] - truth[1]).abs() < 5.0,
+            "{v:?} vs {truth:?}"
+        );
+    }
+    Ok(())
+}
+
+#[test]
+fn crossing_objects_with_different_velocities_do_not_swap() -> Result<(), TrackerError> {
+    // A moves right and B left at 400 px/s on rows 8 px apart: 12 px per slice each. At the
+    // crossing, each object's new centroid is nearer to the *other* object's previous centroid,
+    // so matching to last positions would swap them; the velocity prediction must not.
+    let mut tracker = Tracker::new(TrackerParams::default())?;
+    let (va, vb) = ([400.0, 0.0], [-400.0, 0.0]);
+    let (a0, b0) = ([-2.0, 100.0], [202.0, 108.0]);
+    let mut swapped_for_nearest_neighbour = false;
+    for k in 0..17 {
+        let (pa, pb) = (position(a0, va, k), position(b0, vb, k));
+        if k > 0 {
+            let (qa, qb) = (position(a0, va, k - 1), position(b0, vb, k - 1));
+            let d = |p: [f64; 2], q: [f64; 2]| ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2)).sqrt();
+            swapped_for_nearest_neighbour |= d(pb, qa) < d(pa, qa) && d(pa, qb) < d(pb, qb);
+        }
+        let a = Obj {
+            label: 1 + (k as u32 % 2),
+            centroid: pa,
+            events: 100,
+        };
+        let b = Obj {
+            label: 2 - (k as u32 % 2),
+            centroid: pb,
+            events: 100,
+        };
+        let (n, seg) = frame(&[a, b], 50);
+        let out = tracker.update(span(k), n, &seg)?;
+        assert_eq!(id_of(&seg, &out, a.label), 1, "slice {k}: object A");
+        assert_eq!(id_of(&seg, &out, b.label), 2, "slice {k}: object B");
+    }
+    assert!(
+        swapped_for_nearest_neighbour,
+        "the scenario must be one that fools nearest-neighbour matching"
+    );
+    Ok(())
+}
+
+/// Object moving at (100, 50) px/s, seen in slices `0..10`, hidden for `gap` slices, then seen
+/// for 5 more slices on the same line. Returns the ids it got before and after the gap.
+fn ids_around_gap(gap: usize, params: TrackerParams) -> Result<(u32, u32), TrackerError> {
+    let mut tracker = Tracker::new(params)?;
+    let v = [100.0, 50.0];
+    let mut ids = (0, 0);
+    for k in 0..10 + gap + 5 {
+        let visible = !(10..10 + gap).contains(&k);
+        let objs = if visible {
+            vec![Obj {
+                label: 4,
+                centroid: position([100.0, 100.0], v, k),
+                events: 80,
+            }]
+        } else {
+            vec![]
+        };
+        let (n, seg) = frame(&objs, 30);
+        let out = tracker.update(span(k), n, &seg)?;
+        if visible {
+            let id = id_of(&seg, &out, 4);
+            if k < 10 {
+                ids.0 = id;
+            } else {
+                ids.1 = id;
+                assert_eq!(out.tracks.len(), 1);
+            }
+        } else {
+            // A missing track is not reported.
+            assert!(out.tracks.is_empty(), "slice {k}");
+        }
+    }
+    Ok(ids)
+}
+
+#[test]
+fn a_short_gap_keeps_the_id_and_a_long_one_gives_a_new_id() -> Result<(), TrackerError> {
+    // 30 ms slices, max_missing_s 0.5 s. Gap of 10 slices: 0.33 s since the last match when the
+    // object reappears -> same id. Gap of 20 slices: 0.63 s -> dropped, new id 2 (1 is not reused).
+    let params = TrackerParams::default();
+    assert_eq!(ids_around_gap(10, params.clone())?, (1, 1));
+    assert_eq!(ids_around_gap(20, params.clone())?, (1, 2));
+    // The limit is the parameter: with 1 s, a 20-slice gap is bridged.
+    let lenient = TrackerParams {
+        max_missing_s: 1.0,
+        ..params
+    };
+    assert_eq!(ids_around_gap(20, lenient)?, (1, 1));
+    Ok(())
+}
+
+#[test]
+fn small_segments_are_background_unless_they_continue_a_track() -> Result<(), TrackerError> {
+    let params = TrackerParams {
+        min_events: 30,
+        ..TrackerParams::default()
+    };
+    let mut tracker = Tracker::new(params)?;
+    // Slice 0: a big object (label 1) and a small blob (label 2, 10 events) far away.
+    let big = |k: usize, events| Obj {
+        label: 1,
+        centroid: position([100.0, 100.0], [50.0, 0.0], k),
+        events,
+    };
+    let small = Obj {
+        label: 2,
+        centroid: [400.0, 300.0],
+        events: 10,
+    };
+    let (n, seg) = frame(&[big(0, 100), small], 20);
+    let out = tracker.update(span(0), n, &seg)?;
+    assert_eq!(id_of(&seg, &out, 1), 1);
+    assert_eq!(id_of(&seg, &out, 2), 0, "a small unmatched segment is background");
+    assert_eq!(out.tracks.len(), 1);
+    assert_eq!(out.label.iter().filter(|&&l| l == 0).count(), 30);
+    // Slice 1: the object shrinks to 10 events but continues its track: it keeps id 1.
+    let (n, seg) = frame(&[big(1, 10)], 20);
+    let out = tracker.update(span(1), n, &seg)?;
+    assert_eq!(id_of(&seg, &out, 1), 1);
+    assert_eq!(out.tracks[0].events, 10);
+    // Slice 2: exactly min_events in a new place: a new track, id 2.
+    let (n, seg) = frame(
+        &[
+            big(2, 100),
+            Obj {
+                label: 5,
+                centroid: [500.0, 50.0],
+                events: 30,
+            },
+        ],
+        0,
+    );
+    let out = tracker.update(span(2), n, &seg)?;
+    assert_eq!((id_of(&seg, &out, 1), id_of(&seg, &out, 5)), (1, 2));
+    Ok(())
+}
+
+#[test]
+fn tentative_tracks_label_their_events_but_are_listed_only_when_confirmed() -> Result<(), TrackerError> {
+    let params = TrackerParams {
+        min_hits: 3,
+        ..TrackerParams::default()
+    };
+    let mut tracker = Tracker::new(params)?;
+    let obj = |k| Obj {
+        label: 1,
+        centroid: position([200.0, 100.0], [0.0, 150.0], k),
+        events: 60,
+    };
+    for k in 0..4 {
+        let (n, seg) = frame(&[obj(k)], 10);
+        let out = tracker.update(span(k), n, &seg)?;
+        assert_eq!(id_of(&seg, &out, 1), 1, "slice {k}");
+        let listed: Vec<u32> = out.tracks.iter().map(|t| t.id).collect();
+        assert_eq!(listed, if k < 2 { vec![] } else { vec![1] }, "slice {k}");
+    }
+    // A new tentative object seen once, missed once, seen again in place: it was dropped at its
+    // first miss and comes back with a new id.
+    let other = Obj {
+        label: 2,
+        centroid: [50.0, 50.0],
+        events: 60,
+    };
+    let (n, seg) = frame(&[obj(4), other], 0);
+    assert_eq!(id_of(&seg, &tracker.update(span(4), n, &seg)?, 2), 2);
+    let (n, seg) = frame(&[obj(5)], 0);
+    tracker.update(span(5), n, &seg)?;
+    let (n, seg) = frame(&[obj(6), other], 0);
+    let out = tracker.update(span(6), n, &seg)?;
+    assert_eq!((id_of(&seg, &out, 1), id_of(&seg, &out, 2)), (1, 3));
+    Ok(())
+}
+
+#[test]
+fn egomotion_is_passed_through_and_an_empty_slice_is_fine() -> Result<(), TrackerError> {
+    let mut tracker = Tracker::new(TrackerParams::default())?;
+    let (n, mut seg) = frame(&[], 0);
+    seg.egomotion = Egomotion {
+        direction: [0.0, 0.6, 0.8],
+        omega: [0.1, -0.2, 0.3],
+        valid: true,
+    };
+    let out = tracker.update(span(0), n, &seg)?;
+    assert_eq!(out.egomotion, seg.egomotion);
+    assert!(out.label.is_empty() && out.tracks.is_empty());
+    Ok(())
+}
+
+#[test]
+fn malformed_input_gives_errors_and_leaves_the_tracker_unchanged() -> Result<(), TrackerError> {
+    let mut tracker = Tracker::new(TrackerParams::default())?;
+    let obj = |k| Obj {
+        label: 1,
+        centroid: position([100.0, 100.0], [100.0, 0.0], k),
+        events: 50,
+    };
+    let (n, seg) = frame(&[obj(0)], 10);
+    tracker.update(span(0), n, &seg)?;
+
+    let (n, good) = frame(&[obj(1)], 10);
+    // Label vector shorter than the slice.
+    assert_eq!(
+        tracker.update(span(1), n + 1, &good).err(),
+        Some(TrackerError::LabelCount {
+            labels: n,
+            events: n + 1
+        })
+    );
+    // An event label that no segment describes.
+    let mut bad = good.clone();
+    bad.label[3] = 9;
+    assert_eq!(
+        tracker.update(span(1), n, &bad).err(),
+        Some(TrackerError::UnknownLabel { index: 3, label: 9 })
+    );
+    // Two segments with one label.
+    let mut bad = good.clone();
+    bad.segments.push(bad.segments[0].clone());
+    assert_eq!(
+        tracker.update(span(1), n, &bad).err(),
+        Some(TrackerError::DuplicateSegment { label: 1 })
+    );
+    // Non-finite centroid.
+    let mut bad = good.clone();
+    bad.segments[0].centroid[1] = f64::NAN;
+    assert!(matches!(
+        tracker.update(span(1), n, &bad),
+        Err(TrackerError::NonFiniteCentroid { label: 1, .. })
+    ));
+    // Inverted or infinite box.
+    let mut bad = good.clone();
+    bad.segments[0].bbox = [10.0, 10.0, 5.0, 20.0];
+    assert!(matches!(
+        tracker.update(span(1), n, &bad),
+        Err(TrackerError::InvalidBbox { label: 1, .. })
+    ));
+    bad.segments[0].bbox = [10.0, 10.0, f32::INFINITY, 20.0];
+    assert!(matches!(
+        tracker.update(span(1), n, &bad),
+        Err(TrackerError::InvalidBbox { label: 1, .. })
+    ));
+    // Bad windows: non-finite, reversed, and not after the previous slice.
+    assert!(matches!(
+        tracker.update((f64::NAN, 1.0), n, &good),
+        Err(TrackerError::InvalidSpan { .. })
+    ));
+    assert!(matches!(
+        tracker.update((1.0, 0.5), n, &good),
+        Err(TrackerError::InvalidSpan { .. })
+    ));
+    assert!(matches!(
+        tracker.update(span(0), n, &good),
+        Err(TrackerError::TimeNotIncreasing { .. })
+    ));
+    // A huge label value is fine (sparse index) when it is declared.
+    let mut big_label = good.clone();
+    big_label.segments[0].label = 4_000_000_000;
+    big_label
+        .label
+        .iter_mut()
+        .filter(|l| **l == 1)
+        .for_each(|l| *l = 4_000_000_000);
+    let mut probe = tracker.clone();
+    assert_eq!(
+        id_of(&big_label, &probe.update(span(1), n, &big_label)?, 4_000_000_000),
+        1
+    );
+
+    // None of the errors changed anything: the next good slice continues track 1 at age 1.
+    let out = tracker.update(span(1), n, &good)?;
+    assert_eq!(id_of(&good, &out, 1), 1);
+    assert_eq!(out.tracks[0].age, 1);
+    assert_eq!(tracker.live_tracks(), 1);
+    Ok(())
+}
+
+#[test]
+fn background_segment_entries_are_ignored_even_if_malformed() -> Result<(), TrackerError> {
+    // A segment with label 0 describes the background: it is never tracked and its centroid is
+    // not checked (a producer may leave it NaN).
+    let mut tracker = Tracker::new(TrackerParams::default())?;
+    let (n, mut seg) = frame(
+        &[Obj {
+            label: 3,
+            centroid: [10.0, 10.0],
+            events: 40,
+        }],
+        100,
+    );
+    seg.segments.push(Segment {
+        label: 0,
+        translation: [0.0; 3],
+        centroid: [f64::NAN, f64::NAN],
+        bbox: [0.0; 4],
+        events: 100,
+    });
+    let out = tracker.update(span(0), n, &seg)?;
+    assert_eq!(out.tracks.len(), 1);
+    assert_eq!(out.label.iter().filter(|&&l| l == 0).count(), 100);
+    Ok(())
+}
+
+#[test]
+fn invalid_parameters_are_refused() {
+    let bad = [
+        TrackerParams {
+            measurement_std_px: 0.0,
+            ..Default::default()
+        },
+        TrackerParams {
+            gate_chi2: f64::NAN,
+            ..Default::default()
+        },
+        TrackerParams {
+            accel_std_px_s2: -1.0,
+            ..Default::default()
+        },
+        TrackerParams {
+            max_missing_s: f64::INFINITY,
+            ..Default::default()
+        },
+        TrackerParams {
+            min_hits: 0,
+            ..Default::default()
+        },
+        TrackerParams {
+            max_distance_px: -5.0,
+            ..Default::default()
+        },
+    ];
+    for p in bad {
+        assert!(
+            matches!(Tracker::new(p.clone()), Err(TrackerError::InvalidParam { .. })),
+            "{p:?} accepted"
+        );
+    }
+}

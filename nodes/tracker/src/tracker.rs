@@ -1,0 +1,332 @@
+//! The tracker: one constant-velocity Kalman filter per object, Hungarian association per slice,
+//! stable ids (paper section 3.5, last paragraph).
+
+use std::collections::HashMap;
+
+use evseg_schemas::{Segment, Segmentation, Track, Tracks};
+
+use crate::association::{associate, pair_cost};
+use crate::error::TrackerError;
+use crate::kalman::CvKalman;
+use crate::params::TrackerParams;
+
+/// One live track.
+#[derive(Debug, Clone)]
+struct TrackState {
+    /// Published id (>= 1, never reused).
+    id: u32,
+    /// Filter on the image centroid (pixels, pixels/s).
+    kf: CvKalman,
+    /// The last matched box relative to the last matched centroid, pixels
+    /// (`bbox − [cx, cy, cx, cy]`); the predicted box is the predicted centroid plus these.
+    box_offsets: [f64; 4],
+    /// Value of [`Tracker::slices`] when the track was created.
+    created_slice: u64,
+    /// Slices in which the track was matched (creation counts as one).
+    hits: u32,
+    /// Centre time of the slice of the last match, seconds.
+    last_match_t: f64,
+}
+
+impl TrackState {
+    fn predicted_bbox(&self) -> [f64; 4] {
+        let [x, y] = self.kf.position();
+        let o = self.box_offsets;
+        [x + o[0], y + o[1], x + o[2], y + o[3]]
+    }
+}
+
+/// Maps a segment label to its index in `Segmentation::segments`.
+enum LabelIndex {
+    /// Table indexed by label (`usize::MAX` = no segment), for small labels.
+    Dense(Vec<usize>),
+    /// Hash map, for large label values.
+    Sparse(HashMap<u32, usize>),
+}
+
+impl LabelIndex {
+    /// Largest label value for which a dense table is used (a 64k-entry table is cheap).
+    const DENSE_MAX: u32 = 1 << 16;
+
+    fn new(segments: &[Segment]) -> Result<Self, TrackerError> {
+        let max = segments.iter().map(|s| s.label).max().unwrap_or(0);
+        let mut index = if max <= Self::DENSE_MAX {
+            LabelIndex::Dense(vec![usize::MAX; max as usize + 1])
+        } else {
+            LabelIndex::Sparse(HashMap::with_capacity(segments.len()))
+        };
+        for (i, s) in segments.iter().enumerate() {
+            let duplicate = match &mut index {
+                LabelIndex::Dense(v) => std::mem::replace(&mut v[s.label as usize], i) != usize::MAX,
+                LabelIndex::Sparse(m) => m.insert(s.label, i).is_some(),
+            };
+            if duplicate {
+                return Err(TrackerError::DuplicateSegment { label: s.label });
+            }
+        }
+        Ok(index)
+    }
+
+    fn get(&self, label: u32) -> Option<usize> {
+        match self {
+            LabelIndex::Dense(v) => v.get(label as usize).copied().filter(|&i| i != usize::MAX),
+            LabelIndex::Sparse(m) => m.get(&label).copied(),
+        }
+    }
+}
+
+/// Checks a foreground segment's centroid and box.
+fn check_segment(s: &Segment) -> Result<(), TrackerError> {
+    if !(s.centroid[0].is_finite() && s.centroid[1].is_finite()) {
+        return Err(TrackerError::NonFiniteCentroid {
+            label: s.label,
+            centroid: s.centroid,
+        });
+    }
+    let b = s.bbox;
+    if !b.iter().all(|v| v.is_finite()) || b[0] > b[2] || b[1] > b[3] {
+        return Err(TrackerError::InvalidBbox {
+            label: s.label,
+            bbox: b,
+        });
+    }
+    Ok(())
+}
+
+fn bbox_f64(b: [f32; 4]) -> [f64; 4] {
+    b.map(f64::from)
+}
+
+/// Tracks the merged segments of successive slices and gives each a stable id.
+///
+/// Per slice ([`Tracker::update`]):
+/// 1. every track's filter is predicted to the slice's centre time; tracks not matched for more
+///    than `max_missing_s` are dropped;
+/// 2. tracks are matched one-to-one to the segments with label != 0 that have events
+///    ([`crate::association`]); a matched track's filter is corrected with the segment centroid;
+/// 3. a tentative track (fewer than `min_hits` matches) that was not matched is dropped;
+/// 4. each unmatched segment with at least `min_events` events opens a track with a new id
+///    (1, 2, 3, ...; ids are never reused);
+/// 5. every event of a segment takes the id of the segment's track; events of label 0 and of
+///    small unmatched segments (no track) are background, 0.
+///
+/// Events of a tentative track carry its id too, since the evaluator scores per-event labels and
+/// the id does not change on confirmation; only `Tracks::tracks` waits for `min_hits`.
+#[derive(Debug, Clone)]
+pub struct Tracker {
+    params: TrackerParams,
+    tracks: Vec<TrackState>,
+    /// The id the next new track gets.
+    next_id: u32,
+    /// Centre time of the previous slice, seconds.
+    last_t: Option<f64>,
+    /// Slices processed so far.
+    slices: u64,
+}
+
+impl Tracker {
+    /// A tracker with no tracks; refuses parameters out of range.
+    pub fn new(params: TrackerParams) -> Result<Self, TrackerError> {
+        params.validate()?;
+        Ok(Self {
+            params,
+            tracks: Vec::new(),
+            next_id: 1,
+            last_t: None,
+            slices: 0,
+        })
+    }
+
+    /// The parameters.
+    pub fn params(&self) -> &TrackerParams {
+        &self.params
+    }
+
+    /// Number of live tracks (tentative, matched or missing).
+    pub fn live_tracks(&self) -> usize {
+        self.tracks.len()
+    }
+
+    /// Tracks one slice: `span` is its time window `(t_start, t_end)` in seconds (from the
+    /// envelope), `events` the number of events of the slice, `segmentation` its merged
+    /// segments (per-event labels aligned with the slice's events).
+    ///
+    /// Returns per-event track ids (0 = background), the confirmed tracks matched in this slice
+    /// (sorted by id) and the segmentation's egomotion. The segments' own `events` field is not
+    /// used: event counts are taken from the per-event labels. Only foreground segments
+    /// (label != 0) are checked for finite centroids and valid boxes. On error the tracker is
+    /// unchanged.
+    pub fn update(
+        &mut self,
+        span: (f64, f64),
+        events: usize,
+        segmentation: &Segmentation,
+    ) -> Result<Tracks, TrackerError> {
+        // ---- validation (no state change before this block succeeds) ----
+        let (t_start, t_end) = span;
+        if !(t_start.is_finite() && t_end.is_finite() && t_end >= t_start) {
+            return Err(TrackerError::InvalidSpan { t_start, t_end });
+        }
+        let t = 0.5 * (t_start + t_end);
+        if let Some(previous) = self.last_t
+            && t <= previous
+        {
+            return Err(TrackerError::TimeNotIncreasing { previous, current: t });
+        }
+        if segmentation.label.len() != events {
+            return Err(TrackerError::LabelCount {
+                labels: segmentation.label.len(),
+                events,
+            });
+        }
+        let segments = &segmentation.segments;
+        let index = LabelIndex::new(segments)?;
+        for s in segments.iter().filter(|s| s.label != 0) {
+            check_segment(s)?;
+        }
+        let mut counts = vec![0u32; segments.len()];
+        for (i, &label) in segmentation.label.iter().enumerate() {
+            if label == 0 {
+                continue;
+            }
+            match index.get(label) {
+                Some(k) => counts[k] += 1,
+                None => return Err(TrackerError::UnknownLabel { index: i, label }),
+            }
+        }
+
+        let candidates: Vec<usize> = (0..segments.len())
+            .filter(|&k| segments[k].label != 0 && counts[k] > 0)
+            .collect();
+        if u64::from(self.next_id) + candidates.len() as u64 > u64::from(u32::MAX) {
+            return Err(TrackerError::IdsExhausted {
+                next: self.next_id,
+                needed: candidates.len(),
+            });
+        }
+
+        // ---- prediction and expiry ----
+        if let Some(previous) = self.last_t {
+            let dt = t - previous;
+            for tr in &mut self.tracks {
+                tr.kf.predict(dt, self.params.accel_std_px_s2);
+            }
+        }
+        let max_missing = self.params.max_missing_s;
+        self.tracks.retain(|tr| t - tr.last_match_t <= max_missing);
+
+        // ---- association ----
+        let costs: Vec<Vec<Option<f64>>> = self
+            .tracks
+            .iter()
+            .map(|tr| {
+                let pb = tr.predicted_bbox();
+                candidates
+                    .iter()
+                    .map(|&k| {
+                        let s = &segments[k];
+                        pair_cost(&tr.kf, pb, s.centroid, bbox_f64(s.bbox), &self.params)
+                    })
+                    .collect()
+            })
+            .collect();
+        let matches = associate(&costs, self.params.bbox_weight);
+
+        // Track index per segment index, filled for matched and new tracks.
+        let mut track_of_segment: Vec<Option<usize>> = vec![None; segments.len()];
+        let mut matched_track = vec![false; self.tracks.len()];
+        for (ti, m) in matches.iter().enumerate() {
+            if let Some(ci) = *m {
+                let k = candidates[ci];
+                let s = &segments[k];
+                let tr = &mut self.tracks[ti];
+                tr.kf.update(s.centroid, self.params.measurement_std_px);
+                tr.box_offsets = box_offsets(s);
+                tr.hits = tr.hits.saturating_add(1);
+                tr.last_match_t = t;
+                matched_track[ti] = true;
+                track_of_segment[k] = Some(ti);
+            }
+        }
+
+        // ---- new tracks (enough ids were checked above) ----
+        let new_segments: Vec<usize> = candidates
+            .iter()
+            .copied()
+            .filter(|&k| track_of_segment[k].is_none() && counts[k] >= self.params.min_events)
+            .collect();
+        for &k in &new_segments {
+            let s = &segments[k];
+            let id = self.next_id;
+            self.next_id += 1;
+            self.tracks.push(TrackState {
+                id,
+                kf: CvKalman::new(
+                    s.centroid,
+                    self.params.measurement_std_px,
+                    self.params.initial_velocity_std_px_s,
+                ),
+                box_offsets: box_offsets(s),
+                created_slice: self.slices,
+                hits: 1,
+                last_match_t: t,
+            });
+            matched_track.push(true);
+            track_of_segment[k] = Some(self.tracks.len() - 1);
+        }
+
+        // ---- outputs ----
+        let id_of_segment: Vec<u32> = track_of_segment
+            .iter()
+            .map(|m| m.map_or(0, |ti| self.tracks[ti].id))
+            .collect();
+        let label: Vec<u32> = segmentation
+            .label
+            .iter()
+            .map(|&l| {
+                if l == 0 {
+                    0
+                } else {
+                    index.get(l).map_or(0, |k| id_of_segment[k])
+                }
+            })
+            .collect();
+        let mut tracks: Vec<Track> = track_of_segment
+            .iter()
+            .enumerate()
+            .filter_map(|(k, m)| m.map(|ti| (k, &self.tracks[ti])))
+            .filter(|(_, tr)| tr.hits >= self.params.min_hits)
+            .map(|(k, tr)| Track {
+                id: tr.id,
+                centroid: tr.kf.position(),
+                velocity: tr.kf.velocity(),
+                bbox: segments[k].bbox,
+                translation: segments[k].translation,
+                age: u32::try_from(self.slices - tr.created_slice).unwrap_or(u32::MAX),
+                events: counts[k],
+            })
+            .collect();
+        tracks.sort_by_key(|tr| tr.id);
+
+        // Tentative tracks missed in this slice are dropped at once.
+        let min_hits = self.params.min_hits;
+        let mut keep = matched_track.into_iter();
+        self.tracks
+            .retain(|tr| keep.next().unwrap_or(true) || tr.hits >= min_hits);
+
+        self.last_t = Some(t);
+        self.slices += 1;
+        Ok(Tracks {
+            label,
+            tracks,
+            egomotion: segmentation.egomotion,
+        })
+    }
+}
+
+/// A segment's box relative to its centroid, pixels.
+fn box_offsets(s: &Segment) -> [f64; 4] {
+    let [cx, cy] = s.centroid;
+    let b = bbox_f64(s.bbox);
+    [b[0] - cx, b[1] - cy, b[2] - cx, b[3] - cy]
+}
