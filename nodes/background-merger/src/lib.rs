@@ -11,7 +11,8 @@
 //!    Clusters with a prior of at least [`BackgroundParams::candidate_threshold`] are background
 //!    candidates.
 //! 2. **Egomotion.** The linear SVM on the candidates' derotated normal flow gives the camera's
-//!    translation direction `t` (METHOD_NOTES section 3).
+//!    translation direction `t` (METHOD_NOTES section 3), refined with one inverse depth per
+//!    image cell (`evseg_geometry::egomotion`; `refine_iterations = 0` gives the SVM alone).
 //! 3. **Residuals under the refined background motion.** Each cluster gets its own inverse depth
 //!    `rho >= 0` (least squares of `n_derot = rho (X . t)`, clamped at 0 by cheirality), and each
 //!    event the residual `r_new = n_derot - rho (X . t)`. The paper writes
@@ -32,7 +33,7 @@ pub mod map;
 pub mod params;
 pub mod warp;
 
-use evseg_geometry::{FlowSample, TableCache, flow_samples, translation_direction};
+use evseg_geometry::{FlowSample, TableCache, estimate_translation, flow_samples};
 use evseg_schemas::align::AlignError;
 use evseg_schemas::{CameraInfo, Clusters, CoarseSegmentation, Egomotion, Events, NormalFlow, Residuals};
 
@@ -253,10 +254,15 @@ impl BackgroundMerger {
                 .filter(|(c, _)| in_svm[*c])
                 .flat_map(|(_, m)| m.iter().copied())
                 .collect();
-            let svm = (chosen.len() >= p.min_svm_events)
-                .then(|| translation_direction(chosen.iter().copied(), &p.svm))
-                .flatten();
-            direction = svm.map(|s| s.direction).or(previous_direction);
+            let estimate = estimate_translation(
+                &chosen,
+                &events.x,
+                &events.y,
+                input.camera.width,
+                input.camera.height,
+                &p.egomotion,
+            );
+            direction = estimate.or(previous_direction);
             for (c, members) in per_cluster.iter().enumerate() {
                 let consistent = explain(members, direction, &p, &mut residual, &mut reports[c]);
                 reports[c].background = reports[c].candidate && consistent;

@@ -6,7 +6,7 @@
 use std::process::ExitCode;
 
 use evseg_background_merger::{BackgroundMerger, BackgroundParams, SliceInput};
-use evseg_geometry::SvmParams;
+use evseg_geometry::{EgomotionParams, SvmParams};
 use evseg_runtime::describe::Describe;
 use evseg_runtime::{BoxError, Inputs, NodeConfig, Outputs, Stage, run_stage};
 use evseg_schemas::{Clusters, CoarseSegmentation, NormalFlow, Residuals, Slice, Tracks};
@@ -71,21 +71,36 @@ fn main() -> ExitCode {
         "flow at or below this confidence is invalid",
     )
     .param("derotate", d.derotate, "subtract the IMU rotational flow")
-    .param("svm_c", d.svm.c, "SVM cost C (squared hinge)")
+    .param("svm_c", d.egomotion.svm.c, "SVM cost C (squared hinge)")
     .param(
-        "svm_max_iter",
-        d.svm.max_iter,
-        "most Newton iterations of the SVM",
+        "egomotion_min_samples",
+        d.egomotion.min_samples,
+        "fewest background events for an egomotion estimate",
+    )
+    .param(
+        "refine_iterations",
+        d.egomotion.refine_iterations,
+        "rounds of depth refinement after the SVM (0 = the SVM alone, as in the paper)",
+    )
+    .param(
+        "depth_grid_cols",
+        d.egomotion.grid_cols,
+        "columns of the grid of constant-depth cells of the refinement",
+    )
+    .param(
+        "min_cell_samples",
+        d.egomotion.min_cell_samples,
+        "cells with fewer samples are left out of the refinement",
+    )
+    .param(
+        "egomotion_density_cell_px",
+        d.egomotion.density_cell_px,
+        "cells over which the egomotion samples are density-normalized, pixels (0 = off)",
     )
     .param(
         "refine_rounds",
         d.refine_rounds,
         "rounds of SVM on the background -> residuals -> consistent candidates",
-    )
-    .param(
-        "min_svm_events",
-        d.min_svm_events,
-        "fewest background events for an SVM estimate",
     )
     .param(
         "warp_cell_px",
@@ -142,13 +157,18 @@ fn main() -> ExitCode {
         let params = BackgroundParams {
             min_confidence: cfg.param("min_confidence")?,
             derotate: cfg.param("derotate")?,
-            svm: SvmParams {
-                c: cfg.param("svm_c")?,
-                max_iter: cfg.param("svm_max_iter")?,
-                ..SvmParams::default()
+            egomotion: EgomotionParams {
+                svm: SvmParams {
+                    c: cfg.param("svm_c")?,
+                    ..SvmParams::default()
+                },
+                min_samples: cfg.param("egomotion_min_samples")?,
+                refine_iterations: cfg.param("refine_iterations")?,
+                grid_cols: cfg.param("depth_grid_cols")?,
+                min_cell_samples: cfg.param("min_cell_samples")?,
+                density_cell_px: cfg.param("egomotion_density_cell_px")?,
             },
             refine_rounds: cfg.param("refine_rounds")?,
-            min_svm_events: cfg.param("min_svm_events")?,
             warp_cell_px: cfg.param("warp_cell_px")?,
             warp_min_hits: cfg.param("warp_min_hits")?,
             warp_weight: cfg.param("warp_weight")?,

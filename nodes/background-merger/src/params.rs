@@ -1,7 +1,7 @@
 //! Settings of the background merger. The paper (section 3.4) gives the steps but none of these
 //! numbers; each default says where it came from.
 
-use evseg_geometry::SvmParams;
+use evseg_geometry::EgomotionParams;
 
 /// Settings of [`crate::BackgroundMerger`].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -11,17 +11,13 @@ pub struct BackgroundParams {
     pub min_confidence: f32,
     /// Subtract the IMU rotational flow (default true; the SVM step needs derotated flow).
     pub derotate: bool,
-    /// The egomotion SVM (C = 1, squared hinge: METHOD_NOTES section 3).
-    pub svm: SvmParams,
+    /// The egomotion estimate (SVM, then depth refinement; see `evseg_geometry::egomotion`).
+    pub egomotion: EgomotionParams,
     /// Rounds of "SVM on the background, residuals, background = consistent candidates"
     /// (default 2: the second round drops the candidates the first translation does not explain,
     /// such as an object the planar vote missed, from the SVM; a third changed nothing on the
     /// test scenes).
     pub refine_rounds: usize,
-    /// Fewest background events for an SVM estimate (default 30: the 3-parameter problem is
-    /// well posed with a few tens of spread-out samples); with fewer the previous direction is
-    /// kept.
-    pub min_svm_events: usize,
     /// Cell of the warped previous-background occupancy grid, pixels (default 4: the warp's
     /// accuracy at 30 ms slices is a few pixels).
     pub warp_cell_px: u16,
@@ -64,9 +60,8 @@ impl Default for BackgroundParams {
         Self {
             min_confidence: 0.0,
             derotate: true,
-            svm: SvmParams::default(),
+            egomotion: EgomotionParams::default(),
             refine_rounds: 2,
-            min_svm_events: 30,
             warp_cell_px: 4,
             warp_min_hits: 10,
             warp_weight: 0.5,
@@ -125,7 +120,7 @@ impl BackgroundParams {
         };
         nonneg("consistency_ratio", self.consistency_ratio)?;
         nonneg("consistency_floor", self.consistency_floor)?;
-        nonneg("svm_c", self.svm.c)?;
+        nonneg("svm_c", self.egomotion.svm.c)?;
         nonneg("min_confidence", f64::from(self.min_confidence))?;
         if self.warp_cell_px == 0 || self.map_cell_px == 0 {
             return Err(ParamError {

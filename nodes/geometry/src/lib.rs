@@ -14,14 +14,20 @@
 
 pub mod assignment;
 pub mod camera;
+pub mod density;
+pub mod egomotion;
 pub mod lsq;
 pub mod motion;
+pub mod refine;
 pub mod samples;
 pub mod svm;
 pub mod translation;
 
 pub use camera::{Camera, TableCache, UndistortTable};
+pub use density::density_weights;
+pub use egomotion::{EgomotionParams, estimate_translation};
 pub use motion::{a_matrix, b_matrix, c_matrix, planar_flow, rotational_flow, translational_flow};
+pub use refine::{grid_regions, refine_direction, refine_direction_robust};
 pub use samples::{FlowSample, flow_samples};
 pub use svm::{SvmDirection, SvmParams, translation_direction};
 pub use translation::TranslationFit;

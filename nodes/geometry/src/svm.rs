@@ -47,19 +47,22 @@ pub struct SvmDirection {
     pub samples: usize,
 }
 
-/// Estimates the translation direction from `samples` (their derotated normal flow). `None` with
-/// fewer than 3 usable samples or a zero solution (no translation signal).
+/// Estimates the translation direction from `samples` (their derotated normal flow), each with a
+/// prior weight (1 for the reference method; it multiplies the `|r|` weight). `None` with fewer
+/// than 3 usable samples or a zero solution (no translation signal).
 pub fn translation_direction<'a>(
-    samples: impl IntoIterator<Item = &'a FlowSample>,
+    samples: impl IntoIterator<Item = (&'a FlowSample, f64)>,
     p: &SvmParams,
 ) -> Option<SvmDirection> {
     // (X * s, weight) per sample; the mirrored half [-X, -s] gives the same term, hence the 2.
     let rows: Vec<(Vector3<f64>, f64)> = samples
         .into_iter()
-        .filter(|s| s.n_derot.is_finite() && s.n_derot.abs() > p.min_abs_flow && s.n_derot != 0.0)
-        .map(|s| {
+        .filter(|(s, w)| {
+            s.n_derot.is_finite() && s.n_derot.abs() > p.min_abs_flow && s.n_derot != 0.0 && *w > 0.0
+        })
+        .map(|(s, w)| {
             let x = Vector3::from(s.x_row());
-            (x * s.n_derot.signum(), s.n_derot.abs())
+            (x * s.n_derot.signum(), s.n_derot.abs() * w)
         })
         .collect();
     if rows.len() < 3 {
@@ -185,7 +188,7 @@ mod tests {
             [0.2, -1.0, -0.4],
         ] {
             let s = scene(t, 0.0, 2000);
-            let d = translation_direction(&s, &SvmParams::default()).unwrap();
+            let d = translation_direction(s.iter().map(|x| (x, 1.0)), &SvmParams::default()).unwrap();
             assert!(angle_deg(d.direction, t) < 3.0, "t {t:?} got {:?}", d.direction);
             assert!(d.agreement > 0.999);
         }
@@ -195,18 +198,18 @@ mod tests {
     fn noisy_samples_still_give_the_direction() {
         let t = [0.6, -0.2, 0.8];
         let s = scene(t, 0.2, 4000);
-        let d = translation_direction(&s, &SvmParams::default()).unwrap();
+        let d = translation_direction(s.iter().map(|x| (x, 1.0)), &SvmParams::default()).unwrap();
         assert!(angle_deg(d.direction, t) < 6.0, "got {:?}", d.direction);
     }
 
     #[test]
     fn too_few_samples_or_no_signal_is_none() {
         let s = scene([1.0, 0.0, 0.0], 0.0, 2);
-        assert!(translation_direction(&s, &SvmParams::default()).is_none());
+        assert!(translation_direction(s.iter().map(|x| (x, 1.0)), &SvmParams::default()).is_none());
         let mut s = scene([1.0, 0.0, 0.0], 0.0, 50);
         for x in &mut s {
             x.n_derot = 0.0;
         }
-        assert!(translation_direction(&s, &SvmParams::default()).is_none());
+        assert!(translation_direction(s.iter().map(|x| (x, 1.0)), &SvmParams::default()).is_none());
     }
 }

@@ -19,12 +19,13 @@
 //! 4. Events without flow (no group) take the most common label among labelled events in the
 //!    3x3 cells around them ([`fill`]); background where there are none.
 //! 5. The final egomotion: the linear SVM on the final background's derotated normal flow, for
-//!    the next slice (section 3.5, last paragraph).
+//!    the next slice (section 3.5, last paragraph), refined with one inverse depth per image cell
+//!    (`evseg_geometry::egomotion`).
 
 pub mod fill;
 pub mod params;
 
-use evseg_geometry::{FlowSample, TableCache, TranslationFit, flow_samples, translation_direction};
+use evseg_geometry::{FlowSample, TableCache, TranslationFit, estimate_translation, flow_samples};
 use evseg_schemas::align::AlignError;
 use evseg_schemas::{CameraInfo, CoarseSegmentation, Egomotion, Events, NormalFlow, Segment, Segmentation};
 
@@ -149,8 +150,25 @@ pub struct HierResult {
     pub initial_segments: usize,
     /// Merges made.
     pub merges: usize,
+    /// Each merge in order (for logs and studies).
+    pub steps: Vec<MergeStep>,
     /// Object segments turned background for being too small.
     pub dropped_small: usize,
+}
+
+/// One merge of the agglomeration.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MergeStep {
+    /// Events of the two segments.
+    pub events: [usize; 2],
+    /// Their translations (depth 1, normalized units/s).
+    pub translations: [[f64; 3]; 2],
+    /// Their mean map values.
+    pub map: [f64; 2],
+    /// True when one held the coarse background.
+    pub background: bool,
+    /// The similarity that made them merge.
+    pub similarity: f64,
 }
 
 /// The hierarchical merger (stateless across slices except the undistortion table).
@@ -261,6 +279,7 @@ impl HierarchicalMerger {
         // 2. Agglomerative merging of touching segments.
         let on_map = |nd: &Node| nd.map_value().is_some_and(|v| v >= f64::from(p.map_threshold));
         let mut merges = 0;
+        let mut steps = Vec::new();
         loop {
             let mut best: Option<(f64, usize, usize)> = None;
             for i in 0..active.len() {
@@ -281,7 +300,18 @@ impl HierarchicalMerger {
                     }
                 }
             }
-            let Some((_, i, j)) = best else { break };
+            let Some((sim, i, j)) = best else { break };
+            let (a, b) = (&active[i], &active[j]);
+            steps.push(MergeStep {
+                events: [a.events, b.events],
+                translations: [a.t.unwrap_or_default(), b.t.unwrap_or_default()],
+                map: [
+                    a.map_value().unwrap_or(f64::NAN),
+                    b.map_value().unwrap_or(f64::NAN),
+                ],
+                background: a.has_background_group || b.has_background_group,
+                similarity: sim,
+            });
             let other = active.swap_remove(j);
             active[i].absorb(&other, p.lambda);
             merges += 1;
@@ -364,12 +394,17 @@ impl HierarchicalMerger {
 
         // 5. Final egomotion on the final background.
         let bg_samples: Vec<&FlowSample> = samples.iter().filter(|s| label[s.index] == 0).collect();
-        let svm = (bg_samples.len() >= p.min_svm_events)
-            .then(|| translation_direction(bg_samples.iter().copied(), &p.svm))
-            .flatten();
-        let egomotion = match svm {
-            Some(s) => Egomotion {
-                direction: s.direction,
+        let estimate = estimate_translation(
+            &bg_samples,
+            &events.x,
+            &events.y,
+            camera.width,
+            camera.height,
+            &p.egomotion,
+        );
+        let egomotion = match estimate {
+            Some(direction) => Egomotion {
+                direction,
                 omega: omega.unwrap_or([0.0; 3]),
                 valid: true,
             },
@@ -383,6 +418,7 @@ impl HierarchicalMerger {
             },
             initial_segments,
             merges,
+            steps,
             dropped_small,
         })
     }

@@ -3,7 +3,7 @@
 
 use std::process::ExitCode;
 
-use evseg_geometry::SvmParams;
+use evseg_geometry::{EgomotionParams, SvmParams};
 use evseg_hierarchical_merger::{HierParams, HierarchicalMerger};
 use evseg_runtime::describe::Describe;
 use evseg_runtime::{BoxError, Inputs, NodeConfig, Outputs, Stage, run_stage};
@@ -94,11 +94,31 @@ fn main() -> ExitCode {
         d.fill_cell_px,
         "grid cell labelling events without flow, pixels",
     )
-    .param("svm_c", d.svm.c, "SVM cost C (squared hinge)")
+    .param("svm_c", d.egomotion.svm.c, "SVM cost C (squared hinge)")
     .param(
-        "min_svm_events",
-        d.min_svm_events,
-        "fewest background events for the final SVM",
+        "egomotion_min_samples",
+        d.egomotion.min_samples,
+        "fewest background events for an egomotion estimate",
+    )
+    .param(
+        "refine_iterations",
+        d.egomotion.refine_iterations,
+        "rounds of depth refinement after the SVM (0 = the SVM alone, as in the paper)",
+    )
+    .param(
+        "depth_grid_cols",
+        d.egomotion.grid_cols,
+        "columns of the grid of constant-depth cells of the refinement",
+    )
+    .param(
+        "min_cell_samples",
+        d.egomotion.min_cell_samples,
+        "cells with fewer samples are left out of the refinement",
+    )
+    .param(
+        "egomotion_density_cell_px",
+        d.egomotion.density_cell_px,
+        "cells over which the egomotion samples are density-normalized, pixels (0 = off)",
     )
     .build();
     run_stage(description, |cfg: &NodeConfig| {
@@ -114,11 +134,17 @@ fn main() -> ExitCode {
             min_segment_fraction: cfg.param("min_segment_fraction")?,
             min_segment_events: cfg.param("min_segment_events")?,
             fill_cell_px: cfg.param("fill_cell_px")?,
-            svm: SvmParams {
-                c: cfg.param("svm_c")?,
-                ..SvmParams::default()
+            egomotion: EgomotionParams {
+                svm: SvmParams {
+                    c: cfg.param("svm_c")?,
+                    ..SvmParams::default()
+                },
+                min_samples: cfg.param("egomotion_min_samples")?,
+                refine_iterations: cfg.param("refine_iterations")?,
+                grid_cols: cfg.param("depth_grid_cols")?,
+                min_cell_samples: cfg.param("min_cell_samples")?,
+                density_cell_px: cfg.param("egomotion_density_cell_px")?,
             },
-            min_svm_events: cfg.param("min_svm_events")?,
         };
         Ok(Node(HierarchicalMerger::new(params)?))
     })

@@ -2,7 +2,7 @@
 //! the paper gives no merge threshold, penalty size or minimum segment size, so each default
 //! says where it came from.
 
-use evseg_geometry::SvmParams;
+use evseg_geometry::EgomotionParams;
 
 /// Settings of [`crate::HierarchicalMerger`].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -38,11 +38,9 @@ pub struct HierParams {
     /// Cell of the grid that labels events without flow by their labelled neighbours, pixels
     /// (default 4).
     pub fill_cell_px: u16,
-    /// The final egomotion SVM (METHOD_NOTES section 3).
-    pub svm: SvmParams,
-    /// Fewest background events for the final SVM (default 30); with fewer, the coarse stage's
-    /// direction is kept.
-    pub min_svm_events: usize,
+    /// The final egomotion estimate (SVM, then depth refinement; see
+    /// `evseg_geometry::egomotion`).
+    pub egomotion: EgomotionParams,
 }
 
 impl Default for HierParams {
@@ -59,8 +57,7 @@ impl Default for HierParams {
             min_segment_fraction: 0.005,
             min_segment_events: 20,
             fill_cell_px: 4,
-            svm: SvmParams::default(),
-            min_svm_events: 30,
+            egomotion: EgomotionParams::default(),
         }
     }
 }
@@ -123,7 +120,12 @@ impl HierParams {
             (0.0..=1.0).contains(&self.map_threshold),
             "must be in [0, 1]",
         )?;
-        check("svm_c", self.svm.c, self.svm.c > 0.0, "must be finite and > 0")?;
+        check(
+            "svm_c",
+            self.egomotion.svm.c,
+            self.egomotion.svm.c > 0.0,
+            "must be finite and > 0",
+        )?;
         check(
             "min_confidence",
             f64::from(self.min_confidence),

@@ -102,10 +102,16 @@ fn robust_scale(residuals: &[f64]) -> f64 {
 /// Fits `a` to the equations. `None` when they do not determine it (fewer than 8 independent
 /// equations).
 pub fn fit_planar(eqs: &[Equation], params: &FitParams) -> Option<[f64; 8]> {
-    if eqs.len() < 8 {
+    fit_planar_weighted(eqs, None, params)
+}
+
+/// [`fit_planar`] with a prior weight per equation (`base`, same length as `eqs`, >= 0; the
+/// robust weights multiply it).
+pub fn fit_planar_weighted(eqs: &[Equation], base: Option<&[f64]>, params: &FitParams) -> Option<[f64; 8]> {
+    if eqs.len() < 8 || base.is_some_and(|b| b.len() != eqs.len()) {
         return None;
     }
-    let mut a = solve(eqs, None, params.ridge)?;
+    let mut a = solve(eqs, base, params.ridge)?;
     if params.robust == Robust::LeastSquares {
         return Some(a);
     }
@@ -136,6 +142,11 @@ pub fn fit_planar(eqs: &[Equation], params: &FitParams) -> Option<[f64; 8]> {
                     }
                 }
             };
+        }
+        if let Some(b) = base {
+            for (w, b) in weights.iter_mut().zip(b) {
+                *w *= b;
+            }
         }
         match solve(eqs, Some(&weights), params.ridge) {
             Some(next) => a = next,

@@ -37,11 +37,11 @@ pub mod fit;
 pub mod smooth;
 pub mod two_means;
 
-use evseg_geometry::{TableCache, flow_samples};
+use evseg_geometry::{TableCache, density_weights, flow_samples};
 use evseg_schemas::align::AlignError;
 use evseg_schemas::{CameraInfo, Events, NormalFlow, Residuals};
 
-pub use fit::{Equation, FitParams, Robust, fit_planar};
+pub use fit::{Equation, FitParams, Robust, fit_planar, fit_planar_weighted};
 pub use smooth::SmoothGrid;
 pub use two_means::{TwoMeans, two_means};
 
@@ -72,6 +72,13 @@ pub struct PlanarParams {
     /// Classify events without valid flow by the smoothed residual at their pixel when it has at
     /// least [`PlanarParams::min_support`] support (default true); otherwise they are background.
     pub classify_invalid: bool,
+    /// Side of the cells over which the fit is density-normalized, pixels: each event's equation
+    /// is weighted by 1 / (valid events in its cell), so every patch of the image counts alike
+    /// however many events its texture fires (default 8; 0 = plain per-event weights, as in the
+    /// paper). Without it a densely textured object near the camera outweighs a sparsely
+    /// textured background: on the simulator's one-object scene the object holds 45 % of the
+    /// events on 15 % of the image and the plain fit follows the object.
+    pub density_cell_px: u16,
     /// Support needed to classify an event without flow (Gaussian-weighted count of valid
     /// events around it, 1 = one event in the same cell; default 1).
     pub min_support: f64,
@@ -89,6 +96,7 @@ impl Default for PlanarParams {
             two_means_iter: 100,
             classify_invalid: true,
             min_support: 1.0,
+            density_cell_px: 8,
         }
     }
 }
@@ -210,7 +218,15 @@ impl PlanarSegmenter {
         let mut residual = vec![f32::NAN; n];
         let mut background = vec![true; n];
         let mut smoothed = vec![f32::NAN; n];
-        let Some(a) = fit_planar(&eqs, &p.fit) else {
+        let weights = (p.density_cell_px > 0).then(|| {
+            density_weights(
+                samples.iter().map(|s| (events.x[s.index], events.y[s.index])),
+                camera.width,
+                camera.height,
+                p.density_cell_px,
+            )
+        });
+        let Some(a) = fit_planar_weighted(&eqs, weights.as_deref(), &p.fit) else {
             return Ok(PlanarResult {
                 residuals: Residuals {
                     residual,

@@ -101,6 +101,11 @@ fn main() -> ExitCode {
         d.min_support,
         "support needed to label an event without flow",
     )
+    .param(
+        "density_cell_px",
+        d.density_cell_px,
+        "cells over which the fit is density-normalized, pixels (0 = per-event weights)",
+    )
     .build();
     run_stage(description, |cfg: &NodeConfig| {
         let robust: String = cfg.param("robust")?;
@@ -118,6 +123,7 @@ fn main() -> ExitCode {
             two_means_iter: cfg.param("two_means_iter")?,
             classify_invalid: cfg.param("classify_invalid")?,
             min_support: cfg.param("min_support")?,
+            density_cell_px: cfg.param("density_cell_px")?,
         };
         Ok(Node(PlanarSegmenter::new(params)?))
     })

@@ -1,0 +1,331 @@
+//! Runs the method's stages in one process on simulator scenes and prints foreground IoU and
+//! egomotion direction error, for quick parameter studies (the graph and `evseg bench` give the
+//! official figures).
+//!
+//! `cargo run --release -p evseg-hierarchical-merger --example method_on_sim -- [preset ...]`
+//! env: SEED (1), SECONDS (2), FLOW (est | ideal), SET ("name=value,...": background-merger and
+//! hierarchical-merger parameters, several variants separated by ';').
+
+use anyhow::{Context, bail};
+use evseg_background_merger::{BackgroundMerger, BackgroundParams, SliceInput};
+use evseg_geometry::Camera;
+use evseg_hierarchical_merger::{HierParams, HierarchicalMerger};
+use evseg_normal_flow::{PlaneFitEstimator, PlaneFitParams};
+use evseg_oversegmenter::{OversegParams, Oversegmenter};
+use evseg_planar_segmenter::{PlanarParams, PlanarSegmenter};
+use evseg_schemas::{NormalFlow, Slice, Truth};
+use evseg_slicer::{Slicer, SlicerParams};
+use evseg_source::EventSource;
+use evseg_source::synthetic::SyntheticSource;
+
+fn env_or<T: std::str::FromStr>(name: &str, default: T) -> anyhow::Result<T> {
+    match std::env::var(name) {
+        Ok(v) => v
+            .parse()
+            .map_err(|_| anyhow::anyhow!("{name}={v:?} does not parse")),
+        Err(_) => Ok(default),
+    }
+}
+
+fn apply(
+    set: &str,
+    bg: &mut BackgroundParams,
+    hier: &mut HierParams,
+    planar: &mut PlanarParams,
+) -> anyhow::Result<()> {
+    for kv in set.split(',').filter(|s| !s.trim().is_empty()) {
+        let (k, v) = kv.split_once('=').context("SET entries are name=value")?;
+        let f: f64 = v.trim().parse().with_context(|| kv.to_string())?;
+        match k.trim() {
+            "warp_weight" => bg.warp_weight = f,
+            "candidate_threshold" => bg.candidate_threshold = f,
+            "consistency_ratio" => bg.consistency_ratio = f,
+            "consistency_floor" => bg.consistency_floor = f,
+            "refine_rounds" => bg.refine_rounds = f as usize,
+            "alpha_max" => bg.alpha_max = f,
+            "merge_threshold" => hier.merge_threshold = f,
+            "background_penalty" => hier.background_penalty = f,
+            "lambda_r" => hier.lambda_r = f,
+            "lambda" => hier.lambda = f,
+            "min_segment_events" => hier.min_segment_events = f as usize,
+            "min_segment_fraction" => hier.min_segment_fraction = f,
+            "touch_px" => hier.touch_px = f as f32,
+            "sigma_px" => planar.sigma_px = f,
+            "min_center_gap" => planar.min_center_gap = f,
+            "density_cell_px" => planar.density_cell_px = f as u16,
+            other => bail!("unknown parameter {other}"),
+        }
+    }
+    Ok(())
+}
+
+fn c_of(c: &evseg_schemas::Clusters, i: usize) -> Option<usize> {
+    (c.id[i] != u16::MAX).then(|| usize::from(c.id[i]))
+}
+
+fn color(k: u32) -> [u8; 3] {
+    if k == 0 {
+        return [110, 110, 110];
+    }
+    let h = k.wrapping_mul(2654435761);
+    [(h >> 24) as u8 | 64, (h >> 16) as u8 | 64, (h >> 8) as u8 | 64]
+}
+
+/// Four panels: truth (object red), planar foreground (red), coarse groups (0 grey), final labels.
+fn dump(
+    path: &str,
+    s: &Slice,
+    truth: &Truth,
+    planar_bg: &[bool],
+    group: &[u32],
+    label: &[u32],
+) -> anyhow::Result<()> {
+    let (w, h) = (usize::from(s.camera.width), usize::from(s.camera.height));
+    let mut img = vec![0u8; 4 * w * h * 3];
+    let ev = &s.events;
+    for i in 0..ev.len() {
+        let (x, y) = (usize::from(ev.x[i]), usize::from(ev.y[i]));
+        let cols = [
+            if truth.event_object[i] != 0 {
+                [255, 60, 60]
+            } else {
+                [110, 110, 110]
+            },
+            if planar_bg[i] {
+                [110, 110, 110]
+            } else {
+                [255, 60, 60]
+            },
+            if group[i] == u32::MAX {
+                [40, 40, 200]
+            } else {
+                color(group[i])
+            },
+            color(label[i]),
+        ];
+        for (p, c) in cols.iter().enumerate() {
+            let off = ((y * 4 * w) + p * w + x) * 3;
+            img[off..off + 3].copy_from_slice(c);
+        }
+    }
+    let file = std::fs::File::create(path)?;
+    let mut enc = png::Encoder::new(std::io::BufWriter::new(file), (4 * w) as u32, h as u32);
+    enc.set_color(png::ColorType::Rgb);
+    enc.write_header()?.write_image_data(&img)?;
+    Ok(())
+}
+
+fn angle_deg(a: [f64; 3], b: [f64; 3]) -> f64 {
+    let d = a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    let na = (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
+    let nb = (b[0] * b[0] + b[1] * b[1] + b[2] * b[2]).sqrt();
+    (d / (na * nb)).clamp(-1.0, 1.0).acos().to_degrees()
+}
+
+fn main() -> anyhow::Result<()> {
+    let mut names: Vec<String> = std::env::args().skip(1).collect();
+    if names.is_empty() {
+        names = vec!["one-object".into(), "two-objects".into()];
+    }
+    let seed: u64 = env_or("SEED", 1)?;
+    let seconds: f64 = env_or("SECONDS", 2.0)?;
+    let ideal = env_or("FLOW", String::from("est"))? == "ideal";
+    let sets: Vec<String> = env_or("SET", String::new())?
+        .split(';')
+        .map(str::to_string)
+        .collect();
+    for name in &names {
+        let mut src = SyntheticSource::new(name, seed, Some(seconds))?;
+        let camera = src.camera();
+        let cam = Camera::new(&camera);
+        let mut slicer = Slicer::new(SlicerParams::default())?;
+        let mut slices: Vec<(Slice, Truth, (f64, f64))> = Vec::new();
+        let mut t = 0.0;
+        loop {
+            t += 0.01;
+            let Some(b) = src.next_batch(t)? else { break };
+            let packet = evseg_schemas::EventPacket {
+                camera: camera.clone(),
+                events: b.events,
+                imu: b.imu,
+            };
+            for s in slicer.push(packet, b.truth, t)? {
+                slices.push((s.slice, s.truth.unwrap_or_default(), (s.t_start, s.t_end)));
+            }
+        }
+        let mut est = PlaneFitEstimator::new(&camera, PlaneFitParams::default())?;
+        let flows: Vec<NormalFlow> = slices
+            .iter()
+            .map(|(s, truth, _)| {
+                if ideal {
+                    let mut f = NormalFlow::default();
+                    for i in 0..s.events.len() {
+                        let v = cam.pixel_flow_to_normalized(
+                            f64::from(s.events.x[i]),
+                            f64::from(s.events.y[i]),
+                            f64::from(truth.flow_x[i]),
+                            f64::from(truth.flow_y[i]),
+                        );
+                        f.nx.push(v[0] as f32);
+                        f.ny.push(v[1] as f32);
+                        f.confidence.push(1.0);
+                    }
+                    Ok(f)
+                } else {
+                    est.process(&s.events)
+                }
+            })
+            .collect::<Result<_, _>>()?;
+        {
+            let (mut ov, mut on, mut bv, mut bn) = (0usize, 0usize, 0usize, 0usize);
+            for ((_, truth, _), f) in slices.iter().zip(&flows) {
+                for (o, c) in truth.event_object.iter().zip(&f.confidence) {
+                    if *o != 0 {
+                        on += 1;
+                        ov += usize::from(*c > 0.0);
+                    } else {
+                        bn += 1;
+                        bv += usize::from(*c > 0.0);
+                    }
+                }
+            }
+            println!(
+                "flow coverage: objects {:.3} of {on}, background {:.3} of {bn}",
+                ov as f64 / on.max(1) as f64,
+                bv as f64 / bn.max(1) as f64
+            );
+        }
+        let mut overseg = Oversegmenter::new(OversegParams::default())?;
+        let clusters: Vec<_> = slices
+            .iter()
+            .zip(&flows)
+            .map(|((s, _, _), f)| overseg.segment(&s.camera, &s.events, f))
+            .collect::<Result<_, _>>()?;
+        for set in &sets {
+            let (mut bgp, mut hp, mut pp) = (
+                BackgroundParams::default(),
+                HierParams::default(),
+                PlanarParams::default(),
+            );
+            apply(set, &mut bgp, &mut hp, &mut pp)?;
+            let mut planar = PlanarSegmenter::new(pp)?;
+            let mut bg = BackgroundMerger::new(bgp)?;
+            let mut hier = HierarchicalMerger::new(hp)?;
+            let mut prev: Option<Vec<u32>> = None;
+            let (mut ious, mut dirs, mut planar_ious) = (Vec::new(), Vec::new(), Vec::new());
+            let (mut inter_all, mut union_all) = (0usize, 0usize);
+            for (dump_k, (((s, truth, span), f), c)) in slices.iter().zip(&flows).zip(&clusters).enumerate() {
+                let clusters_k = c.clone();
+                let r = planar.segment(&s.camera, &s.events, f, s.omega)?;
+                let m = bg.merge(&SliceInput {
+                    camera: &s.camera,
+                    events: &s.events,
+                    span: *span,
+                    omega: s.omega,
+                    flow: f,
+                    clusters: c,
+                    residuals: &r.residuals,
+                    previous_labels: prev.as_deref(),
+                })?;
+                let h = hier.merge(&s.camera, &s.events, f, s.omega, &m.coarse)?;
+                let label = &h.segmentation.label;
+                if let Ok(d) = std::env::var("DUMP")
+                    && d.parse::<usize>().ok() == Some(dump_k)
+                {
+                    dump(
+                        &format!("/tmp/dump-{name}.png"),
+                        s,
+                        truth,
+                        &r.residuals.background,
+                        &m.coarse.group,
+                        label,
+                    )?;
+                    for st in &h.steps {
+                        println!("  merge {st:?}");
+                    }
+                    for (c, rep) in m.clusters.iter().enumerate() {
+                        let obj = s
+                            .events
+                            .x
+                            .iter()
+                            .enumerate()
+                            .filter(|(i, _)| c_of(&clusters_k, *i) == Some(c) && truth.event_object[*i] != 0)
+                            .count();
+                        println!("  cluster {c}: {rep:?} object events {obj}");
+                    }
+                }
+                if std::env::var("VERBOSE").is_ok() {
+                    let fg = label.iter().filter(|&&l| l != 0).count();
+                    let gt = truth.event_object.iter().filter(|&&o| o != 0).count();
+                    let cl: Vec<String> = m
+                        .clusters
+                        .iter()
+                        .map(|c| {
+                            format!(
+                                "{}{}:{:.2}/{}/{:.2}",
+                                if c.background { "B" } else { "" },
+                                c.events,
+                                c.planar_background,
+                                c.warp_score.map_or("-".into(), |w| format!("{w:.2}")),
+                                c.relative_residual
+                            )
+                        })
+                        .collect();
+                    println!(
+                        "  t {:.2} events {} fg {} truth {} segs {} merges {} small {} warped {} | {}",
+                        span.0,
+                        label.len(),
+                        fg,
+                        gt,
+                        h.segmentation.segments.len(),
+                        h.merges,
+                        h.dropped_small,
+                        m.warped,
+                        cl.join(" ")
+                    );
+                }
+                if truth.event_object.iter().any(|&o| o != 0) {
+                    let (mut i, mut u, mut pi, mut pu) = (0, 0, 0, 0);
+                    for (k, l) in label.iter().enumerate() {
+                        let (p, g) = (*l != 0, truth.event_object[k] != 0);
+                        i += usize::from(p && g);
+                        u += usize::from(p || g);
+                        let pp = !r.residuals.background[k];
+                        pi += usize::from(pp && g);
+                        pu += usize::from(pp || g);
+                    }
+                    ious.push(i as f64 / u.max(1) as f64);
+                    planar_ious.push(pi as f64 / pu.max(1) as f64);
+                    inter_all += i;
+                    union_all += u;
+                }
+                let vel: Vec<[f64; 3]> = truth.camera.iter().filter_map(|c| c.linear_velocity).collect();
+                if !vel.is_empty() && h.segmentation.egomotion.valid {
+                    let mut v = [0.0; 3];
+                    for x in &vel {
+                        for k in 0..3 {
+                            v[k] += x[k];
+                        }
+                    }
+                    if (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt() / vel.len() as f64 > 0.05 {
+                        dirs.push(angle_deg(h.segmentation.egomotion.direction, v));
+                    }
+                }
+                prev = Some(label.clone());
+            }
+            dirs.sort_by(f64::total_cmp);
+            let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
+            println!(
+                "{name:14} seed {seed} flow {} [{set}] slices {:3} IoU mean {:.3} pooled {:.3} (planar {:.3}) dir median {:.1} deg (n {})",
+                if ideal { "ideal" } else { "est" },
+                ious.len(),
+                mean(&ious),
+                inter_all as f64 / union_all.max(1) as f64,
+                mean(&planar_ious),
+                dirs.get(dirs.len() / 2).copied().unwrap_or(f64::NAN),
+                dirs.len()
+            );
+        }
+    }
+    Ok(())
+}
