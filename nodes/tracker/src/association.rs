@@ -34,7 +34,7 @@ pub fn pair_cost(
     bbox: [f64; 4],
     params: &TrackerParams,
 ) -> Option<f64> {
-    let innovation = predicted.innovation(centroid, params.measurement_std_px);
+    let innovation = predicted.innovation(centroid, params.measurement_std(bbox));
     if innovation.residual.norm() > params.max_distance_px {
         return None;
     }
@@ -84,6 +84,7 @@ mod tests {
         let params = TrackerParams::default();
         let kf = CvKalman::new([100.0, 100.0], 4.0, 1.0);
         let b = [95.0, 95.0, 105.0, 105.0];
+        // Box 11 px wide: measurement std max(4, 0.1 · 11) = 4 px.
         // S = (16 + 16) I = 32 I; d = 10 px → d² = 100/32 = 3.125, IoU 1 → cost 3.125/13.82.
         let c = pair_cost(&kf, b, [110.0, 100.0], b, &params).unwrap_or(f64::NAN);
         assert!((c - 3.125 / 13.82).abs() < 1e-12, "{c}");
@@ -93,6 +94,11 @@ mod tests {
         let wide = CvKalman::new([100.0, 100.0], 1000.0, 1.0);
         assert!(pair_cost(&wide, b, [190.0, 100.0], b, &params).is_some());
         assert_eq!(pair_cost(&wide, b, [210.0, 100.0], b, &params), None);
+        // A 201 px wide segment box: measurement std 20.1 px in x, so d = 30 px in x is inside
+        // the gate: d² = 900 / (16 + 404.01) = 2.14.
+        let big = [0.0, 95.0, 200.0, 105.0];
+        let c = pair_cost(&kf, big, [130.0, 100.0], big, &params).unwrap_or(f64::NAN);
+        assert!((c - 900.0 / 420.01 / 13.82).abs() < 1e-9, "{c}");
     }
 
     #[test]

@@ -4,7 +4,8 @@
 //! right, y down). Process model: piecewise constant white acceleration with standard deviation
 //! `σ_a` px/s² per axis (Bar-Shalom, Li, Kirubarajan, *Estimation with Applications to Tracking
 //! and Navigation*, 2001, section 6.3.3): `Q = σ_a² G Gᵀ`, `G = [dt²/2, dt]` per axis.
-//! Measurement: the position, with independent noise of standard deviation `σ_z` px per axis.
+//! Measurement: the position, with independent noise of standard deviation `σ_z = [σ_x, σ_y]` px
+//! per axis (the caller sets it per measurement, for example from the segment's size).
 
 use nalgebra::{Matrix2, Matrix2x4, Matrix4, Vector2, Vector4};
 
@@ -20,6 +21,11 @@ pub struct CvKalman {
 /// The measurement matrix: the position part of the state.
 fn h() -> Matrix2x4<f64> {
     Matrix2x4::new(1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0)
+}
+
+/// Diagonal measurement covariance from per-axis standard deviations (pixels), pixels².
+fn measurement_cov(std: [f64; 2]) -> Matrix2<f64> {
+    Matrix2::new(std[0] * std[0], 0.0, 0.0, std[1] * std[1])
 }
 
 /// A predicted measurement: where the centroid should be and how uncertain that is.
@@ -86,10 +92,10 @@ impl CvKalman {
         self.p = f * self.p * f.transpose() + q;
     }
 
-    /// The innovation of a position measurement `z` (pixels) with noise standard deviation
-    /// `measurement_std` (pixels), against the current (predicted) state.
-    pub fn innovation(&self, z: [f64; 2], measurement_std: f64) -> Innovation {
-        let r = Matrix2::identity() * (measurement_std * measurement_std);
+    /// The innovation of a position measurement `z` (pixels) with noise standard deviations
+    /// `measurement_std` (pixels, per axis), against the current (predicted) state.
+    pub fn innovation(&self, z: [f64; 2], measurement_std: [f64; 2]) -> Innovation {
+        let r = measurement_cov(measurement_std);
         let predicted = self.position();
         Innovation {
             residual: Vector2::new(z[0] - predicted[0], z[1] - predicted[1]),
@@ -97,11 +103,11 @@ impl CvKalman {
         }
     }
 
-    /// Corrects the state with the position measurement `z` (pixels, noise standard deviation
-    /// `measurement_std` pixels). Joseph-form covariance update, which stays symmetric and
-    /// positive definite. A singular innovation covariance (impossible with `measurement_std >
-    /// 0`) leaves the state unchanged.
-    pub fn update(&mut self, z: [f64; 2], measurement_std: f64) {
+    /// Corrects the state with the position measurement `z` (pixels, noise standard deviations
+    /// `measurement_std` pixels per axis). Joseph-form covariance update, which stays symmetric
+    /// and positive definite. A singular innovation covariance (impossible with
+    /// `measurement_std > 0`) leaves the state unchanged.
+    pub fn update(&mut self, z: [f64; 2], measurement_std: [f64; 2]) {
         let inn = self.innovation(z, measurement_std);
         let Some(s_inv) = inn.covariance.try_inverse() else {
             return;
@@ -110,7 +116,7 @@ impl CvKalman {
         let k = self.p * h.transpose() * s_inv;
         self.x += k * inn.residual;
         let i_kh = Matrix4::identity() - k * h;
-        let r = Matrix2::identity() * (measurement_std * measurement_std);
+        let r = measurement_cov(measurement_std);
         self.p = i_kh * self.p * i_kh.transpose() + k * r * k.transpose();
     }
 }
@@ -148,7 +154,7 @@ mod tests {
     fn update_with_equal_variances_lands_halfway() {
         // Prior Var = 9 and measurement Var = 9: the posterior is the midpoint, Var 4.5.
         let mut kf = CvKalman::new([0.0, 0.0], 3.0, 1.0);
-        kf.update([6.0, -2.0], 3.0);
+        kf.update([6.0, -2.0], [3.0, 3.0]);
         let p = kf.position();
         assert!((p[0] - 3.0).abs() < 1e-12 && (p[1] + 1.0).abs() < 1e-12);
         assert!((kf.position_covariance()[(0, 0)] - 4.5).abs() < 1e-12);
@@ -161,7 +167,7 @@ mod tests {
         for k in 1..40 {
             kf.predict(dt, 100.0);
             let t = k as f64 * dt;
-            kf.update([200.0 * t, -100.0 * t], 1.0);
+            kf.update([200.0 * t, -100.0 * t], [1.0, 1.0]);
         }
         let v = kf.velocity();
         assert!((v[0] - 200.0).abs() < 2.0, "{v:?}");
@@ -172,7 +178,10 @@ mod tests {
     fn mahalanobis_distance_of_a_known_innovation() {
         // S = diag(4 + 1, 4 + 1) = 5 I; r = (3, 4): d² = 25 / 5 = 5.
         let kf = CvKalman::new([0.0, 0.0], 2.0, 1.0);
-        let inn = kf.innovation([3.0, 4.0], 1.0);
+        let inn = kf.innovation([3.0, 4.0], [1.0, 1.0]);
         assert!((inn.mahalanobis2() - 5.0).abs() < 1e-12);
+        // Per-axis noise: S = diag(4 + 5, 4 + 12) = diag(9, 16): d² = 9/9 + 16/16 = 2.
+        let inn = kf.innovation([3.0, 4.0], [5f64.sqrt(), 12f64.sqrt()]);
+        assert!((inn.mahalanobis2() - 2.0).abs() < 1e-12);
     }
 }

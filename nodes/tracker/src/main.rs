@@ -58,7 +58,12 @@ fn description() -> NodeDescription {
     .param(
         "measurement_std_px",
         d.measurement_std_px,
-        "segment centroid measurement noise standard deviation, pixels",
+        "least segment centroid measurement noise standard deviation, pixels",
+    )
+    .param(
+        "measurement_std_box_fraction",
+        d.measurement_std_box_fraction,
+        "centroid noise standard deviation as a fraction of the segment's box size, per axis",
     )
     .param(
         "initial_velocity_std_px_s",
@@ -103,6 +108,7 @@ fn main() -> ExitCode {
         let params = TrackerParams {
             accel_std_px_s2: cfg.param("accel_std_px_s2")?,
             measurement_std_px: cfg.param("measurement_std_px")?,
+            measurement_std_box_fraction: cfg.param("measurement_std_box_fraction")?,
             initial_velocity_std_px_s: cfg.param("initial_velocity_std_px_s")?,
             gate_chi2: cfg.param("gate_chi2")?,
             max_distance_px: cfg.param("max_distance_px")?,
@@ -138,6 +144,7 @@ mod tests {
             [
                 "accel_std_px_s2",
                 "measurement_std_px",
+                "measurement_std_box_fraction",
                 "initial_velocity_std_px_s",
                 "gate_chi2",
                 "max_distance_px",

@@ -240,7 +240,8 @@ impl Tracker {
                 let k = candidates[ci];
                 let s = &segments[k];
                 let tr = &mut self.tracks[ti];
-                tr.kf.update(s.centroid, self.params.measurement_std_px);
+                tr.kf
+                    .update(s.centroid, self.params.measurement_std(bbox_f64(s.bbox)));
                 tr.box_offsets = box_offsets(s);
                 tr.hits = tr.hits.saturating_add(1);
                 tr.last_match_t = t;
@@ -261,11 +262,10 @@ impl Tracker {
             self.next_id += 1;
             self.tracks.push(TrackState {
                 id,
-                kf: CvKalman::new(
-                    s.centroid,
-                    self.params.measurement_std_px,
-                    self.params.initial_velocity_std_px_s,
-                ),
+                kf: {
+                    let [sx, sy] = self.params.measurement_std(bbox_f64(s.bbox));
+                    CvKalman::new(s.centroid, sx.max(sy), self.params.initial_velocity_std_px_s)
+                },
                 box_offsets: box_offsets(s),
                 created_slice: self.slices,
                 hits: 1,
