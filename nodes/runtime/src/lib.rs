@@ -13,6 +13,9 @@
 //!   mode, never waits and drops the oldest input when a queue overflows, counting drops;
 //! - refuses messages of the wrong schema or version with an error naming both;
 //! - publishes progress and statistics, ends streams cleanly, and stops on SIGTERM/SIGINT.
+//!
+//! A node whose inputs the launcher chooses (the recorder) implements [`RawConsumer`] instead and
+//! calls [`run_raw_consumer`]: every port on its own, no join, any schema, same credits.
 
 pub mod config;
 pub mod describe;
@@ -21,9 +24,11 @@ pub mod join;
 pub mod memory;
 pub mod node;
 pub mod progress;
+pub mod raw;
 pub mod signals;
 pub mod transport;
 
 pub use config::{Mode, NodeConfig};
 pub use error::{BoxError, RuntimeError};
 pub use node::{Inputs, Outputs, Source, Stage, run_source, run_stage};
+pub use raw::{RawConsumer, run_raw_consumer};

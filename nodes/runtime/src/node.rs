@@ -300,22 +300,22 @@ fn init_tracing() {
 
 /// Shared counters published on the stats key.
 #[derive(Default)]
-struct Counters {
-    received: AtomicU64,
-    processed: AtomicU64,
-    refused: AtomicU64,
-    dropped: AtomicU64,
-    last_seq: AtomicU64,
-    busy_ns: AtomicU64,
+pub(crate) struct Counters {
+    pub(crate) received: AtomicU64,
+    pub(crate) processed: AtomicU64,
+    pub(crate) refused: AtomicU64,
+    pub(crate) dropped: AtomicU64,
+    pub(crate) last_seq: AtomicU64,
+    pub(crate) busy_ns: AtomicU64,
 }
 
-struct Running {
-    cfg: NodeConfig,
+pub(crate) struct Running {
+    pub(crate) cfg: NodeConfig,
     session: zenoh::Session,
     outputs: Outputs,
-    counters: Arc<Counters>,
+    pub(crate) counters: Arc<Counters>,
     schemas: HashMap<String, String>,
-    inbox: Arc<Inbox>,
+    pub(crate) inbox: Arc<Inbox>,
     _handles: Vec<Box<dyn std::any::Any + Send>>,
     _token: zenoh::liveliness::LivelinessToken,
 }
@@ -343,7 +343,7 @@ impl Running {
         }
     }
 
-    fn publish_progress(&self, consumed: Vec<(String, u64)>) -> Result<(), RuntimeError> {
+    pub(crate) fn publish_progress(&self, consumed: Vec<(String, u64)>) -> Result<(), RuntimeError> {
         let p = Progress {
             node: self.cfg.node.clone(),
             consumed,
@@ -357,7 +357,7 @@ impl Running {
             .map_err(|e| RuntimeError::Zenoh(e.to_string()))
     }
 
-    fn finish(mut self) -> Result<(), RuntimeError> {
+    pub(crate) fn finish(mut self) -> Result<(), RuntimeError> {
         self.outputs.end_all(&self.schemas)?;
         let done = self.cfg.inputs.iter().map(|i| (i.port.clone(), DONE)).collect();
         self.publish_progress(done)?;
@@ -369,7 +369,14 @@ impl Running {
     }
 }
 
-fn start(description: &NodeDescription, path: &std::path::Path) -> Result<Running, RuntimeError> {
+/// Reads the config and opens ports. `fixed_inputs`: the config's inputs must be ports of
+/// `description` (false only for nodes whose inputs are chosen by the launcher, see
+/// [`crate::raw`]).
+pub(crate) fn start(
+    description: &NodeDescription,
+    path: &std::path::Path,
+    fixed_inputs: bool,
+) -> Result<Running, RuntimeError> {
     let cfg = NodeConfig::load(path)?;
     if cfg.window == 0 || cfg.queue == 0 {
         return Err(RuntimeError::Config(format!(
@@ -378,7 +385,7 @@ fn start(description: &NodeDescription, path: &std::path::Path) -> Result<Runnin
         )));
     }
     for i in &cfg.inputs {
-        if description.input(&i.port).is_none() {
+        if fixed_inputs && description.input(&i.port).is_none() {
             return Err(RuntimeError::Config(format!(
                 "node {}: config names unknown input `{}`",
                 cfg.node, i.port
@@ -472,7 +479,7 @@ pub fn run_stage<S: Stage>(
     description: NodeDescription,
     make: impl FnOnce(&NodeConfig) -> Result<S, BoxError>,
 ) -> std::process::ExitCode {
-    main_wrapper(description, |run| {
+    main_wrapper(description, true, |run| {
         let mut stage =
             make(&run.cfg).map_err(|e| RuntimeError::Config(format!("node {}: {e}", run.cfg.node)))?;
         stage_loop(run, &mut stage)
@@ -484,15 +491,16 @@ pub fn run_source<S: Source>(
     description: NodeDescription,
     make: impl FnOnce(&NodeConfig) -> Result<S, BoxError>,
 ) -> std::process::ExitCode {
-    main_wrapper(description, |run| {
+    main_wrapper(description, true, |run| {
         let mut source =
             make(&run.cfg).map_err(|e| RuntimeError::Config(format!("node {}: {e}", run.cfg.node)))?;
         source_loop(run, &mut source)
     })
 }
 
-fn main_wrapper(
+pub(crate) fn main_wrapper(
     description: NodeDescription,
+    fixed_inputs: bool,
     body: impl FnOnce(Running) -> Result<(), RuntimeError>,
 ) -> std::process::ExitCode {
     crate::memory::tune_allocator();
@@ -517,7 +525,7 @@ fn main_wrapper(
             }
         },
         Cli::Run(path) => {
-            let result = start(&description, &path).and_then(body);
+            let result = start(&description, &path, fixed_inputs).and_then(body);
             match result {
                 Ok(()) => {
                     tracing::info!("finished");
@@ -537,7 +545,7 @@ fn main_wrapper(
     }
 }
 
-fn maybe_stats(run: &Running, last: &mut Instant) {
+pub(crate) fn maybe_stats(run: &Running, last: &mut Instant) {
     if last.elapsed() >= Duration::from_millis(500) {
         run.publish_stats(false);
         *last = Instant::now();

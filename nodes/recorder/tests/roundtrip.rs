@@ -1,0 +1,356 @@
+//! Write a recording, read it back (whole and cut off at every kind of place), export it.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use evseg_evimo2::npy;
+use evseg_recorder::read::{read, read_bytes};
+use evseg_recorder::write::{ChannelSpec, McapRecorder, WriterSettings};
+use evseg_recorder::{RecordError, export};
+use evseg_schemas::{
+    Egomotion, Envelope, FrameKind, Message, Metric, Metrics, NormalFlow, Track, Tracks, codec,
+};
+
+fn channel(topic: &str, schema: &str) -> ChannelSpec {
+    ChannelSpec {
+        topic: topic.into(),
+        schema: schema.into(),
+        version: evseg_schemas::schema_version(schema).unwrap_or(0),
+        metadata: BTreeMap::from([(
+            "producer".to_string(),
+            topic.split('/').next().unwrap().to_string(),
+        )]),
+    }
+}
+
+fn tracks(seq: u64, n: usize) -> Tracks {
+    Tracks {
+        label: (0..n as u32).map(|i| (i + seq as u32) % 3).collect(),
+        tracks: vec![Track {
+            id: 7,
+            centroid: [10.0 + seq as f64, 20.0],
+            velocity: [1.5, -2.5],
+            bbox: [1.0, 2.0, 30.0, 40.0],
+            translation: [0.1, 0.2, 0.3],
+            age: seq as u32,
+            events: 5,
+        }],
+        egomotion: Egomotion {
+            direction: [0.0, 0.0, 1.0],
+            omega: [0.01 * seq as f64, 0.0, -0.5],
+            valid: seq.is_multiple_of(2),
+        },
+    }
+}
+
+fn flow(n: usize) -> NormalFlow {
+    NormalFlow {
+        nx: (0..n).map(|i| i as f32 * 0.5).collect(),
+        ny: (0..n).map(|i| -(i as f32)).collect(),
+        confidence: vec![0.75; n],
+    }
+}
+
+fn metrics(seq: u64) -> Metrics {
+    let mut values = vec![Metric {
+        name: "iou".into(),
+        value: 0.25 * seq as f64,
+    }];
+    if seq >= 2 {
+        values.push(Metric {
+            name: "direction_error_deg".into(),
+            value: 3.0,
+        });
+    }
+    Metrics { values }
+}
+
+const SLICES: u64 = 5;
+const EVENTS_PER_SLICE: usize = 4000;
+
+/// Writes a recording with tracks, flow and metrics channels (and one frame of an unknown schema
+/// version) with small chunks, so it has many; returns its bytes.
+fn write_recording(path: &Path) -> Vec<u8> {
+    let channels = [
+        channel("segmenter/tracks", Tracks::SCHEMA),
+        channel("flow/flow", NormalFlow::SCHEMA),
+        channel("evaluator/metrics", Metrics::SCHEMA),
+    ];
+    let settings = WriterSettings {
+        chunk_bytes: 16 * 1024,
+        ..WriterSettings::default()
+    };
+    let mut rec = McapRecorder::create(path, &channels, &settings).unwrap();
+    rec.metadata(
+        "evseg.run",
+        BTreeMap::from([("graph_hash".to_string(), "abc".to_string())]),
+    )
+    .unwrap();
+    rec.attach("graph.resolved.json", "application/json", b"{\"name\":\"t\"}", 1)
+        .unwrap();
+    let put = |rec: &mut McapRecorder, port: usize, frame: Vec<u8>| {
+        let (env, _) = codec::decode_header(&frame).unwrap();
+        rec.write_frame(port, &env, &frame).unwrap();
+    };
+    for seq in 0..SLICES {
+        let (t0, t1) = (seq as f64 * 0.03, (seq + 1) as f64 * 0.03);
+        put(
+            &mut rec,
+            0,
+            codec::encode(seq, t0, t1, &tracks(seq, EVENTS_PER_SLICE)).unwrap(),
+        );
+        put(
+            &mut rec,
+            1,
+            codec::encode(seq, t0, t1, &flow(EVENTS_PER_SLICE)).unwrap(),
+        );
+        put(&mut rec, 2, codec::encode(seq, t0, t1, &metrics(seq)).unwrap());
+    }
+    // A frame from a future version of the metrics schema: counted by export, never decoded.
+    let env = Envelope {
+        schema: Metrics::SCHEMA.into(),
+        version: Metrics::VERSION + 1,
+        kind: FrameKind::Data,
+        seq: SLICES,
+        t_start: 0.0,
+        t_end: 0.0,
+        publish_ns: 5,
+    };
+    let future = codec::encode_with(&env, Some(&metrics(0))).unwrap();
+    rec.write_frame(2, &env, &future).unwrap();
+    assert_eq!(rec.counts(), &[SLICES, SLICES, SLICES + 1]);
+    rec.finish().unwrap();
+    std::fs::read(path).unwrap()
+}
+
+#[test]
+fn a_complete_recording_reads_back_exactly() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("run.mcap");
+    let bytes = write_recording(&path);
+    let mut frames: Vec<(String, u32, Vec<u8>)> = Vec::new();
+    let rec = read(&path, |m| {
+        frames.push((m.channel.topic.clone(), m.sequence, m.data.to_vec()));
+        Ok(())
+    })
+    .unwrap();
+    assert!(rec.truncated.is_none(), "{}", rec.completeness());
+    assert_eq!(rec.messages, 3 * SLICES + 1);
+    assert!(rec.chunks >= 3, "small chunks expected, got {}", rec.chunks);
+    let by_topic: BTreeMap<&str, u64> = rec
+        .channels
+        .values()
+        .map(|c| (c.topic.as_str(), c.messages))
+        .collect();
+    assert_eq!(by_topic["segmenter/tracks"], SLICES);
+    assert_eq!(by_topic["evaluator/metrics"], SLICES + 1);
+    let tracks_channel = rec
+        .channels
+        .values()
+        .find(|c| c.topic == "segmenter/tracks")
+        .unwrap();
+    assert_eq!(tracks_channel.schema, "evseg.Tracks");
+    assert_eq!(tracks_channel.version, Some(1));
+    assert_eq!(tracks_channel.message_encoding, "evseg-bincode2");
+    assert_eq!(rec.metadata_named("evseg.run").unwrap()["graph_hash"], "abc");
+    assert_eq!(rec.attachments[0].name, "graph.resolved.json");
+    // The frames are the wire bytes: they decode with the codec, sequence numbers intact.
+    let (_, seq, data) = frames
+        .iter()
+        .find(|(t, s, _)| t == "segmenter/tracks" && *s == 3)
+        .unwrap();
+    assert_eq!(*seq, 3);
+    assert_eq!(
+        codec::decode::<Tracks>(data).unwrap().body.unwrap(),
+        tracks(3, EVENTS_PER_SLICE)
+    );
+    assert!(
+        bytes.len() < 3 * SLICES as usize * EVENTS_PER_SLICE * 4,
+        "compressed"
+    );
+}
+
+#[test]
+fn a_cut_off_recording_is_read_up_to_its_last_complete_chunk() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("run.mcap");
+    let bytes = write_recording(&path);
+    let full = read(&path, |_| Ok(())).unwrap();
+    let mut last_messages = 0;
+    let mut saw_partial = false;
+    // Cut everywhere from just after the magic to just before the end.
+    for cut in (8..bytes.len()).step_by(97).chain([bytes.len() - 1]) {
+        let mut n = 0u64;
+        let rec = read_bytes(Path::new("cut.mcap"), &bytes[..cut], &mut |_| {
+            n += 1;
+            Ok(())
+        })
+        .unwrap_or_else(|e| panic!("cut at {cut}: {e}"));
+        let t = rec
+            .truncated
+            .as_ref()
+            .unwrap_or_else(|| panic!("cut at {cut} not reported"));
+        assert!(t.offset <= cut as u64, "cut {cut}: stopped at {}", t.offset);
+        assert_eq!(n, rec.messages);
+        assert!(rec.messages <= full.messages);
+        assert!(
+            rec.messages >= last_messages,
+            "more data never gives fewer messages"
+        );
+        last_messages = rec.messages;
+        saw_partial |= rec.messages > 0 && rec.messages < full.messages;
+        let text = rec.completeness();
+        assert!(
+            text.contains("cut.mcap") && text.contains("TRUNCATED at byte"),
+            "{text}"
+        );
+    }
+    assert!(saw_partial, "some cut must recover part of the messages");
+    // Cut inside the summary section: every message is still there.
+    assert_eq!(last_messages, full.messages);
+}
+
+#[test]
+fn a_chunk_whose_writer_was_killed_is_reported_with_its_offset() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("run.mcap");
+    let bytes = write_recording(&path);
+    // Find the second chunk (opcode 0x06) by walking the records, and give it the placeholder
+    // length the writer leaves while a chunk is being written.
+    let mut pos = 8;
+    let mut chunks = Vec::new();
+    while pos + 9 <= bytes.len() {
+        let len = u64::from_le_bytes(bytes[pos + 1..pos + 9].try_into().unwrap()) as usize;
+        if bytes[pos] == 0x06 {
+            chunks.push(pos);
+        }
+        if bytes[pos] == 0x02 {
+            break;
+        }
+        pos += 9 + len;
+    }
+    assert!(chunks.len() >= 3, "{} chunks", chunks.len());
+    let last = *chunks.last().unwrap();
+    let mut broken = bytes[..last + 40].to_vec();
+    broken[last + 1..last + 9].copy_from_slice(&u64::MAX.to_le_bytes());
+    let rec = read_bytes(Path::new("killed.mcap"), &broken, &mut |_| Ok(())).unwrap();
+    let t = rec.truncated.unwrap();
+    assert_eq!(t.offset, last as u64);
+    assert!(t.reason.contains("never written"), "{}", t.reason);
+    assert_eq!(rec.chunks as usize, chunks.len() - 1);
+    assert!(rec.messages > 0);
+}
+
+#[test]
+fn not_an_mcap_file_is_an_error_naming_it() {
+    let err = read_bytes(Path::new("x.bin"), b"hello world", &mut |_| Ok(())).unwrap_err();
+    assert!(matches!(err, RecordError::NotMcap { .. }));
+    assert!(err.to_string().contains("x.bin"), "{err}");
+    let missing = read(Path::new("/nonexistent/r.mcap"), |_| Ok(())).unwrap_err();
+    assert!(missing.to_string().contains("/nonexistent/r.mcap"), "{missing}");
+}
+
+fn load_f64(path: &Path) -> (Vec<usize>, Vec<f64>) {
+    let bytes = std::fs::read(path).unwrap();
+    let a = npy::parse_bytes(&bytes, &path.display().to_string()).unwrap();
+    assert_eq!(a.header.descr, "<f8");
+    let v = a
+        .data
+        .chunks_exact(8)
+        .map(|c| f64::from_le_bytes(c.try_into().unwrap()))
+        .collect();
+    (a.header.shape, v)
+}
+
+#[test]
+fn export_writes_labels_flow_egomotion_tracks_and_metrics() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("run.mcap");
+    write_recording(&path);
+    let out = dir.path().join("export");
+    let summary = export::export(&path, &out).unwrap();
+    let names: Vec<&str> = summary.files.iter().map(|f| f.file.as_str()).collect();
+    assert_eq!(
+        names,
+        [
+            "evaluator.metrics.metrics.npy",
+            "flow.flow.flow.npy",
+            "segmenter.tracks.egomotion.npy",
+            "segmenter.tracks.labels.npy",
+            "segmenter.tracks.tracks.npy"
+        ]
+    );
+    // Labels: int64 (N, 2), slice then label, in slice order.
+    let bytes = std::fs::read(out.join("segmenter.tracks.labels.npy")).unwrap();
+    let a = npy::parse_bytes(&bytes, "labels").unwrap();
+    assert_eq!(a.header.descr, "<i8");
+    let n = SLICES as usize * EVENTS_PER_SLICE;
+    assert_eq!(a.header.shape, [n, 2]);
+    let v: Vec<i64> = a
+        .data
+        .chunks_exact(8)
+        .map(|c| i64::from_le_bytes(c.try_into().unwrap()))
+        .collect();
+    let k = 3 * EVENTS_PER_SLICE + 10;
+    assert_eq!(
+        (v[2 * k], v[2 * k + 1]),
+        (3, i64::from(tracks(3, EVENTS_PER_SLICE).label[10]))
+    );
+    // Flow.
+    let (shape, f) = load_f64(&out.join("flow.flow.flow.npy"));
+    assert_eq!(shape, [n, 4]);
+    assert_eq!(&f[4 * 7..4 * 8], &[0.0, 3.5, -7.0, 0.75]);
+    // Egomotion: slice, t_start, t_end, direction, omega, valid.
+    let (shape, e) = load_f64(&out.join("segmenter.tracks.egomotion.npy"));
+    assert_eq!(shape, [SLICES as usize, 10]);
+    assert_eq!(
+        &e[10..20],
+        &[1.0, 0.03, 0.06, 0.0, 0.0, 1.0, 0.01, 0.0, -0.5, 0.0]
+    );
+    // Tracks.
+    let (shape, t) = load_f64(&out.join("segmenter.tracks.tracks.npy"));
+    assert_eq!(shape, [SLICES as usize, 15]);
+    assert_eq!(
+        &t[15 * 2..15 * 3],
+        &[
+            2.0, 7.0, 12.0, 20.0, 1.5, -2.5, 1.0, 2.0, 30.0, 40.0, 0.1, 0.2, 0.3, 2.0, 5.0
+        ]
+    );
+    // Metrics: one column per name, NaN where a slice lacks it; the future-version frame is
+    // counted, not exported.
+    let (shape, m) = load_f64(&out.join("evaluator.metrics.metrics.npy"));
+    assert_eq!(shape, [SLICES as usize, 3]);
+    assert_eq!(&m[3..5], &[1.0, 0.25]);
+    assert!(m[5].is_nan());
+    assert_eq!(&m[6..9], &[2.0, 0.5, 3.0]);
+    let skipped = &summary.not_exported["evaluator/metrics"];
+    assert_eq!(skipped.unknown_schema, 1);
+    assert!(skipped.first_problem.as_ref().unwrap().contains("v2"));
+    let readme = std::fs::read_to_string(out.join("README.txt")).unwrap();
+    assert!(
+        readme.contains("direction_x") && readme.contains("rad/s"),
+        "{readme}"
+    );
+    let columns: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("columns.json")).unwrap()).unwrap();
+    assert_eq!(columns["files"].as_array().unwrap().len(), 5);
+    assert_eq!(columns["complete"], true);
+}
+
+#[test]
+fn a_truncated_recording_still_exports_what_was_recovered() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("run.mcap");
+    let bytes = write_recording(&path);
+    let cut = dir.path().join("cut.mcap");
+    std::fs::write(&cut, &bytes[..bytes.len() / 2]).unwrap();
+    let summary = export::export(&cut, &dir.path().join("out")).unwrap();
+    assert!(summary.recording.truncated.is_some());
+    let labels = summary
+        .files
+        .iter()
+        .find(|f| f.file.ends_with("labels.npy"))
+        .unwrap();
+    assert!(labels.shape[0] > 0 && labels.shape[0] < SLICES as usize * EVENTS_PER_SLICE);
+    assert_eq!(labels.shape[0] % EVENTS_PER_SLICE, 0, "whole messages only");
+}
