@@ -2,6 +2,9 @@
 
 mod bench_scenes;
 mod bench_transport;
+mod export;
+mod info;
+mod record;
 mod resolve;
 mod run;
 mod rundir;
@@ -48,6 +51,25 @@ enum Command {
         /// No progress display.
         #[arg(long, short)]
         quiet: bool,
+        /// Record the graph's outputs (those of its `record:` section, else all) into this MCAP
+        /// file (relative to the working folder).
+        #[arg(long)]
+        record: Option<PathBuf>,
+    },
+    /// Describe a recording: channels, schemas, message counts, time span, metadata, and
+    /// whether it is complete (a cut-off file is read up to its last complete chunk).
+    Info {
+        /// MCAP file written by `evseg run --record`.
+        recording: PathBuf,
+    },
+    /// Export a recording as NumPy .npy files (per-event labels and flow, per-slice egomotion,
+    /// tracks, metrics; README.txt lists the columns).
+    Export {
+        /// MCAP file written by `evseg run --record`.
+        recording: PathBuf,
+        /// Output folder.
+        #[arg(long)]
+        out: PathBuf,
     },
     /// Check a graph without starting anything: every error with file, line and column.
     Check {
@@ -141,9 +163,12 @@ fn main() -> ExitCode {
         connect: vec![],
         set: vec![],
         quiet: false,
+        record: None,
     });
     let result = match command {
         Command::Check { graph } => check(&graph),
+        Command::Info { recording } => info::info(&recording).map(|text| print!("{text}")),
+        Command::Export { recording, out } => export::export(&recording, &out).map(|text| println!("{text}")),
         Command::Sim {
             scene,
             out,
@@ -188,6 +213,7 @@ fn main() -> ExitCode {
             connect,
             set,
             quiet,
+            record,
         } => {
             let opts = run::RunOptions {
                 graph,
@@ -198,6 +224,7 @@ fn main() -> ExitCode {
                 connect,
                 set,
                 quiet,
+                record,
             };
             run::run(&opts).map(|outcome| {
                 let order: Vec<String> = outcome.stats.keys().cloned().collect();
@@ -206,6 +233,9 @@ fn main() -> ExitCode {
                     if let Ok(text) = std::fs::read_to_string(&report) {
                         println!("{}:\n{text}", report.display());
                     }
+                }
+                if let Some(path) = &outcome.recording {
+                    println!("recorded to {}", path.display());
                 }
                 println!(
                     "run finished in {:.2} s; folder {}",

@@ -39,6 +39,8 @@ pub struct RunOptions {
     pub set: Vec<String>,
     /// No progress display.
     pub quiet: bool,
+    /// Record into this MCAP file (overrides the graph's `record.path`).
+    pub record: Option<PathBuf>,
 }
 
 /// How a run ended.
@@ -50,6 +52,8 @@ pub struct RunOutcome {
     pub stats: BTreeMap<String, Stats>,
     /// Wall time, seconds.
     pub seconds: f64,
+    /// The MCAP recording written by this machine's recorder, if the run was recorded.
+    pub recording: Option<PathBuf>,
 }
 
 /// Loads and checks `path`, asking each binary for its description.
@@ -247,10 +251,6 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
         })?,
         None => graph.machines[0].clone(),
     };
-    let nodes: Vec<NodeSpec> = match &opts.machine {
-        Some(m) => graph.nodes_on(m).into_iter().cloned().collect(),
-        None => graph.nodes.clone(),
-    };
     let listen = if opts.listen.is_empty() {
         machine.listen.clone()
     } else {
@@ -275,6 +275,33 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
     if let Ok(text) = std::fs::read(&opts.graph) {
         std::fs::write(dir.join("graph.yaml"), text)?;
     }
+    let recording = crate::record::recording_path(opts.record.as_deref(), &graph, &dir)?;
+    let mut recorder_here = None;
+    if let Some(path) = &recording {
+        // With `--record` the recorder runs with this launcher; with the graph's `record:`
+        // section every launcher adds it the same way, on the first machine.
+        let on = if opts.record.is_some() {
+            machine.name.clone()
+        } else {
+            graph.machines[0].name.clone()
+        };
+        let outputs = graph
+            .record
+            .as_ref()
+            .map(|r| r.outputs.clone())
+            .unwrap_or_default();
+        let metadata = run_metadata(&graph, &opts.graph, &machine.name);
+        let (with_recorder, id) = crate::record::add_recorder(&graph, path, &outputs, &on, metadata)?;
+        graph = with_recorder;
+        if on == machine.name {
+            recorder_here = Some(path.clone());
+        }
+        tracing::info!(recorder = %id, file = %path.display(), "recording");
+    }
+    let nodes: Vec<NodeSpec> = match &opts.machine {
+        Some(m) => graph.nodes_on(m).into_iter().cloned().collect(),
+        None => graph.nodes.clone(),
+    };
 
     let session = open_router(&listen, &connect)?;
     let stats: Arc<Mutex<BTreeMap<String, Stats>>> = Arc::default();
@@ -379,7 +406,28 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
         dir,
         stats: final_stats,
         seconds,
+        recording: recorder_here,
     })
+}
+
+/// The run's facts stored in a recording (`evseg.run` metadata record).
+fn run_metadata(graph: &Graph, file: &Path, machine: &str) -> serde_json::Map<String, serde_json::Value> {
+    let mut m = serde_json::Map::new();
+    let mut put = |k: &str, v: String| {
+        m.insert(k.to_string(), serde_json::Value::String(v));
+    };
+    put("graph_hash", crate::record::graph_hash(&graph.canonical_json()));
+    put("graph_hash_algorithm", "fnv1a-64 of graph.resolved.json".into());
+    put("evseg_version", env!("CARGO_PKG_VERSION").into());
+    put("instance", graph.name.clone());
+    put("mode", graph.mode.as_str().into());
+    put("window", graph.window.to_string());
+    put("queue", graph.queue.to_string());
+    put("machine", machine.to_string());
+    put("graph_file", file.display().to_string());
+    put("started_utc", crate::rundir::timestamp());
+    put("command", std::env::args().collect::<Vec<_>>().join(" "));
+    m
 }
 
 /// Markdown reports the nodes wrote into the run folder (`*/report.md`, one level down).

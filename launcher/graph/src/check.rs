@@ -9,9 +9,9 @@ use serde_json::{Map, Value as Json};
 
 use crate::cycles::{self, Edge};
 use crate::diagnostic::{Problems, Span, did_you_mean, name_list};
-use crate::model::{Consumer, Graph, InputSpec, Machine, NodeSpec, OutputSpec};
+use crate::model::{Consumer, Graph, InputSpec, Machine, NodeSpec, OutputSpec, RecordSpec};
 use crate::params;
-use crate::raw::{RawGraph, RawInput, RawNode};
+use crate::raw::{RawGraph, RawInput, RawNode, RawRecord};
 
 /// Turns a binary name into its description (the launcher runs `<binary> --describe`).
 pub type Resolver<'r> = &'r dyn Fn(&str) -> Result<NodeDescription, String>;
@@ -95,12 +95,17 @@ pub(crate) fn check(raw: &RawGraph<'_>, resolver: Resolver<'_>, p: &mut Problems
             ),
         );
     }
+    let record = raw
+        .record
+        .as_ref()
+        .and_then(|r| check_record(r, &raw.nodes, &work, p));
     if !p.is_empty() {
         return None;
     }
     let name = raw.name.as_ref()?.value.clone();
     let order = cycles::topological_order(raw.nodes.len(), &plain_edges);
     Some(Graph {
+        record,
         file: p.file().to_string(),
         name,
         mode: raw.mode,
@@ -108,6 +113,57 @@ pub(crate) fn check(raw: &RawGraph<'_>, resolver: Resolver<'_>, p: &mut Problems
         queue: raw.queue,
         machines,
         nodes: build_nodes(&raw.nodes, work, &order)?,
+    })
+}
+
+/// Checks the `record:` section: a path, and outputs that exist (`node/output`).
+fn check_record(
+    record: &RawRecord,
+    nodes: &[RawNode<'_>],
+    work: &[NodeWork<'_>],
+    p: &mut Problems,
+) -> Option<RecordSpec> {
+    let path = record.path.as_ref()?;
+    if path.value.trim().is_empty() {
+        p.error(
+            path.at,
+            "`record.path` is empty; name the MCAP file, e.g. `run.mcap`",
+        );
+        return None;
+    }
+    let mut outputs = Vec::new();
+    let mut known = Vec::new();
+    for (node, w) in nodes.iter().zip(work) {
+        let Some(id) = &node.id else { continue };
+        for o in &w.published {
+            known.push(format!("{}/{o}", id.value));
+        }
+    }
+    for r in record.outputs.iter().flatten() {
+        if known.contains(&r.value) {
+            if !outputs.contains(&r.value) {
+                outputs.push(r.value.clone());
+            }
+        } else {
+            p.error(
+                r.at,
+                format!(
+                    "`record.outputs`: no output `{}` in this graph{}",
+                    r.value,
+                    did_you_mean(&r.value, &known)
+                ),
+            );
+        }
+    }
+    if record.outputs.as_ref().is_some_and(|o| o.is_empty()) {
+        p.error(
+            record.at,
+            "`record.outputs` is empty; leave it out to record every output",
+        );
+    }
+    Some(RecordSpec {
+        path: path.value.clone(),
+        outputs,
     })
 }
 

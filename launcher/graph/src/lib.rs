@@ -23,7 +23,7 @@ use std::path::Path;
 pub use check::Resolver;
 pub use diagnostic::{Diagnostic, Span};
 pub use model::{
-    Consumer, Graph, InputSpec, Machine, Mode, NodeKeys, NodeSpec, OutputSpec, PortKey, Restart,
+    Consumer, Graph, InputSpec, Machine, Mode, NodeKeys, NodeSpec, OutputSpec, PortKey, RecordSpec, Restart,
     RestartPolicy,
 };
 

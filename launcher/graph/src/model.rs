@@ -204,6 +204,16 @@ pub struct NodeKeys {
     pub outputs: Vec<PortKey>,
 }
 
+/// What to record (`record: { path, outputs }` in graph.yaml).
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct RecordSpec {
+    /// MCAP file to write; a relative path is inside the run folder.
+    pub path: String,
+    /// Outputs to record as `node/output`, each checked to exist; empty = every output.
+    #[serde(default)]
+    pub outputs: Vec<String>,
+}
+
 /// A checked graph.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Graph {
@@ -223,6 +233,10 @@ pub struct Graph {
     /// Nodes in a topological order of the non-feedback edges (producers before consumers; ties
     /// keep the order of the file).
     pub nodes: Vec<NodeSpec>,
+    /// Recording of the run, when graph.yaml has a `record:` section (left out of the canonical
+    /// form when absent, so graphs without one hash as before).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub record: Option<RecordSpec>,
 }
 
 impl Graph {

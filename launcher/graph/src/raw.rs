@@ -7,7 +7,8 @@ use crate::model::{Graph, Mode, Restart, RestartPolicy};
 use crate::shape::{self, Spanned};
 use crate::yaml::{Entry, Node, Value};
 
-const TOP_KEYS: &[&str] = &["name", "mode", "window", "queue", "zenoh", "nodes"];
+const TOP_KEYS: &[&str] = &["name", "mode", "window", "queue", "zenoh", "nodes", "record"];
+const RECORD_KEYS: &[&str] = &["path", "outputs"];
 const ZENOH_KEYS: &[&str] = &["machines"];
 const MACHINE_KEYS: &[&str] = &["listen", "connect"];
 const NODE_KEYS: &[&str] = &["id", "run", "machine", "params", "inputs", "outputs", "restart"];
@@ -55,8 +56,19 @@ impl RawNode<'_> {
     }
 }
 
+/// The `record:` section as written.
+pub(crate) struct RawRecord {
+    /// Where the section is.
+    pub at: Span,
+    pub path: Option<Spanned<String>>,
+    /// `node/output` references; `None` = every output.
+    pub outputs: Option<Vec<Spanned<String>>>,
+}
+
 /// The whole file as written.
 pub(crate) struct RawGraph<'a> {
+    /// The `record:` section, if any (and readable).
+    pub record: Option<RawRecord>,
     pub name: Option<Spanned<String>>,
     pub mode: Mode,
     pub window: u32,
@@ -96,7 +108,9 @@ pub(crate) fn read<'a>(root: &'a Node, p: &mut Problems) -> Option<RawGraph<'a>>
             Vec::new()
         }
     };
+    let record = top.get("record").and_then(|n| read_record(n, p));
     Some(RawGraph {
+        record,
         name,
         mode,
         window,
@@ -119,6 +133,28 @@ fn read_mode(node: &Node, p: &mut Problems) -> Option<Mode> {
             None
         }
     }
+}
+
+fn read_record(node: &Node, p: &mut Problems) -> Option<RawRecord> {
+    let fields = shape::mapping(node, "`record`", RECORD_KEYS, p)?;
+    let path = match fields.get("path") {
+        Some(n) => shape::string(n, "`record.path`", p),
+        None => {
+            p.error(
+                node.at,
+                "missing `path` in `record` (the MCAP file to write, e.g. `path: run.mcap`)",
+            );
+            None
+        }
+    };
+    let outputs = fields
+        .get("outputs")
+        .and_then(|n| shape::string_list(n, "`record.outputs`", p));
+    Some(RawRecord {
+        at: node.at,
+        path,
+        outputs,
+    })
 }
 
 fn read_zenoh(node: &Node, p: &mut Problems) -> Vec<RawMachine> {
