@@ -183,6 +183,8 @@ print(json.dumps({'labels': list(labels.shape), 'events': list(events.shape), 'e
 
 #[test]
 fn a_recorded_lockstep_run_loses_nothing_and_reads_back_everywhere() {
+    // Build the binaries first, so the run times printed below are the runs' own.
+    evseg_tests::bin_dir();
     let dir = tempfile::tempdir().unwrap();
     let dir = dir.path();
     let plain = run(dir, "plain", "", &[]);

@@ -236,16 +236,19 @@ impl<V: FnMut(MessageRef<'_>) -> Result<(), RecordError>> Walk<'_, V> {
 /// Reads the recording at `path`, handing every message to `visit` in file order, and returns
 /// what was found. A file cut off mid-write is not an error: reading stops at the first
 /// incomplete or unreadable record, and [`Recording::truncated`] says at which byte and why.
-/// Errors: the file cannot be read, is not MCAP, or `visit` failed.
+/// The file is streamed one top-level record (at most one chunk) at a time, so memory does not
+/// grow with the file. Errors: the file cannot be read, is not MCAP, or `visit` failed.
 pub fn read(
     path: &Path,
     mut visit: impl FnMut(MessageRef<'_>) -> Result<(), RecordError>,
 ) -> Result<Recording, RecordError> {
-    let bytes = std::fs::read(path).map_err(|e| RecordError::Io {
+    let io = |e: std::io::Error| RecordError::Io {
         file: path.to_path_buf(),
         source: e,
-    })?;
-    read_bytes(path, &bytes, &mut visit)
+    };
+    let file = std::fs::File::open(path).map_err(io)?;
+    let size = file.metadata().map_err(io)?.len();
+    walk_records(path, std::io::BufReader::new(file), size, &mut visit)
 }
 
 /// [`read`] on bytes already in memory (`path` only names them in messages).
@@ -254,7 +257,23 @@ pub fn read_bytes(
     bytes: &[u8],
     visit: &mut impl FnMut(MessageRef<'_>) -> Result<(), RecordError>,
 ) -> Result<Recording, RecordError> {
-    if bytes.len() < mcap::MAGIC.len() || &bytes[..mcap::MAGIC.len()] != mcap::MAGIC {
+    walk_records(path, bytes, bytes.len() as u64, visit)
+}
+
+/// Walks the top-level records of `size` bytes read from `src`.
+fn walk_records(
+    path: &Path,
+    mut src: impl std::io::Read,
+    size: u64,
+    visit: &mut impl FnMut(MessageRef<'_>) -> Result<(), RecordError>,
+) -> Result<Recording, RecordError> {
+    let io = |e: std::io::Error| RecordError::Io {
+        file: path.to_path_buf(),
+        source: e,
+    };
+    let magic_len = mcap::MAGIC.len() as u64;
+    let mut magic = [0u8; 8];
+    if size < magic_len || src.read_exact(&mut magic).is_err() || magic[..] != *mcap::MAGIC {
         return Err(RecordError::NotMcap {
             file: path.to_path_buf(),
         });
@@ -262,7 +281,7 @@ pub fn read_bytes(
     let mut walk = Walk {
         rec: Recording {
             file: path.to_path_buf(),
-            size: bytes.len() as u64,
+            size,
             channels: BTreeMap::new(),
             metadata: Vec::new(),
             attachments: Vec::new(),
@@ -274,24 +293,22 @@ pub fn read_bytes(
         schemas: BTreeMap::new(),
         visit,
     };
-    let mut pos = mcap::MAGIC.len();
-    let stop = |offset: usize, reason: String| {
-        Some(Truncation {
-            offset: offset as u64,
-            reason,
-        })
-    };
+    let mut pos = magic_len;
+    let stop = |offset: u64, reason: String| Some(Truncation { offset, reason });
+    let mut body = Vec::new();
     let truncated = loop {
-        let left = bytes.len() - pos;
+        let left = size - pos;
         if left == 0 {
             break stop(pos, "the file ends without a footer".into());
         }
         if left < 9 {
             break stop(pos, format!("incomplete record header ({left} of 9 bytes)"));
         }
-        let op = bytes[pos];
+        let mut head = [0u8; 9];
+        src.read_exact(&mut head).map_err(io)?;
+        let op = head[0];
         let mut len_bytes = [0u8; 8];
-        len_bytes.copy_from_slice(&bytes[pos + 1..pos + 9]);
+        len_bytes.copy_from_slice(&head[1..9]);
         let len = u64::from_le_bytes(len_bytes);
         let name = record_name(op);
         if len == u64::MAX {
@@ -302,21 +319,24 @@ pub fn read_bytes(
                 ),
             );
         }
-        if len > (left - 9) as u64 {
+        if len > left - 9 {
             break stop(
                 pos,
                 format!("incomplete {name} record: needs {len} bytes, {} left", left - 9),
             );
         }
-        let body = &bytes[pos + 9..pos + 9 + len as usize];
-        let record = match mcap::parse_record(op, body) {
+        // The length is bounded by the file size, so this allocation is too.
+        body.resize(len as usize, 0);
+        src.read_exact(&mut body).map_err(io)?;
+        let record = match mcap::parse_record(op, &body) {
             Ok(r) => r,
             Err(e) => break stop(pos, format!("unreadable {name} record: {e}")),
         };
         match record {
             Record::Footer(_) => {
-                let end = pos + 9 + len as usize;
-                if bytes.get(end..) == Some(mcap::MAGIC) {
+                let end = pos + 9 + len;
+                let mut tail = [0u8; 8];
+                if size - end == magic_len && src.read_exact(&mut tail).is_ok() && tail[..] == *mcap::MAGIC {
                     break None;
                 }
                 break stop(
@@ -339,7 +359,7 @@ pub fn read_bytes(
             }
             other => walk.take(other)?,
         }
-        pos += 9 + len as usize;
+        pos += 9 + len;
     };
     walk.rec.truncated = truncated;
     Ok(walk.rec)
