@@ -104,6 +104,8 @@ pub struct ClusterReport {
     pub planar_background: f64,
     /// Warp score, if enough events landed on warped previous events.
     pub warp_score: Option<f64>,
+    /// Background prior in [0, 1] (step 1).
+    pub prior: f64,
     /// Background candidate (step 1).
     pub candidate: bool,
     /// Mean `|r_new|` / mean `|n_derot|` (NaN without samples or without a translation).
@@ -228,11 +230,11 @@ impl BackgroundMerger {
             if b + f >= p.warp_min_hits as f64 {
                 r.warp_score = Some(b / (b + f));
             }
-            let prior = match r.warp_score {
+            r.prior = match r.warp_score {
                 Some(s) => (1.0 - p.warp_weight) * r.planar_background + p.warp_weight * s,
                 None => r.planar_background,
             };
-            r.candidate = prior >= p.candidate_threshold;
+            r.candidate = r.prior >= p.candidate_threshold;
         }
 
         // 2-3. Egomotion from the candidates, residuals under it with a depth per cluster, and
@@ -246,7 +248,15 @@ impl BackgroundMerger {
         let previous_direction = self.previous.as_ref().and_then(|prev| prev.direction);
         let mut residual = vec![f32::NAN; n];
         let mut direction = previous_direction;
+        let priors: Vec<f64> = reports.iter().map(|r| r.prior).collect();
         let mut in_svm: Vec<bool> = reports.iter().map(|r| r.candidate).collect();
+        if p.hypotheses {
+            let chosen = select_hypothesis(&per_cluster, &priors, previous_direction, input, &p);
+            if let Some((t, consistent)) = chosen {
+                direction = Some(t);
+                in_svm = consistent;
+            }
+        }
         for round in 0..p.refine_rounds.max(1) {
             let chosen: Vec<&FlowSample> = per_cluster
                 .iter()
@@ -356,6 +366,114 @@ fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
+/// Sums `(|r|, |n_derot|)` over `members` (one cluster) under translation `t` with the cluster's
+/// own inverse depth.
+fn cluster_residual(members: &[&FlowSample], t: [f64; 3]) -> (f64, f64) {
+    let rho = inverse_depth(members, t);
+    let (mut sum_r, mut sum_n) = (0.0, 0.0);
+    for s in members {
+        sum_r += (s.n_derot - rho * dot(s.x_row(), t)).abs();
+        sum_n += s.n_derot.abs();
+    }
+    (sum_r, sum_n)
+}
+
+/// True when a cluster with residual sums `(sum_r, sum_n)` over `m` samples is explained.
+fn is_consistent(sum_r: f64, sum_n: f64, m: usize, p: &BackgroundParams) -> bool {
+    m > 0 && (sum_r / m as f64 <= p.consistency_floor || sum_r <= p.consistency_ratio * sum_n)
+}
+
+/// Step 2a: background translation hypotheses and the one that explains the most image area.
+///
+/// Hypotheses: the estimate from the background candidates, the previous slice's direction, and
+/// estimates from the samples of each image half and quadrant (an object rarely covers all of
+/// them, so at least one is mostly background). Each is scored by the image area (occupied
+/// cells of [`BackgroundParams::map_cell_px`]) of the clusters it explains, each weighted by
+/// `prior_floor + prior`: the background is the motion that explains most of the scene, with
+/// the planar and warp votes as tie-breakers. Returns the winner and the clusters it explains.
+fn select_hypothesis(
+    per_cluster: &[Vec<&FlowSample>],
+    priors: &[f64],
+    previous: Option<[f64; 3]>,
+    input: &SliceInput<'_>,
+    p: &BackgroundParams,
+) -> Option<([f64; 3], Vec<bool>)> {
+    let (ev, cam) = (input.events, input.camera);
+    let (w, h) = (u32::from(cam.width.max(1)), u32::from(cam.height.max(1)));
+    let estimate = |keep: &dyn Fn(&FlowSample) -> bool| {
+        let chosen: Vec<&FlowSample> = per_cluster
+            .iter()
+            .flatten()
+            .copied()
+            .filter(|s| keep(s))
+            .collect();
+        estimate_translation(&chosen, &ev.x, &ev.y, cam.width, cam.height, &p.egomotion)
+    };
+    let mut hypotheses: Vec<[f64; 3]> = previous.into_iter().collect();
+    let candidate_set: Vec<bool> = priors.iter().map(|&q| q >= p.candidate_threshold).collect();
+    if let Some(t) =
+        estimate(&|s: &FlowSample| cluster_of(input.clusters, s.index).is_some_and(|c| candidate_set[c]))
+    {
+        hypotheses.push(t);
+    }
+    // Halves and quadrants: (column range, row range) in units of half the sensor.
+    let parts: [(u32, u32, u32, u32); 8] = [
+        (0, 1, 0, 2),
+        (1, 2, 0, 2),
+        (0, 2, 0, 1),
+        (0, 2, 1, 2),
+        (0, 1, 0, 1),
+        (1, 2, 0, 1),
+        (0, 1, 1, 2),
+        (1, 2, 1, 2),
+    ];
+    for (x0, x1, y0, y1) in parts {
+        let inside = |s: &FlowSample| {
+            let (u, v) = (2 * u32::from(ev.x[s.index]), 2 * u32::from(ev.y[s.index]));
+            u >= x0 * w && u < x1 * w && v >= y0 * h && v < y1 * h
+        };
+        if let Some(t) = estimate(&inside) {
+            hypotheses.push(t);
+        }
+    }
+    // Area of each cluster: distinct occupied cells.
+    let cell = usize::from(p.map_cell_px.max(1));
+    let cols = usize::from(cam.width).div_ceil(cell).max(1);
+    let area: Vec<f64> = per_cluster
+        .iter()
+        .map(|m| {
+            let mut cells: Vec<usize> = m
+                .iter()
+                .map(|s| usize::from(ev.y[s.index]) / cell * cols + usize::from(ev.x[s.index]) / cell)
+                .collect();
+            cells.sort_unstable();
+            cells.dedup();
+            cells.len() as f64
+        })
+        .collect();
+    let mut best: Option<(f64, [f64; 3], Vec<bool>)> = None;
+    for t in hypotheses {
+        let consistent: Vec<bool> = per_cluster
+            .iter()
+            .map(|m| {
+                let (r, nsum) = cluster_residual(m, t);
+                is_consistent(r, nsum, m.len(), p)
+            })
+            .collect();
+        let score: f64 = consistent
+            .iter()
+            .zip(&area)
+            .zip(priors)
+            .filter(|((c, _), _)| **c)
+            .map(|((_, a), q)| a * (p.prior_floor + q))
+            .sum();
+        if best.as_ref().is_none_or(|(b, _, _)| score > *b) {
+            best = Some((score, t, consistent));
+        }
+    }
+    best.map(|(_, t, c)| (t, c))
+}
+
 /// Residuals of `members` (one cluster) under translation `direction` with the cluster's own
 /// inverse depth, written into `residual`; fills the report's relative residual and returns
 /// whether the cluster is consistent with the translation.
@@ -382,13 +500,12 @@ fn explain(
         sum_r += r.abs();
         sum_n += s.n_derot.abs();
     }
-    let m = members.len() as f64;
     report.relative_residual = if direction.is_some() && sum_n > 0.0 {
         sum_r / sum_n
     } else {
         f64::NAN
     };
-    direction.is_none() || sum_r / m <= p.consistency_floor || sum_r <= p.consistency_ratio * sum_n
+    direction.is_none() || is_consistent(sum_r, sum_n, members.len(), p)
 }
 
 /// Least-squares inverse depth of `members` under translation `t`, clamped at 0 (cheirality).

@@ -98,6 +98,16 @@ fn main() -> ExitCode {
         "cells over which the egomotion samples are density-normalized, pixels (0 = off)",
     )
     .param(
+        "hypotheses",
+        d.hypotheses,
+        "choose the background translation among hypotheses by the image area they explain",
+    )
+    .param(
+        "prior_floor",
+        d.prior_floor,
+        "a cluster's area counts prior_floor + prior in a hypothesis' score",
+    )
+    .param(
         "refine_rounds",
         d.refine_rounds,
         "rounds of SVM on the background -> residuals -> consistent candidates",
@@ -168,6 +178,8 @@ fn main() -> ExitCode {
                 min_cell_samples: cfg.param("min_cell_samples")?,
                 density_cell_px: cfg.param("egomotion_density_cell_px")?,
             },
+            hypotheses: cfg.param("hypotheses")?,
+            prior_floor: cfg.param("prior_floor")?,
             refine_rounds: cfg.param("refine_rounds")?,
             warp_cell_px: cfg.param("warp_cell_px")?,
             warp_min_hits: cfg.param("warp_min_hits")?,

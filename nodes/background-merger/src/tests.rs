@@ -136,7 +136,12 @@ fn an_independently_moving_object_stays_apart_even_if_the_planar_vote_says_backg
 fn the_previous_segmentation_is_warped_in_and_corrects_a_wrong_planar_vote() {
     let t = [0.4, 0.0, 0.1];
     let t_obj = Some([-0.5, 0.4, 0.0]);
-    let mut m = BackgroundMerger::new(BackgroundParams::default()).unwrap();
+    // Equal trust in warp and planar vote, so a perfect warp score outvotes a wrong vote.
+    let p = BackgroundParams {
+        warp_weight: 0.5,
+        ..BackgroundParams::default()
+    };
+    let mut m = BackgroundMerger::new(p).unwrap();
     let first = construct(t, t_obj, 0.0);
     let r1 = run(&mut m, &first, (0.0, 0.03), None);
     assert!(!r1.warped);

@@ -25,11 +25,11 @@ pub struct EgomotionParams {
     /// Cells with fewer samples are left out of the refinement (default 20).
     pub min_cell_samples: usize,
     /// Side of the cells over which the samples are density-normalized, pixels: each sample is
-    /// weighted by 1 / (samples in its cell) in the SVM and the refinement, so every patch of the
-    /// background counts alike however densely it fires (default 8; 0 = equal weights, as in the
-    /// reference). Without it a densely textured region that the coarse stage wrongly kept in
-    /// the background (on the simulator, a checkered object with 45 % of the events on 15 % of
-    /// the image) dictates the translation.
+    /// weighted by 1 / (samples in its cell) in the SVM and the refinement, so every patch counts
+    /// alike however densely it fires (default 0 = equal weights, as in the reference). It
+    /// limits the pull of a densely textured object wrongly kept in the background, but costs
+    /// accuracy otherwise: median direction error on the simulator's camera-only scene 13 deg
+    /// without, 25 deg with 8 px cells.
     pub density_cell_px: u16,
 }
 
@@ -41,7 +41,7 @@ impl Default for EgomotionParams {
             refine_iterations: 50,
             grid_cols: 8,
             min_cell_samples: 20,
-            density_cell_px: 8,
+            density_cell_px: 0,
         }
     }
 }

@@ -42,6 +42,20 @@ fn apply(
             "consistency_ratio" => bg.consistency_ratio = f,
             "consistency_floor" => bg.consistency_floor = f,
             "refine_rounds" => bg.refine_rounds = f as usize,
+            "hypotheses" => bg.hypotheses = f != 0.0,
+            "ego_density" => {
+                bg.egomotion.density_cell_px = f as u16;
+                hier.egomotion.density_cell_px = f as u16;
+            }
+            "refine_iterations" => {
+                bg.egomotion.refine_iterations = f as usize;
+                hier.egomotion.refine_iterations = f as usize;
+            }
+            "grid_cols" => {
+                bg.egomotion.grid_cols = f as usize;
+                hier.egomotion.grid_cols = f as usize;
+            }
+            "prior_floor" => bg.prior_floor = f,
             "alpha_max" => bg.alpha_max = f,
             "merge_threshold" => hier.merge_threshold = f,
             "background_penalty" => hier.background_penalty = f,
@@ -213,6 +227,7 @@ fn main() -> anyhow::Result<()> {
             let mut hier = HierarchicalMerger::new(hp)?;
             let mut prev: Option<Vec<u32>> = None;
             let (mut ious, mut dirs, mut planar_ious) = (Vec::new(), Vec::new(), Vec::new());
+            let mut coarse_ious = Vec::new();
             let (mut inter_all, mut union_all) = (0usize, 0usize);
             for (dump_k, (((s, truth, span), f), c)) in slices.iter().zip(&flows).zip(&clusters).enumerate() {
                 let clusters_k = c.clone();
@@ -228,7 +243,37 @@ fn main() -> anyhow::Result<()> {
                     previous_labels: prev.as_deref(),
                 })?;
                 let h = hier.merge(&s.camera, &s.events, f, s.omega, &m.coarse)?;
-                let label = &h.segmentation.label;
+                let mut oracle_label;
+                let mut label = &h.segmentation.label;
+                if std::env::var("ORACLE_CLUSTERS").is_ok() {
+                    let k = usize::from(c.count);
+                    let mut votes = vec![(0usize, 0usize); k];
+                    for (i, &id) in c.id.iter().enumerate() {
+                        if id != u16::MAX {
+                            votes[usize::from(id)].0 += usize::from(truth.event_object[i] != 0);
+                            votes[usize::from(id)].1 += 1;
+                        }
+                    }
+                    oracle_label =
+                        c.id.iter()
+                            .map(|&id| {
+                                if id == u16::MAX {
+                                    evseg_hierarchical_merger::fill::UNLABELLED
+                                } else {
+                                    let (o, a) = votes[usize::from(id)];
+                                    u32::from(2 * o > a)
+                                }
+                            })
+                            .collect::<Vec<u32>>();
+                    evseg_hierarchical_merger::fill::fill_unlabelled(
+                        &s.events,
+                        s.camera.width,
+                        s.camera.height,
+                        4,
+                        &mut oracle_label,
+                    );
+                    label = &oracle_label;
+                }
                 if let Ok(d) = std::env::var("DUMP")
                     && d.parse::<usize>().ok() == Some(dump_k)
                 {
@@ -285,6 +330,33 @@ fn main() -> anyhow::Result<()> {
                     );
                 }
                 if truth.event_object.iter().any(|&o| o != 0) {
+                    // Diagnostic: the coarse stage alone (group != 0 is foreground).
+                    let mut coarse_label: Vec<u32> = m
+                        .coarse
+                        .group
+                        .iter()
+                        .map(|&g| {
+                            if g == u32::MAX {
+                                evseg_hierarchical_merger::fill::UNLABELLED
+                            } else {
+                                u32::from(g != 0)
+                            }
+                        })
+                        .collect();
+                    evseg_hierarchical_merger::fill::fill_unlabelled(
+                        &s.events,
+                        s.camera.width,
+                        s.camera.height,
+                        4,
+                        &mut coarse_label,
+                    );
+                    let (mut ci, mut cu) = (0usize, 0usize);
+                    for (k, l) in coarse_label.iter().enumerate() {
+                        let (p, g) = (*l != 0, truth.event_object[k] != 0);
+                        ci += usize::from(p && g);
+                        cu += usize::from(p || g);
+                    }
+                    coarse_ious.push(ci as f64 / cu.max(1) as f64);
                     let (mut i, mut u, mut pi, mut pu) = (0, 0, 0, 0);
                     for (k, l) in label.iter().enumerate() {
                         let (p, g) = (*l != 0, truth.event_object[k] != 0);
@@ -316,12 +388,13 @@ fn main() -> anyhow::Result<()> {
             dirs.sort_by(f64::total_cmp);
             let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
             println!(
-                "{name:14} seed {seed} flow {} [{set}] slices {:3} IoU mean {:.3} pooled {:.3} (planar {:.3}) dir median {:.1} deg (n {})",
+                "{name:14} seed {seed} flow {} [{set}] slices {:3} IoU mean {:.3} pooled {:.3} (planar {:.3}, coarse {:.3}) dir median {:.1} deg (n {})",
                 if ideal { "ideal" } else { "est" },
                 ious.len(),
                 mean(&ious),
                 inter_all as f64 / union_all.max(1) as f64,
                 mean(&planar_ious),
+                mean(&coarse_ious),
                 dirs.get(dirs.len() / 2).copied().unwrap_or(f64::NAN),
                 dirs.len()
             );
