@@ -71,7 +71,8 @@ fn row_from_report(scene: &str, seed: u64, run: &Path, report: &Value) -> SceneR
     }
 }
 
-fn node_with_binary(graph: &evseg_graph::Graph, binary: &str) -> anyhow::Result<String> {
+/// Id of the (first) node of `graph` that runs `binary`.
+pub fn node_with_binary(graph: &evseg_graph::Graph, binary: &str) -> anyhow::Result<String> {
     graph
         .nodes
         .iter()

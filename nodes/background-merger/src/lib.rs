@@ -407,7 +407,11 @@ fn select_hypothesis(
             .copied()
             .filter(|s| keep(s))
             .collect();
-        estimate_translation(&chosen, &ev.x, &ev.y, cam.width, cam.height, &p.egomotion)
+        // A regular subsample: the hypotheses only need to be roughly right (the winner is
+        // re-estimated from all its samples afterwards).
+        let stride = chosen.len().div_ceil(p.hypothesis_max_samples.max(1)).max(1);
+        let sub: Vec<&FlowSample> = chosen.iter().step_by(stride).copied().collect();
+        estimate_translation(&sub, &ev.x, &ev.y, cam.width, cam.height, &p.egomotion)
     };
     let mut hypotheses: Vec<[f64; 3]> = previous.into_iter().collect();
     let candidate_set: Vec<bool> = priors.iter().map(|&q| q >= p.candidate_threshold).collect();

@@ -108,6 +108,11 @@ fn main() -> ExitCode {
         "a cluster's area counts prior_floor + prior in a hypothesis' score",
     )
     .param(
+        "hypothesis_max_samples",
+        d.hypothesis_max_samples,
+        "most samples per hypothesis estimate (more are subsampled)",
+    )
+    .param(
         "refine_rounds",
         d.refine_rounds,
         "rounds of SVM on the background -> residuals -> consistent candidates",
@@ -180,6 +185,7 @@ fn main() -> ExitCode {
             },
             hypotheses: cfg.param("hypotheses")?,
             prior_floor: cfg.param("prior_floor")?,
+            hypothesis_max_samples: cfg.param("hypothesis_max_samples")?,
             refine_rounds: cfg.param("refine_rounds")?,
             warp_cell_px: cfg.param("warp_cell_px")?,
             warp_min_hits: cfg.param("warp_min_hits")?,

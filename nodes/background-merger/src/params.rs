@@ -22,6 +22,10 @@ pub struct BackgroundParams {
     /// a cluster the planar and warp votes call foreground still counts a third as much as one
     /// they call background).
     pub prior_floor: f64,
+    /// Most samples per hypothesis estimate; more are subsampled regularly (default 3000: a
+    /// tenth of a 640x480 slice's flow samples, plenty for 3 parameters; the ten hypotheses
+    /// otherwise made this the graph's slowest stage).
+    pub hypothesis_max_samples: usize,
     /// Rounds of "SVM on the background, residuals, background = consistent candidates"
     /// (default 2: the second round drops the candidates the first translation does not explain,
     /// such as an object the planar vote missed, from the SVM; a third changed nothing on the
@@ -75,6 +79,7 @@ impl Default for BackgroundParams {
             egomotion: EgomotionParams::default(),
             hypotheses: true,
             prior_floor: 0.5,
+            hypothesis_max_samples: 3000,
             refine_rounds: 2,
             warp_cell_px: 4,
             warp_min_hits: 10,

@@ -1,0 +1,134 @@
+//! `evseg bench pipeline`: end-to-end speed of a whole graph in lock-step mode.
+//!
+//! A simulator scene is first written as an EVIMO2 v2 folder (not timed: the simulator is slower
+//! than the pipeline and would be what is measured), then the graph (default
+//! `graphs/evimo2.yaml`, the method's stages) reads it. Reported: events per second over the
+//! run's wall time (process start-up included) and each stage's share of the busy time its node
+//! reported (seconds inside its own logic).
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+use serde_json::Value;
+
+use crate::run::{RunOptions, run};
+
+/// One stage's busy time.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct StageTime {
+    /// Node id.
+    pub node: String,
+    /// Seconds in the node's own logic.
+    pub busy_s: f64,
+    /// Slices (or source steps) processed.
+    pub processed: u64,
+}
+
+/// The figures of one pipeline run.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct PipelineRow {
+    /// Scene, seed, seconds of sensor time.
+    pub scene: String,
+    /// Seed of the scene.
+    pub seed: u64,
+    /// Events in the sequence.
+    pub events: u64,
+    /// Wall time of the run, seconds.
+    pub wall_s: f64,
+    /// Events per second over the wall time.
+    pub events_per_s: f64,
+    /// Per node, in graph order of the statistics.
+    pub stages: Vec<StageTime>,
+}
+
+/// Options of the pipeline benchmark.
+#[derive(Debug, Clone)]
+pub struct PipelineOptions {
+    /// Graph to run; its `evseg-source` node gets `kind=evimo2` and the folder's path.
+    pub graph: PathBuf,
+    /// Simulator preset.
+    pub scene: String,
+    /// Seed.
+    pub seed: u64,
+    /// Seconds of sensor time.
+    pub seconds: f64,
+    /// Working folder (the sequence and the run folder).
+    pub work: PathBuf,
+}
+
+/// Writes the sequence (unless already there) and runs the graph on it.
+pub fn bench(o: &PipelineOptions) -> anyhow::Result<PipelineRow> {
+    let seq = o.work.join(format!("{}-seed{}-{}s", o.scene, o.seed, o.seconds));
+    if !seq.join("dataset_events_t.npy").exists() {
+        eprintln!("writing {} (not timed)", seq.display());
+        evseg_source::synthetic::write_evimo2(&o.scene, o.seed, Some(o.seconds), 1.0, &seq)
+            .with_context(|| format!("cannot write the sequence to {}", seq.display()))?;
+    }
+    let dir = o.graph.parent().map(Path::to_path_buf).unwrap_or_default();
+    let graph = crate::run::load_graph(&o.graph, &crate::resolve::BinaryResolver::new(&dir))?;
+    let source = crate::bench_scenes::node_with_binary(&graph, "evseg-source")?;
+    let out = o.work.join("run");
+    if out.exists() {
+        std::fs::remove_dir_all(&out).with_context(|| format!("cannot clear {}", out.display()))?;
+    }
+    let outcome = run(&RunOptions {
+        graph: o.graph.clone(),
+        out: Some(out),
+        set: vec![
+            format!("{source}.kind=evimo2"),
+            format!("{source}.path={}", seq.display()),
+        ],
+        quiet: true,
+        ..RunOptions::default()
+    })?;
+    let digest_path = outcome.dir.join(format!("source-{source}.json"));
+    let digest: Value = serde_json::from_str(
+        &std::fs::read_to_string(&digest_path).with_context(|| format!("{}", digest_path.display()))?,
+    )
+    .with_context(|| format!("{}", digest_path.display()))?;
+    let events = digest["digest"]["count"]
+        .as_u64()
+        .with_context(|| format!("{}: no digest.count", digest_path.display()))?;
+    let stages = outcome
+        .stats
+        .values()
+        .map(|s| StageTime {
+            node: s.node.clone(),
+            busy_s: s.busy_s,
+            processed: s.processed,
+        })
+        .collect();
+    Ok(PipelineRow {
+        scene: o.scene.clone(),
+        seed: o.seed,
+        events,
+        wall_s: outcome.seconds,
+        events_per_s: events as f64 / outcome.seconds.max(1e-9),
+        stages,
+    })
+}
+
+/// The row as Markdown: the headline, then the per-stage shares.
+pub fn markdown(r: &PipelineRow, graph: &Path) -> String {
+    let total: f64 = r.stages.iter().map(|s| s.busy_s).sum();
+    let mut s = format!(
+        "{} on `{}` (seed {}): {} events in {:.2} s wall = **{:.2} M events/s** end to end, lock-step\n\n\
+         | node | busy s | share of busy time | slices |\n|---|---:|---:|---:|\n",
+        graph.display(),
+        r.scene,
+        r.seed,
+        r.events,
+        r.wall_s,
+        r.events_per_s / 1e6
+    );
+    for st in &r.stages {
+        s.push_str(&format!(
+            "| {} | {:.2} | {:.1} % | {} |\n",
+            st.node,
+            st.busy_s,
+            100.0 * st.busy_s / total.max(1e-12),
+            st.processed
+        ));
+    }
+    s
+}
