@@ -3,8 +3,13 @@
 //! official figures).
 //!
 //! `cargo run --release -p evseg-hierarchical-merger --example method_on_sim -- [preset ...]`
-//! env: SEED (1), SECONDS (2), FLOW (est | ideal), SET ("name=value,...": background-merger and
-//! hierarchical-merger parameters, several variants separated by ';').
+//! env: SEED (1), SECONDS (2), FLOW (est | ideal; "ideal" puts n0 along the true flow, which
+//! makes the SVM degenerate), SET ("name=value,...": background-merger, hierarchical-merger and
+//! planar parameters, several variants separated by ';'), VERBOSE (per-slice cluster reports),
+//! DUMP=k (PNG panels of slice k: truth, planar, coarse, final, in /tmp/dump-<scene>.png).
+//! Diagnostics that replace the final labels: ORACLE_CLUSTERS (each cluster labelled by its
+//! ground-truth majority: the over-segmentation's ceiling), ORACLE_T=ratio (a cluster is
+//! background when the true camera translation explains it with a depth of its own).
 
 use anyhow::{Context, bail};
 use evseg_background_merger::{BackgroundMerger, BackgroundParams, SliceInput};
@@ -262,6 +267,60 @@ fn main() -> anyhow::Result<()> {
                                 } else {
                                     let (o, a) = votes[usize::from(id)];
                                     u32::from(2 * o > a)
+                                }
+                            })
+                            .collect::<Vec<u32>>();
+                    evseg_hierarchical_merger::fill::fill_unlabelled(
+                        &s.events,
+                        s.camera.width,
+                        s.camera.height,
+                        4,
+                        &mut oracle_label,
+                    );
+                    label = &oracle_label;
+                }
+                if let (Ok(ratio), Some(v)) = (
+                    std::env::var("ORACLE_T").map(|r| r.parse::<f64>().unwrap_or(0.5)),
+                    truth.camera.first().and_then(|c| c.linear_velocity),
+                ) {
+                    // Diagnostic: a cluster is background when the true camera translation
+                    // explains it with a positive depth of its own.
+                    let mut table = evseg_geometry::TableCache::default();
+                    let samples =
+                        evseg_geometry::flow_samples(table.get(&s.camera), &s.events, f, s.omega, 0.0)?;
+                    let k = usize::from(c.count);
+                    let mut per: Vec<Vec<&evseg_geometry::FlowSample>> = vec![Vec::new(); k];
+                    for sm in &samples {
+                        if c.id[sm.index] != u16::MAX {
+                            per[usize::from(c.id[sm.index])].push(sm);
+                        }
+                    }
+                    let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+                    let bgc: Vec<bool> = per
+                        .iter()
+                        .map(|m| {
+                            let (mut num, mut den) = (0.0, 0.0);
+                            for sm in m {
+                                let q = dot(sm.x_row(), v);
+                                num += sm.n_derot * q;
+                                den += q * q;
+                            }
+                            let rho = if den > 0.0 { (num / den).max(0.0) } else { 0.0 };
+                            let (mut r, mut nn) = (0.0, 0.0);
+                            for sm in m {
+                                r += (sm.n_derot - rho * dot(sm.x_row(), v)).abs();
+                                nn += sm.n_derot.abs();
+                            }
+                            m.is_empty() || r <= ratio * nn
+                        })
+                        .collect();
+                    oracle_label =
+                        c.id.iter()
+                            .map(|&id| {
+                                if id == u16::MAX {
+                                    evseg_hierarchical_merger::fill::UNLABELLED
+                                } else {
+                                    u32::from(!bgc[usize::from(id)])
                                 }
                             })
                             .collect::<Vec<u32>>();
