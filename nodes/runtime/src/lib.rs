@@ -15,7 +15,9 @@
 //! - publishes progress and statistics, ends streams cleanly, and stops on SIGTERM/SIGINT.
 //!
 //! A node whose inputs the launcher chooses (the recorder) implements [`RawConsumer`] instead and
-//! calls [`run_raw_consumer`]: every port on its own, no join, any schema, same credits.
+//! calls [`run_raw_consumer`]: every port on its own, no join, any schema, same credits. A source
+//! whose outputs the launcher chooses (the replay source) calls [`run_raw_source`] and publishes
+//! recorded frames with [`Outputs::send_bytes`], polling [`Outputs::credit_available`].
 
 pub mod config;
 pub mod describe;
@@ -30,5 +32,5 @@ pub mod transport;
 
 pub use config::{Mode, NodeConfig};
 pub use error::{BoxError, RuntimeError};
-pub use node::{Inputs, Outputs, Source, Stage, run_source, run_stage};
+pub use node::{Inputs, Outputs, Source, Stage, run_raw_source, run_source, run_stage};
 pub use raw::{RawConsumer, run_raw_consumer};

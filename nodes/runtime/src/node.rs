@@ -129,9 +129,17 @@ pub struct Outputs {
     book: Arc<CreditBook>,
     consumers_ready: bool,
     published: Arc<AtomicU64>,
+    /// Nanoseconds spent waiting for consumers (credits, liveliness) since the last
+    /// [`Outputs::take_waited_ns`]: not the node's own work, so not counted as busy.
+    waited_ns: u64,
 }
 
 impl Outputs {
+    /// Nanoseconds spent waiting for consumers since the last call, and resets the count.
+    fn take_waited_ns(&mut self) -> u64 {
+        std::mem::take(&mut self.waited_ns)
+    }
+
     fn port_mut(&mut self, port: &str) -> Result<&mut OutPort, RuntimeError> {
         let node = self.node.clone();
         self.ports
@@ -201,7 +209,10 @@ impl Outputs {
         self.send_bytes(port, seq, t_end, bytes)
     }
 
-    /// Publishes an already encoded frame (replay).
+    /// Publishes an already encoded frame (replay): `bytes` is a whole frame (envelope and
+    /// body, `evseg_schemas::codec`) whose envelope says `seq` and `t_end`; in lock-step mode
+    /// waits for credit like [`Outputs::send`]. The end-of-stream frame sent when the node
+    /// finishes counts `seq + 1` frames and ends at the largest `t_end` seen.
     pub fn send_bytes(
         &mut self,
         port: &str,
@@ -209,6 +220,7 @@ impl Outputs {
         t_end: f64,
         bytes: Vec<u8>,
     ) -> Result<(), RuntimeError> {
+        let waiting = Instant::now();
         self.wait_consumers_alive()?;
         let (mode, window, node) = (self.mode, self.window, self.node.clone());
         let book = self.book.clone();
@@ -217,12 +229,11 @@ impl Outputs {
         if mode == Mode::Lockstep {
             let consumers = p.consumers.clone();
             book.wait_until(&node, &watch, None, |consumed, _| {
-                consumers.iter().all(|(c, cp, _)| {
-                    let n = consumed.get(&(c.clone(), cp.clone())).copied().unwrap_or(0);
-                    n == DONE || seq < n.saturating_add(window)
-                })
+                has_credit(consumed, &consumers, seq, window)
             })?;
         }
+        self.waited_ns += waiting.elapsed().as_nanos() as u64;
+        let p = self.port_mut(port)?;
         p.publisher
             .put(bytes)
             .wait()
@@ -230,6 +241,36 @@ impl Outputs {
         p.sent = p.sent.max(seq + 1);
         p.t_end = p.t_end.max(t_end);
         self.published.fetch_add(1, Ordering::Relaxed);
+        Ok(())
+    }
+
+    /// True when publishing frame `seq` on `port` now would not wait: in lock-step mode every
+    /// consumer of `port` has consumed more than `seq - window` messages (or finished); in live
+    /// mode always. Waits (once) for the consumers to appear, like the first publish does.
+    /// With [`Outputs::wait_progress`] this lets a node that publishes pre-encoded frames on
+    /// several outputs (replay) publish whichever output has credit instead of blocking on one.
+    pub fn credit_available(&mut self, port: &str, seq: u64) -> Result<bool, RuntimeError> {
+        self.wait_consumers_alive()?;
+        if self.mode == Mode::Live {
+            return Ok(true);
+        }
+        let (window, book) = (self.window, self.book.clone());
+        let p = self.port_mut(port)?;
+        Ok(book.check(|consumed| has_credit(consumed, &p.consumers, seq, window)))
+    }
+
+    /// Waits at most `timeout` (and at most [`POLL`]) for news from consumers (progress or
+    /// liveliness), so a caller polling [`Outputs::credit_available`] does not spin. Fails when
+    /// a stop was requested or a consumer vanished for longer than its grace time.
+    pub fn wait_progress(&self, timeout: Duration) -> Result<(), RuntimeError> {
+        let watch = self.watch_list();
+        let mut first = true;
+        // The predicate is evaluated once at entry and then after every wake-up (a change of
+        // the book or the poll interval): returning on the second evaluation waits for one.
+        self.book
+            .wait_until(&self.node, &watch, Some(timeout.min(POLL)), |_, _| {
+                !std::mem::replace(&mut first, false)
+            })?;
         Ok(())
     }
 
@@ -270,6 +311,20 @@ impl Outputs {
         }
         Ok(())
     }
+}
+
+/// Lock-step credit rule: frame `seq` may go out when every consumer has consumed more than
+/// `seq - window` messages of it (or has finished).
+fn has_credit(
+    consumed: &HashMap<(String, String), u64>,
+    consumers: &[(String, String, bool)],
+    seq: u64,
+    window: u64,
+) -> bool {
+    consumers.iter().all(|(c, cp, _)| {
+        let n = consumed.get(&(c.clone(), cp.clone())).copied().unwrap_or(0);
+        n == DONE || seq < n.saturating_add(window)
+    })
 }
 
 /// Parsed command line of a node binary.
@@ -369,13 +424,13 @@ impl Running {
     }
 }
 
-/// Reads the config and opens ports. `fixed_inputs`: the config's inputs must be ports of
-/// `description` (false only for nodes whose inputs are chosen by the launcher, see
-/// [`crate::raw`]).
+/// Reads the config and opens ports. `fixed_ports`: the config's inputs and outputs must be
+/// ports of `description` (false only for nodes whose ports are chosen by the launcher: the
+/// recorder's inputs, the replay source's outputs, see [`crate::raw`]).
 pub(crate) fn start(
     description: &NodeDescription,
     path: &std::path::Path,
-    fixed_inputs: bool,
+    fixed_ports: bool,
 ) -> Result<Running, RuntimeError> {
     let cfg = NodeConfig::load(path)?;
     if cfg.window == 0 || cfg.queue == 0 {
@@ -385,7 +440,7 @@ pub(crate) fn start(
         )));
     }
     for i in &cfg.inputs {
-        if fixed_inputs && description.input(&i.port).is_none() {
+        if fixed_ports && description.input(&i.port).is_none() {
             return Err(RuntimeError::Config(format!(
                 "node {}: config names unknown input `{}`",
                 cfg.node, i.port
@@ -393,7 +448,7 @@ pub(crate) fn start(
         }
     }
     for o in &cfg.outputs {
-        if description.output(&o.port).is_none() {
+        if fixed_ports && description.output(&o.port).is_none() {
             return Err(RuntimeError::Config(format!(
                 "node {}: config names unknown output `{}`",
                 cfg.node, o.port
@@ -440,6 +495,7 @@ pub(crate) fn start(
         book,
         consumers_ready: false,
         published: Arc::new(AtomicU64::new(0)),
+        waited_ns: 0,
     };
     let counters = Arc::new(Counters {
         last_seq: AtomicU64::new(u64::MAX),
@@ -498,9 +554,25 @@ pub fn run_source<S: Source>(
     })
 }
 
+/// Runs a source whose outputs the launcher chooses (the replay source, `evseg-replay`): like
+/// [`run_source`], but the config's outputs need not be ports of `description` (any name, any
+/// schema). The source publishes pre-encoded frames with [`Outputs::send_bytes`], checking
+/// [`Outputs::credit_available`] first so that it never blocks on one output while another
+/// could go; ends of stream are sent on every output when it is exhausted, as for any source.
+pub fn run_raw_source<S: Source>(
+    description: NodeDescription,
+    make: impl FnOnce(&NodeConfig) -> Result<S, BoxError>,
+) -> std::process::ExitCode {
+    main_wrapper(description, false, |run| {
+        let mut source =
+            make(&run.cfg).map_err(|e| RuntimeError::Config(format!("node {}: {e}", run.cfg.node)))?;
+        source_loop(run, &mut source)
+    })
+}
+
 pub(crate) fn main_wrapper(
     description: NodeDescription,
-    fixed_inputs: bool,
+    fixed_ports: bool,
     body: impl FnOnce(Running) -> Result<(), RuntimeError>,
 ) -> std::process::ExitCode {
     crate::memory::tune_allocator();
@@ -525,7 +597,7 @@ pub(crate) fn main_wrapper(
             }
         },
         Cli::Run(path) => {
-            let result = start(&description, &path, fixed_inputs).and_then(body);
+            let result = start(&description, &path, fixed_ports).and_then(body);
             match result {
                 Ok(()) => {
                     tracing::info!("finished");
@@ -569,9 +641,11 @@ fn source_loop<S: Source>(mut run: Running, source: &mut S) -> Result<(), Runtim
                     source,
                 },
             })?;
-        run.counters
-            .busy_ns
-            .fetch_add(t0.elapsed().as_nanos() as u64, Ordering::Relaxed);
+        let waited = run.outputs.take_waited_ns();
+        run.counters.busy_ns.fetch_add(
+            (t0.elapsed().as_nanos() as u64).saturating_sub(waited),
+            Ordering::Relaxed,
+        );
         run.counters.processed.fetch_add(1, Ordering::Relaxed);
         maybe_stats(&run, &mut last_stats);
         if !more {
@@ -657,9 +731,11 @@ fn stage_loop<S: Stage>(mut run: Running, stage: &mut S) -> Result<(), RuntimeEr
                     stage
                         .finish(&mut run.outputs)
                         .map_err(|e| logic_error(&run, u64::MAX, e))?;
-                    run.counters
-                        .busy_ns
-                        .fetch_add(t0.elapsed().as_nanos() as u64, Ordering::Relaxed);
+                    let waited = run.outputs.take_waited_ns();
+                    run.counters.busy_ns.fetch_add(
+                        (t0.elapsed().as_nanos() as u64).saturating_sub(waited),
+                        Ordering::Relaxed,
+                    );
                     run.counters
                         .dropped
                         .store(inbox.dropped() + joiner.dropped(), Ordering::Relaxed);
@@ -674,9 +750,11 @@ fn stage_loop<S: Stage>(mut run: Running, stage: &mut S) -> Result<(), RuntimeEr
                     stage
                         .process(&inputs, &mut run.outputs)
                         .map_err(|e| logic_error(&run, joined.seq, e))?;
-                    run.counters
-                        .busy_ns
-                        .fetch_add(t0.elapsed().as_nanos() as u64, Ordering::Relaxed);
+                    let waited = run.outputs.take_waited_ns();
+                    run.counters.busy_ns.fetch_add(
+                        (t0.elapsed().as_nanos() as u64).saturating_sub(waited),
+                        Ordering::Relaxed,
+                    );
                     run.counters.processed.fetch_add(1, Ordering::Relaxed);
                     run.counters.last_seq.store(joined.seq, Ordering::Relaxed);
                     let consumed = run
@@ -709,5 +787,30 @@ fn logic_error(run: &Running, seq: u64, e: BoxError) -> RuntimeError {
             seq,
             source,
         },
+    }
+}
+
+#[cfg(test)]
+mod credit_tests {
+    use super::*;
+
+    #[test]
+    fn credit_allows_window_frames_beyond_the_slowest_consumer() {
+        let consumers = vec![
+            ("a".to_string(), "in".to_string(), false),
+            ("b".into(), "x".into(), false),
+        ];
+        let mut consumed = HashMap::new();
+        // Nothing heard yet: the first `window` frames may go.
+        assert!(has_credit(&consumed, &consumers, 1, 2));
+        assert!(!has_credit(&consumed, &consumers, 2, 2));
+        consumed.insert(("a".to_string(), "in".to_string()), 5);
+        consumed.insert(("b".to_string(), "x".to_string()), 1);
+        assert!(has_credit(&consumed, &consumers, 2, 2));
+        assert!(!has_credit(&consumed, &consumers, 3, 2), "b is the slowest");
+        consumed.insert(("b".to_string(), "x".to_string()), DONE);
+        assert!(has_credit(&consumed, &consumers, 6, 2));
+        assert!(!has_credit(&consumed, &consumers, 7, 2));
+        assert!(has_credit(&consumed, &[], 99, 1), "no consumer, no wait");
     }
 }

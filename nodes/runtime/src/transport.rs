@@ -251,6 +251,11 @@ impl CreditBook {
             .unwrap_or(0)
     }
 
+    /// Evaluates `pred` on the consumption counts now, without waiting.
+    pub fn check(&self, pred: impl FnOnce(&HashMap<(String, String), u64>) -> bool) -> bool {
+        pred(&lock(&self.state).consumed)
+    }
+
     /// Waits until `pred` holds for the book, checking stop requests and vanished consumers.
     /// `watch` names the consumers that must stay alive while waiting (node, output port).
     /// Returns `Ok(false)` on timeout.
