@@ -5,6 +5,7 @@ mod bench_transport;
 mod export;
 mod info;
 mod record;
+mod replay;
 mod resolve;
 mod run;
 mod rundir;
@@ -53,6 +54,41 @@ enum Command {
         quiet: bool,
         /// Record the graph's outputs (those of its `record:` section, else all) into this MCAP
         /// file (relative to the working folder).
+        #[arg(long)]
+        record: Option<PathBuf>,
+    },
+    /// Replay a recording: the nodes downstream of `--from` run live, fed by the recorded
+    /// outputs of `--from` and the nodes upstream of it (published on the same keys, with
+    /// lock-step credits); in lock-step mode their results equal the recorded run's.
+    Replay {
+        /// MCAP file written by `evseg run --record`.
+        recording: PathBuf,
+        /// Graph file (its downstream part may differ from the recorded run's).
+        #[arg(long, default_value = "graph.yaml")]
+        graph: PathBuf,
+        /// Replay point: this node and the nodes it depends on are replayed, not run.
+        #[arg(long)]
+        from: String,
+        /// Playback speed relative to the recorded publish times (1 = as recorded); default:
+        /// as fast as lock-step credits allow.
+        #[arg(long)]
+        speed: Option<f64>,
+        /// Instance name (part of every key); default: the graph's `name`.
+        #[arg(long)]
+        instance: Option<String>,
+        /// Run folder; default: a new folder under runs/.
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Router listen endpoint, replacing the machine's (repeatable).
+        #[arg(long)]
+        listen: Vec<String>,
+        /// Parameter override `node.param=value` (repeatable) for the live nodes.
+        #[arg(long)]
+        set: Vec<String>,
+        /// No progress display.
+        #[arg(long, short)]
+        quiet: bool,
+        /// Record this run's outputs (the replayed ones too) into this MCAP file.
         #[arg(long)]
         record: Option<PathBuf>,
     },
@@ -225,24 +261,38 @@ fn main() -> ExitCode {
                 set,
                 quiet,
                 record,
+                replay: None,
             };
-            run::run(&opts).map(|outcome| {
-                let order: Vec<String> = outcome.stats.keys().cloned().collect();
-                println!("{}", run::summary(&outcome, &order));
-                for report in run::reports(&outcome.dir) {
-                    if let Ok(text) = std::fs::read_to_string(&report) {
-                        println!("{}:\n{text}", report.display());
-                    }
-                }
-                if let Some(path) = &outcome.recording {
-                    println!("recorded to {}", path.display());
-                }
-                println!(
-                    "run finished in {:.2} s; folder {}",
-                    outcome.seconds,
-                    outcome.dir.display()
-                );
-            })
+            run::run(&opts).map(|outcome| print_outcome(&outcome))
+        }
+        Command::Replay {
+            recording,
+            graph,
+            from,
+            speed,
+            instance,
+            out,
+            listen,
+            set,
+            quiet,
+            record,
+        } => {
+            let opts = run::RunOptions {
+                graph,
+                instance,
+                out,
+                listen,
+                set,
+                quiet,
+                record,
+                replay: Some(replay::ReplaySpec {
+                    recording,
+                    from,
+                    speed,
+                }),
+                ..run::RunOptions::default()
+            };
+            run::run(&opts).map(|outcome| print_outcome(&outcome))
         }
     };
     match result {
@@ -252,4 +302,23 @@ fn main() -> ExitCode {
             ExitCode::FAILURE
         }
     }
+}
+
+/// Prints a finished run: the per-node table, the nodes' reports, where it was recorded, how long it took.
+fn print_outcome(outcome: &run::RunOutcome) {
+    let order: Vec<String> = outcome.stats.keys().cloned().collect();
+    println!("{}", run::summary(outcome, &order));
+    for report in run::reports(&outcome.dir) {
+        if let Ok(text) = std::fs::read_to_string(&report) {
+            println!("{}:\n{text}", report.display());
+        }
+    }
+    if let Some(path) = &outcome.recording {
+        println!("recorded to {}", path.display());
+    }
+    println!(
+        "run finished in {:.2} s; folder {}",
+        outcome.seconds,
+        outcome.dir.display()
+    );
 }

@@ -41,6 +41,9 @@ pub struct RunOptions {
     pub quiet: bool,
     /// Record into this MCAP file (overrides the graph's `record.path`).
     pub record: Option<PathBuf>,
+    /// Replay a recording into the nodes downstream of a replay point instead of running the
+    /// replay point and its upstream (`evseg replay`).
+    pub replay: Option<crate::replay::ReplaySpec>,
 }
 
 /// How a run ended.
@@ -132,7 +135,7 @@ pub fn node_config(graph: &Graph, node: &NodeSpec, router: &[String], run_dir: &
             .iter()
             .map(|o| OutputBinding {
                 port: o.name.clone(),
-                key: keys::data(instance, &node.id, &o.name),
+                key: crate::replay::output_key(instance, node, &o.name),
                 schema: o.schema.clone(),
                 consumers: o
                     .consumers
@@ -244,6 +247,14 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
         graph = graph.with_instance(name)?;
     }
     apply_overrides(&mut graph, &opts.set)?;
+    // A replay's recording is checked before anything is created or started.
+    let replay = match &opts.replay {
+        Some(spec) if opts.machine.is_some() => {
+            bail!("replay runs every remaining node on this machine; --machine is not supported ({spec:?})")
+        }
+        Some(spec) => Some(crate::replay::ReplayPlan::new(&graph, spec)?),
+        None => None,
+    };
     let machine = match &opts.machine {
         Some(m) => graph.machine(m).cloned().with_context(|| {
             let names: Vec<&str> = graph.machines.iter().map(|m| m.name.as_str()).collect();
@@ -297,6 +308,9 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
             recorder_here = Some(path.clone());
         }
         tracing::info!(recorder = %id, file = %path.display(), "recording");
+    }
+    if let Some(plan) = &replay {
+        graph = plan.apply(&graph, &machine.name)?;
     }
     let nodes: Vec<NodeSpec> = match &opts.machine {
         Some(m) => graph.nodes_on(m).into_iter().cloned().collect(),

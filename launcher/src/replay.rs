@@ -1,0 +1,406 @@
+//! `evseg replay run.mcap --graph graph.yaml --from slicer`: the nodes downstream of a replay
+//! point run live, fed by the recorded outputs of the replay point and the nodes upstream of it.
+//!
+//! The launcher removes the replay point and every node it depends on (through non-feedback
+//! inputs) from the resolved graph, and adds one `evseg-replay` node in their place: one output
+//! per removed output that a remaining node consumes, named like the recording's topic
+//! (`node/output`) and bound to the original key ([`output_key`]), so the live nodes' inputs
+//! keep their keys and credits. Outputs the recorder of this run (`--record`) alone consumes are
+//! replayed too when the recording has them. Before anything starts, the recording is read and
+//! checked: a missing channel or one of another schema is an error naming the file and the
+//! channel; a cut-off recording is replayed as far as it was recovered, with a warning.
+
+use std::collections::BTreeSet;
+use std::path::PathBuf;
+
+use anyhow::{Context, bail};
+use evseg_graph::{Consumer, Graph, NodeSpec, OutputSpec, RestartPolicy};
+use evseg_recorder::read::Recording;
+use evseg_replay::check::{Wanted, check_channels, check_recording};
+use evseg_schemas::keys;
+
+use crate::record::RECORDER_BINARY;
+
+/// Binary of the replay source.
+pub const REPLAY_BINARY: &str = "evseg-replay";
+/// Node id of the replay source (with `-2`, `-3`, ... when the graph already uses it).
+pub const REPLAY_ID: &str = "replay";
+
+/// What `evseg replay` was asked to replay.
+#[derive(Debug, Clone)]
+pub struct ReplaySpec {
+    /// The MCAP recording.
+    pub recording: PathBuf,
+    /// The replay point: this node and the nodes upstream of it are replayed, not run.
+    pub from: String,
+    /// Playback speed relative to the recorded publish times; `None` = as fast as lock-step
+    /// credits allow.
+    pub speed: Option<f64>,
+}
+
+/// The replay point and every node it depends on through non-feedback inputs.
+pub fn upstream(graph: &Graph, from: &str) -> anyhow::Result<BTreeSet<String>> {
+    if graph.node(from).is_none() {
+        let ids: Vec<&str> = graph.nodes.iter().map(|n| n.id.as_str()).collect();
+        bail!("--from `{from}`: the graph has no such node (nodes: {ids:?})");
+    }
+    let mut seen = BTreeSet::new();
+    let mut todo = vec![from.to_string()];
+    while let Some(id) = todo.pop() {
+        if !seen.insert(id.clone()) {
+            continue;
+        }
+        if let Some(n) = graph.node(&id) {
+            todo.extend(
+                n.inputs
+                    .iter()
+                    .filter(|i| !i.feedback)
+                    .map(|i| i.from_node.clone()),
+            );
+        }
+    }
+    Ok(seen)
+}
+
+fn is_recorder(graph: &Graph, id: &str) -> bool {
+    graph.node(id).is_some_and(|n| n.binary == RECORDER_BINARY)
+}
+
+/// A replayed output's topic in the recording and on the replay node, `node/output`.
+fn topic(node: &str, output: &str) -> String {
+    format!("{node}/{output}")
+}
+
+/// A checked replay: the nodes it replaces and the recording it reads.
+#[derive(Debug)]
+pub struct ReplayPlan {
+    spec: ReplaySpec,
+    /// Absolute path of the recording.
+    file: PathBuf,
+    replaced: BTreeSet<String>,
+    recording: Recording,
+}
+
+impl ReplayPlan {
+    /// Works out what `spec` replaces in `graph` (before any recorder is added) and checks the
+    /// recording holds every output a remaining node consumes. Reads the whole recording once.
+    pub fn new(graph: &Graph, spec: &ReplaySpec) -> anyhow::Result<Self> {
+        if let Some(s) = spec.speed
+            && !(s.is_finite() && s > 0.0)
+        {
+            bail!("--speed {s}: must be a number > 0 (leave it out to replay as fast as credits allow)");
+        }
+        let replaced = upstream(graph, &spec.from)?;
+        if graph.nodes.iter().all(|n| replaced.contains(&n.id)) {
+            bail!(
+                "--from `{}`: no node of the graph runs downstream of it, nothing to replay into",
+                spec.from
+            );
+        }
+        let mut wanted = Vec::new();
+        for n in graph.nodes.iter().filter(|n| replaced.contains(&n.id)) {
+            for o in &n.outputs {
+                let live: Vec<String> = o
+                    .consumers
+                    .iter()
+                    .filter(|c| !replaced.contains(&c.node))
+                    .map(|c| format!("{}.{}", c.node, c.port))
+                    .collect();
+                if !live.is_empty() {
+                    wanted.push(Wanted {
+                        topic: topic(&n.id, &o.name),
+                        schema: o.schema.clone(),
+                        needed_by: live.join(", "),
+                    });
+                }
+            }
+        }
+        let file = std::path::absolute(&spec.recording)
+            .with_context(|| format!("recording {}", spec.recording.display()))?;
+        let recording = check_recording(&file, &wanted).map_err(|e| anyhow::anyhow!("{e}"))?;
+        if recording.truncated.is_some() {
+            eprintln!(
+                "warning: {}; replaying what was recovered",
+                recording.completeness()
+            );
+        }
+        let count = |t: &str| {
+            recording
+                .channels
+                .values()
+                .find(|c| c.topic == t)
+                .map_or(0, |c| c.messages)
+        };
+        let list: Vec<String> = wanted
+            .iter()
+            .map(|w| format!("{} ({} messages)", w.topic, count(&w.topic)))
+            .collect();
+        tracing::info!(from = %spec.from, outputs = ?list, "replay");
+        Ok(Self {
+            spec: spec.clone(),
+            file,
+            replaced,
+            recording,
+        })
+    }
+
+    /// `graph` (the one given to [`ReplayPlan::new`], possibly with a recorder added) without
+    /// the replaced nodes and with a replay source on `machine` publishing their consumed
+    /// outputs. Outputs only the recorder consumes are replayed when the recording has them,
+    /// else the recorder does not record them.
+    pub fn apply(&self, graph: &Graph, machine: &str) -> anyhow::Result<Graph> {
+        let mut g = graph.clone();
+        let mut id = REPLAY_ID.to_string();
+        let mut k = 1;
+        while g.node(&id).is_some() {
+            k += 1;
+            id = format!("{REPLAY_ID}-{k}");
+        }
+        let mut outputs = Vec::new();
+        let mut unrecorded = Vec::new();
+        for n in graph.nodes.iter().filter(|n| self.replaced.contains(&n.id)) {
+            for o in &n.outputs {
+                let live: Vec<Consumer> = o
+                    .consumers
+                    .iter()
+                    .filter(|c| !self.replaced.contains(&c.node))
+                    .cloned()
+                    .collect();
+                if live.is_empty() {
+                    continue;
+                }
+                let t = topic(&n.id, &o.name);
+                let only_recorder = live.iter().all(|c| is_recorder(graph, &c.node));
+                if only_recorder {
+                    let w = Wanted {
+                        topic: t.clone(),
+                        schema: o.schema.clone(),
+                        needed_by: String::new(),
+                    };
+                    if check_channels(&self.recording, &[w]).is_err() {
+                        unrecorded.push(t);
+                        continue;
+                    }
+                }
+                outputs.push(OutputSpec {
+                    name: t,
+                    schema: o.schema.clone(),
+                    consumers: live,
+                });
+            }
+        }
+        if !unrecorded.is_empty() {
+            eprintln!(
+                "note: {} has no {unrecorded:?}; this run's recording leaves them out",
+                self.file.display()
+            );
+        }
+        g.nodes.retain(|n| !self.replaced.contains(&n.id));
+        for n in &mut g.nodes {
+            // Feedback into a replaced node: nobody reads it now.
+            for o in &mut n.outputs {
+                o.consumers.retain(|c| !self.replaced.contains(&c.node));
+            }
+            if n.binary == RECORDER_BINARY {
+                // Inputs from replaced nodes stay only where the replay publishes them.
+                n.inputs.retain(|i| {
+                    !self.replaced.contains(&i.from_node) || outputs.iter().any(|o| o.name == i.port)
+                });
+            }
+        }
+        let mut params = serde_json::Map::new();
+        params.insert("path".into(), self.file.display().to_string().into());
+        params.insert(
+            "speed".into(),
+            self.spec
+                .speed
+                .map_or(serde_json::Value::Null, serde_json::Value::from),
+        );
+        g.nodes.insert(
+            0,
+            NodeSpec {
+                id,
+                binary: REPLAY_BINARY.into(),
+                machine: machine.to_string(),
+                params,
+                inputs: Vec::new(),
+                outputs,
+                restart: RestartPolicy::default(),
+                span: Default::default(),
+                param_spans: Default::default(),
+            },
+        );
+        Ok(g)
+    }
+}
+
+/// Key of output `output` of `node` in `instance`: the original producer's key for a replay
+/// source's output (named `producer/output`), else the node's own.
+pub fn output_key(instance: &str, node: &NodeSpec, output: &str) -> String {
+    match output.split_once('/') {
+        Some((producer, name)) if node.binary == REPLAY_BINARY => keys::data(instance, producer, name),
+        _ => keys::data(instance, &node.id, output),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn graph() -> Graph {
+        let node = |id: &str, inputs: serde_json::Value, outputs: serde_json::Value| {
+            serde_json::json!({"id": id, "binary": format!("evseg-{id}"), "machine": "local",
+                "params": {}, "restart": {"policy": "never", "max": 3},
+                "inputs": inputs, "outputs": outputs})
+        };
+        let input = |port: &str, from: &str, out: &str, feedback: bool| {
+            serde_json::json!({"port": port, "schema": "s", "from_node": from, "from_output": out,
+                "feedback": feedback})
+        };
+        let output = |name: &str, consumers: &[(&str, &str, bool)]| {
+            let c: Vec<_> = consumers
+                .iter()
+                .map(|(n, p, f)| serde_json::json!({"node": n, "port": p, "feedback": f}))
+                .collect();
+            serde_json::json!({"name": name, "schema": "s", "consumers": c})
+        };
+        serde_json::from_value(serde_json::json!({
+            "name": "t", "mode": "lockstep", "window": 4, "queue": 8,
+            "machines": [{"name": "local", "listen": ["tcp/127.0.0.1:7447"], "connect": []}],
+            "nodes": [
+                node("source", serde_json::json!([]), serde_json::json!([
+                    output("events", &[("slicer", "events", false)]),
+                    output("truth", &[("slicer", "truth", false)])])),
+                node("slicer", serde_json::json!([input("events", "source", "events", false),
+                        input("truth", "source", "truth", false),
+                        input("tracks", "seg", "tracks", true)]),
+                    serde_json::json!([output("slices", &[("eval", "slices", false), ("seg", "slices", false)]),
+                        output("truth", &[("eval", "truth", false)])])),
+                node("seg", serde_json::json!([input("slices", "slicer", "slices", false)]),
+                    serde_json::json!([output("tracks", &[("eval", "result", false), ("slicer", "tracks", true)])])),
+                node("eval", serde_json::json!([input("slices", "slicer", "slices", false),
+                        input("truth", "slicer", "truth", false), input("result", "seg", "tracks", false)]),
+                    serde_json::json!([output("metrics", &[])]))
+            ]
+        }))
+        .unwrap()
+    }
+
+    #[test]
+    fn upstream_follows_inputs_but_not_feedback() {
+        let g = graph();
+        let up: Vec<String> = upstream(&g, "slicer").unwrap().into_iter().collect();
+        assert_eq!(up, ["slicer", "source"]);
+        let up: Vec<String> = upstream(&g, "seg").unwrap().into_iter().collect();
+        assert_eq!(up, ["seg", "slicer", "source"]);
+        let err = upstream(&g, "nope").unwrap_err().to_string();
+        assert!(err.contains("nope") && err.contains("slicer"), "{err}");
+    }
+
+    fn plan(g: &Graph, topics: &[&str]) -> ReplayPlan {
+        let channels = topics
+            .iter()
+            .enumerate()
+            .map(|(i, t)| {
+                let c = evseg_recorder::read::ChannelInfo {
+                    id: i as u16,
+                    topic: t.to_string(),
+                    schema: "s".into(),
+                    version: None,
+                    message_encoding: evseg_recorder::MESSAGE_ENCODING.into(),
+                    metadata: Default::default(),
+                    messages: 3,
+                    bytes: 30,
+                    time_ns: Some((1, 2)),
+                };
+                (i as u16, c)
+            })
+            .collect();
+        let recording = Recording {
+            file: "r.mcap".into(),
+            size: 100,
+            channels,
+            metadata: vec![],
+            attachments: vec![],
+            chunks: 1,
+            messages: 3 * topics.len() as u64,
+            orphan_messages: 0,
+            truncated: None,
+        };
+        let spec = ReplaySpec {
+            recording: "r.mcap".into(),
+            from: "slicer".into(),
+            speed: Some(2.0),
+        };
+        ReplayPlan {
+            replaced: upstream(g, &spec.from).unwrap(),
+            file: "/r.mcap".into(),
+            spec,
+            recording,
+        }
+    }
+
+    #[test]
+    fn the_replay_node_publishes_what_the_live_nodes_and_the_recorder_read() {
+        let g = graph();
+        let p = plan(&g, &["slicer/slices", "slicer/truth", "source/truth"]);
+        assert!(check_channels(&p.recording, &[]).is_ok());
+        // A recorder of every output, as `--record` adds it.
+        let (with_rec, rec) = crate::record::add_recorder(
+            &g,
+            std::path::Path::new("/x.mcap"),
+            &[],
+            "local",
+            Default::default(),
+        )
+        .unwrap();
+        let out = p.apply(&with_rec, "local").unwrap();
+        let ids: Vec<&str> = out.nodes.iter().map(|n| n.id.as_str()).collect();
+        assert_eq!(ids, ["replay", "seg", "eval", rec.as_str()]);
+        let replay = &out.nodes[0];
+        assert_eq!(replay.binary, REPLAY_BINARY);
+        assert_eq!(replay.params["path"], "/r.mcap");
+        assert_eq!(replay.params["speed"], 2.0);
+        let names: Vec<&str> = replay.outputs.iter().map(|o| o.name.as_str()).collect();
+        // source/events is not in the recording: the recorder leaves it out.
+        assert_eq!(names, ["source/truth", "slicer/slices", "slicer/truth"]);
+        let slices: Vec<&str> = replay.outputs[1]
+            .consumers
+            .iter()
+            .map(|c| c.node.as_str())
+            .collect();
+        assert_eq!(slices, ["eval", rec.as_str(), "seg"]);
+        let recorder = out.node(&rec).unwrap();
+        let ports: Vec<&str> = recorder.inputs.iter().map(|i| i.port.as_str()).collect();
+        assert_eq!(
+            ports,
+            [
+                "source/truth",
+                "slicer/slices",
+                "slicer/truth",
+                "seg/tracks",
+                "eval/metrics"
+            ]
+        );
+        // The tracker's feedback into the replaced slicer is cut.
+        let tracks = out.node("seg").unwrap().output("tracks").unwrap();
+        assert!(tracks.consumers.iter().all(|c| c.node != "slicer"));
+        // Without a recorder only the live nodes' inputs are replayed.
+        let out = p.apply(&g, "local").unwrap();
+        let names: Vec<&str> = out.nodes[0].outputs.iter().map(|o| o.name.as_str()).collect();
+        assert_eq!(names, ["slicer/slices", "slicer/truth"]);
+    }
+
+    #[test]
+    fn replay_outputs_keep_the_original_keys() {
+        let mut replay = graph().nodes[0].clone();
+        replay.binary = REPLAY_BINARY.into();
+        replay.id = "replay".into();
+        assert_eq!(
+            output_key("i", &replay, "slicer/slices"),
+            "evseg/i/data/slicer/slices"
+        );
+        let seg = &graph().nodes[2];
+        assert_eq!(output_key("i", seg, "tracks"), "evseg/i/data/seg/tracks");
+    }
+}
