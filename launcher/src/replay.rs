@@ -210,6 +210,10 @@ impl ReplayPlan {
         }
         let mut params = serde_json::Map::new();
         params.insert("path".into(), self.file.display().to_string().into());
+        let limits = self.limits(&outputs);
+        if !limits.is_empty() {
+            params.insert("limits".into(), serde_json::Value::Object(limits));
+        }
         params.insert(
             "speed".into(),
             self.spec
@@ -231,6 +235,43 @@ impl ReplayPlan {
             },
         );
         Ok(g)
+    }
+}
+
+impl ReplayPlan {
+    /// For a cut-off recording: the outputs of one replaced node that were recovered with
+    /// different message counts are all replayed up to the smallest count (a node publishes all
+    /// its outputs for a slice together, and a consumer joining two of them by slice would
+    /// otherwise see them end at different slices). Empty for a complete recording.
+    fn limits(&self, outputs: &[OutputSpec]) -> serde_json::Map<String, serde_json::Value> {
+        let mut limits = serde_json::Map::new();
+        if self.recording.truncated.is_none() {
+            return limits;
+        }
+        let count = |t: &str| {
+            self.recording
+                .channels
+                .values()
+                .find(|c| c.topic == t)
+                .map_or(0, |c| c.messages)
+        };
+        let mut by_node: std::collections::BTreeMap<&str, Vec<(&str, u64)>> = Default::default();
+        for o in outputs {
+            let node = o.name.split_once('/').map_or(o.name.as_str(), |(n, _)| n);
+            by_node.entry(node).or_default().push((&o.name, count(&o.name)));
+        }
+        for (node, list) in by_node {
+            let least = list.iter().map(|(_, n)| *n).min().unwrap_or(0);
+            if list.iter().any(|(_, n)| *n != least) {
+                eprintln!(
+                    "note: the recording is cut off; the outputs of `{node}` are replayed up to {least} messages each (recovered: {list:?})"
+                );
+                for (topic, _) in list {
+                    limits.insert(topic.to_string(), least.into());
+                }
+            }
+        }
+        limits
     }
 }
 
@@ -389,6 +430,31 @@ mod tests {
         let out = p.apply(&g, "local").unwrap();
         let names: Vec<&str> = out.nodes[0].outputs.iter().map(|o| o.name.as_str()).collect();
         assert_eq!(names, ["slicer/slices", "slicer/truth"]);
+    }
+
+    #[test]
+    fn a_cut_off_recording_ends_the_outputs_of_one_node_together() {
+        let g = graph();
+        let mut p = plan(&g, &["slicer/slices", "slicer/truth"]);
+        let out = p.apply(&g, "local").unwrap();
+        assert!(out.nodes[0].params.get("limits").is_none(), "complete: no limits");
+        p.recording.truncated = Some(evseg_recorder::read::Truncation {
+            offset: 50,
+            reason: "cut".into(),
+        });
+        let out = p.apply(&g, "local").unwrap();
+        assert!(
+            out.nodes[0].params.get("limits").is_none(),
+            "same counts: no limits"
+        );
+        if let Some(c) = p.recording.channels.get_mut(&1) {
+            c.messages = 2;
+        }
+        let out = p.apply(&g, "local").unwrap();
+        assert_eq!(
+            out.nodes[0].params["limits"],
+            serde_json::json!({"slicer/slices": 2, "slicer/truth": 2})
+        );
     }
 
     #[test]

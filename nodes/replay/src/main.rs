@@ -43,6 +43,11 @@ fn description() -> evseg_schemas::describe::NodeDescription {
         "playback speed relative to the recorded publish times (1 = as recorded, 2 = twice as fast); null = as fast as lock-step credits allow",
     )
     .param(
+        "limits",
+        serde_json::Value::Null,
+        "most frames replayed per output (object: topic -> count; null = all); the launcher sets it for a cut-off recording so that the outputs of one node end at the same slice",
+    )
+    .param(
         "read_ahead",
         READ_AHEAD,
         "recorded frames held in memory ahead of publishing (>= 1)",
@@ -102,11 +107,16 @@ fn make(cfg: &NodeConfig) -> Result<Replay, BoxError> {
         .enumerate()
         .map(|(i, (t, _))| (t.clone(), i))
         .collect();
+    let limits_by_topic: BTreeMap<String, u64> = cfg.param_opt("limits")?.unwrap_or_default();
+    let limits: Vec<u64> = ports
+        .iter()
+        .map(|(t, _)| limits_by_topic.get(t).copied().unwrap_or(u64::MAX))
+        .collect();
     let (tx, rx) = sync_channel(read_ahead);
     let reader_file = file.clone();
     let reader = std::thread::Builder::new()
         .name("replay-reader".into())
-        .spawn(move || read_frames(&reader_file, &topics, &tx))
+        .spawn(move || read_frames(&reader_file, &topics, &limits, &tx))
         .map_err(|e| format!("cannot start the reader thread: {e}"))?;
     tracing::info!(file = %file.display(), outputs = ports.len(), ?speed, "replaying");
     Ok(Replay {
@@ -124,10 +134,12 @@ fn make(cfg: &NodeConfig) -> Result<Replay, BoxError> {
     })
 }
 
-/// Streams the frames of the replayed topics to `tx`, in file order.
+/// Streams the frames of the replayed topics to `tx`, in file order, at most `limits[port]`
+/// per output.
 fn read_frames(
     file: &std::path::Path,
     topics: &BTreeMap<String, usize>,
+    limits: &[u64],
     tx: &SyncSender<Raw>,
 ) -> Result<Recording, RecordError> {
     let mut counts = vec![0u64; topics.len()];
@@ -137,6 +149,9 @@ fn read_frames(
         };
         let index = counts[port];
         counts[port] += 1;
+        if index >= limits[port] {
+            return Ok(());
+        }
         tx.send(Raw {
             port,
             index,
