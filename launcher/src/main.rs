@@ -1,5 +1,6 @@
 //! `evseg`: check and run graphs of evseg nodes.
 
+mod bench_pipeline;
 mod bench_scenes;
 mod bench_transport;
 mod export;
@@ -145,6 +146,25 @@ enum Command {
 
 #[derive(Subcommand)]
 enum BenchWhat {
+    /// End-to-end events per second of a whole graph in lock-step mode on a simulated sequence
+    /// written beforehand (not timed), with each stage's share of the busy time.
+    Pipeline {
+        /// Graph to run (its evseg-source node reads the sequence folder).
+        #[arg(long, default_value = "graphs/evimo2.yaml")]
+        graph: PathBuf,
+        /// Simulator preset.
+        #[arg(long, default_value = "two-objects")]
+        scene: String,
+        /// Seed.
+        #[arg(long, default_value_t = 7)]
+        seed: u64,
+        /// Seconds of sensor time.
+        #[arg(long, default_value_t = 3.0)]
+        seconds: f64,
+        /// Working folder (the sequence and the run folder).
+        #[arg(long, default_value = "runs/bench-pipeline")]
+        work: PathBuf,
+    },
     /// Events per second through source -> slicer -> sink: three processes over Zenoh against
     /// the same stages in one process.
     Transport {
@@ -228,6 +248,30 @@ fn main() -> ExitCode {
             std::fs::create_dir_all(&work)?;
             std::fs::write(work.join("bench.md"), &md)?;
             std::fs::write(work.join("bench.json"), serde_json::to_string_pretty(&rows)?)?;
+            Ok(())
+        }),
+        Command::Bench {
+            what:
+                Some(BenchWhat::Pipeline {
+                    graph,
+                    scene,
+                    seed,
+                    seconds,
+                    work,
+                }),
+            ..
+        } => bench_pipeline::bench(&bench_pipeline::PipelineOptions {
+            graph: graph.clone(),
+            scene,
+            seed,
+            seconds,
+            work: work.clone(),
+        })
+        .and_then(|row| {
+            let md = bench_pipeline::markdown(&row, &graph);
+            println!("{md}");
+            std::fs::write(work.join("pipeline.md"), &md)?;
+            std::fs::write(work.join("pipeline.json"), serde_json::to_string_pretty(&row)?)?;
             Ok(())
         }),
         Command::Bench {
