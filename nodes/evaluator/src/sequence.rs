@@ -36,6 +36,9 @@ pub struct ObjectIouSummary {
     pub windows: u64,
     /// Of those, windows where a predicted label was matched to it.
     pub matched_windows: u64,
+    /// Times the matched label (track id) changed from one matched window to the next (the
+    /// issue's "id switches"; unmatched windows in between do not count as a switch).
+    pub id_switches: u64,
 }
 
 /// Distribution of the direction error, degrees.
@@ -149,6 +152,8 @@ pub struct SequenceAccumulator {
     iou_events: MeanAcc,
     iou_mask: MeanAcc,
     per_object: BTreeMap<u32, (f64, u64, u64)>,
+    /// Per object: last matched label and the number of label changes.
+    id_history: BTreeMap<u32, (Option<u32>, u64)>,
     ego_n: u64,
     ego_skipped: BTreeMap<String, u64>,
     ego_sq: [f64; 3],
@@ -175,6 +180,13 @@ impl SequenceAccumulator {
                 e.0 += m.iou;
                 e.1 += 1;
                 e.2 += m.label.is_some() as u64;
+                if let Some(l) = m.label {
+                    let h = self.id_history.entry(m.object as u32).or_default();
+                    if h.0.is_some_and(|prev| prev != l) {
+                        h.1 += 1;
+                    }
+                    h.0 = Some(l);
+                }
             }
         }
         match &r.egomotion {
@@ -218,6 +230,7 @@ impl SequenceAccumulator {
                 mean_iou: sum / n as f64,
                 windows: n,
                 matched_windows: matched,
+                id_switches: self.id_history.get(&object).map_or(0, |h| h.1),
             })
             .collect();
         let iou_per_object_mean = (!iou_per_object.is_empty())

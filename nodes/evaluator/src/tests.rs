@@ -172,6 +172,22 @@ fn perfect(k: u64, t0: f64, slice: &Slice, rotate_deg: f64) -> Tracks {
 }
 
 #[test]
+fn a_label_that_changes_between_windows_counts_as_id_switches() {
+    let seq = sequence(12, true);
+    // Label 7 until window 5, then 9, then 7 again from window 9: two switches.
+    let ev = run(&seq, |k, t0, s, _| {
+        let mut t = perfect(k, t0, s, 0.0);
+        if (5..9).contains(&k) {
+            t.label.iter_mut().filter(|l| **l == 7).for_each(|l| *l = 9);
+        }
+        t
+    });
+    let sum = ev.summary("synthetic");
+    assert_eq!(sum.iou_per_object[0].mean_iou, 1.0);
+    assert_eq!(sum.iou_per_object[0].id_switches, 2);
+}
+
+#[test]
 fn perfect_labels_score_one_and_a_ten_degree_direction_error_gives_ten_degrees() {
     let seq = sequence(12, true);
     let ev = run(&seq, |k, t0, s, _| perfect(k, t0, s, 10.0));
@@ -186,6 +202,7 @@ fn perfect_labels_score_one_and_a_ten_degree_direction_error_gives_ten_degrees()
     assert_eq!(sum.iou_per_object.len(), 1);
     assert_eq!(sum.iou_per_object[0].mean_iou, 1.0);
     assert_eq!(sum.iou_per_object[0].matched_windows, 10);
+    assert_eq!(sum.iou_per_object[0].id_switches, 0);
 
     let e = &sum.egomotion;
     // The last window's end has no pose after it to interpolate from.

@@ -81,15 +81,18 @@ pub fn report_markdown(s: &SequenceSummary, images: &[&str]) -> String {
         num(e.mean_true_speed_mps, 3)
     );
     if !s.iou_per_object.is_empty() {
-        m.push_str("## Per-object IoU\n\n| Object | IoU (%) | Windows | Matched |\n|---:|---:|---:|---:|\n");
+        m.push_str(
+            "## Per-object IoU\n\n| Object | IoU (%) | Windows | Matched | Id switches |\n|---:|---:|---:|---:|---:|\n",
+        );
         for o in &s.iou_per_object {
             let _ = writeln!(
                 m,
-                "| {} | {:.2} | {} | {} |",
+                "| {} | {:.2} | {} | {} | {} |",
                 o.object,
                 100.0 * o.mean_iou,
                 o.windows,
-                o.matched_windows
+                o.matched_windows,
+                o.id_switches
             );
         }
         m.push('\n');
