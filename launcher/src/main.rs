@@ -1,5 +1,6 @@
 //! `evseg`: check and run graphs of evseg nodes.
 
+mod ab;
 mod bench_pipeline;
 mod bench_scenes;
 mod bench_transport;
@@ -92,6 +93,35 @@ enum Command {
         /// Record this run's outputs (the replayed ones too) into this MCAP file.
         #[arg(long)]
         record: Option<PathBuf>,
+    },
+    /// Compare two variants of a graph on the same recordings: A as written, B with node
+    /// binaries swapped and/or parameters changed; prints the evaluator's figures side by side
+    /// with the differences and writes ab.md and ab.json.
+    Ab {
+        /// Graph file (variant A).
+        #[arg(default_value = "graph.yaml")]
+        graph: PathBuf,
+        /// Recording to replay (repeatable; one sequence each), from `evseg run --record`.
+        #[arg(long = "recording", required = true)]
+        recordings: Vec<PathBuf>,
+        /// Replay point (this node and its upstream are replayed in both variants).
+        #[arg(long, default_value = "slicer")]
+        from: String,
+        /// Variant B: run this node with another binary, `node=binary` (repeatable).
+        #[arg(long)]
+        swap: Vec<String>,
+        /// Both variants: parameter override `node.param=value` (repeatable).
+        #[arg(long)]
+        set: Vec<String>,
+        /// Variant B only: parameter override `node.param=value` (repeatable).
+        #[arg(long = "set-b")]
+        set_b: Vec<String>,
+        /// Working folder (run folders, variant B's graph, ab.md, ab.json).
+        #[arg(long, default_value = "runs/ab")]
+        work: PathBuf,
+        /// Router listen endpoint replacing the graph's (repeatable).
+        #[arg(long)]
+        listen: Vec<String>,
     },
     /// Describe a recording: channels, schemas, message counts, time span, metadata, and
     /// whether it is complete (a cut-off file is read up to its last complete chunk).
@@ -308,6 +338,34 @@ fn main() -> ExitCode {
                 replay: None,
             };
             run::run(&opts).map(|outcome| print_outcome(&outcome))
+        }
+        Command::Ab {
+            graph,
+            recordings,
+            from,
+            swap,
+            set,
+            set_b,
+            work,
+            listen,
+        } => {
+            let o = ab::AbOptions {
+                graph,
+                recordings,
+                from,
+                swap,
+                set,
+                set_b,
+                work,
+                listen,
+            };
+            ab::ab(&o).and_then(|rows| {
+                let md = ab::markdown(&rows, &o);
+                println!("{md}");
+                std::fs::write(o.work.join("ab.md"), &md)?;
+                std::fs::write(o.work.join("ab.json"), serde_json::to_string_pretty(&rows)?)?;
+                Ok(())
+            })
         }
         Command::Replay {
             recording,

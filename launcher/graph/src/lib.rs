@@ -16,6 +16,7 @@ mod model;
 mod params;
 mod raw;
 mod shape;
+mod swap;
 mod yaml;
 
 use std::path::Path;
@@ -26,6 +27,7 @@ pub use model::{
     Consumer, Graph, InputSpec, Machine, Mode, NodeKeys, NodeSpec, OutputSpec, PortKey, RecordSpec, Restart,
     RestartPolicy,
 };
+pub use swap::swap_binary;
 
 use diagnostic::Problems;
 

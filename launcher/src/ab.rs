@@ -1,0 +1,199 @@
+//! `evseg ab`: two variants of a graph on the same recorded input, their evaluator figures side
+//! by side with the differences.
+//!
+//! Variant A is the graph as written; variant B is the graph with `--swap node=binary` (the node
+//! runs another implementation; the edited graph is checked like any graph file, so the new
+//! binary must have compatible ports and parameters) and `--set-b node.param=value` applied.
+//! Each recording is replayed from `--from` into both variants (`evseg replay`), one after the
+//! other, with the instance names `<name>-a` and `<name>-b`; lock-step replay makes the inputs
+//! of both bit-identical. The figures come from each run's `report/report.json`.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+use serde_json::Value;
+
+use crate::replay::ReplaySpec;
+use crate::run::{RunOptions, run};
+
+/// Options of an A/B comparison.
+#[derive(Debug, Clone)]
+pub struct AbOptions {
+    /// Graph file (variant A).
+    pub graph: PathBuf,
+    /// Recordings to replay (one sequence each).
+    pub recordings: Vec<PathBuf>,
+    /// Replay point.
+    pub from: String,
+    /// `node=binary` swaps of variant B.
+    pub swap: Vec<String>,
+    /// Parameter overrides of both variants.
+    pub set: Vec<String>,
+    /// Parameter overrides of variant B only.
+    pub set_b: Vec<String>,
+    /// Working folder (run folders, the edited graph, the reports).
+    pub work: PathBuf,
+    /// Router listen endpoints replacing the graph's (both variants; they run one at a time).
+    pub listen: Vec<String>,
+}
+
+/// The figures compared, as (label, JSON pointer into report.json, scale).
+const FIGURES: &[(&str, &str, f64)] = &[
+    ("IoU mask (%)", "/sequence/iou_mask/mean", 100.0),
+    ("IoU events (%)", "/sequence/iou_events/mean", 100.0),
+    ("IoU per object (%)", "/sequence/iou_per_object_mean", 100.0),
+    ("Vx RMSE (m/s)", "/sequence/egomotion/rmse_mps/0", 1.0),
+    ("Vy RMSE (m/s)", "/sequence/egomotion/rmse_mps/1", 1.0),
+    ("Vz RMSE (m/s)", "/sequence/egomotion/rmse_mps/2", 1.0),
+    (
+        "median dir. err (deg)",
+        "/sequence/egomotion/direction_error/median_deg",
+        1.0,
+    ),
+];
+
+/// One figure of one sequence in both variants.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct AbFigure {
+    /// Sequence (recording file stem, or "overall").
+    pub sequence: String,
+    /// Figure label with its unit.
+    pub figure: String,
+    /// Variant A.
+    pub a: Option<f64>,
+    /// Variant B.
+    pub b: Option<f64>,
+    /// B - A.
+    pub difference: Option<f64>,
+}
+
+fn figure(report: &Value, pointer: &str, scale: f64) -> Option<f64> {
+    report
+        .pointer(pointer)
+        .and_then(Value::as_f64)
+        .filter(|v| v.is_finite())
+        .map(|v| v * scale)
+}
+
+fn read_report(dir: &Path) -> anyhow::Result<Value> {
+    let path = dir.join("report").join("report.json");
+    let text = std::fs::read_to_string(&path).with_context(|| {
+        format!(
+            "the evaluator wrote no {} (does the graph have one?)",
+            path.display()
+        )
+    })?;
+    serde_json::from_str(&text).with_context(|| format!("{}", path.display()))
+}
+
+/// Writes variant B's graph file into `work` and returns its path.
+fn graph_b(o: &AbOptions) -> anyhow::Result<PathBuf> {
+    let file = o.graph.display().to_string();
+    let mut text = std::fs::read_to_string(&o.graph).with_context(|| format!("cannot read {file}"))?;
+    for s in &o.swap {
+        let (node, binary) = s
+            .split_once('=')
+            .with_context(|| format!("--swap `{s}`: expected node=binary"))?;
+        text = evseg_graph::swap_binary(&file, &text, node, binary)?;
+    }
+    std::fs::create_dir_all(&o.work).with_context(|| format!("cannot create {}", o.work.display()))?;
+    let path = o.work.join("graph-b.yaml");
+    std::fs::write(&path, text).with_context(|| format!("cannot write {}", path.display()))?;
+    Ok(path)
+}
+
+/// Runs both variants on every recording; returns the figures per sequence and overall (mean
+/// over sequences).
+pub fn ab(o: &AbOptions) -> anyhow::Result<Vec<AbFigure>> {
+    anyhow::ensure!(!o.recordings.is_empty(), "give at least one recording");
+    let b_graph = graph_b(o)?;
+    // Variant B's graph is checked before anything runs (a swapped binary with other ports or
+    // parameters is reported with variant B's file, line and column).
+    let dir = o.graph.parent().map(Path::to_path_buf).unwrap_or_default();
+    crate::run::load_graph(&b_graph, &crate::resolve::BinaryResolver::new(&dir))?;
+    let mut rows = Vec::new();
+    for rec in &o.recordings {
+        let seq = rec
+            .file_stem()
+            .map_or_else(|| rec.display().to_string(), |s| s.to_string_lossy().into_owned());
+        let mut reports = Vec::new();
+        for (variant, graph, extra) in [("a", &o.graph, &[][..]), ("b", &b_graph, &o.set_b[..])] {
+            let out = o.work.join(&seq).join(variant);
+            if out.exists() {
+                std::fs::remove_dir_all(&out).with_context(|| format!("cannot clear {}", out.display()))?;
+            }
+            eprintln!("A/B: {seq}, variant {variant}");
+            let mut set = o.set.clone();
+            set.extend(extra.iter().cloned());
+            let outcome = run(&RunOptions {
+                graph: graph.clone(),
+                instance: Some(format!("ab-{variant}")),
+                out: Some(out),
+                set,
+                listen: o.listen.clone(),
+                quiet: true,
+                replay: Some(ReplaySpec {
+                    recording: rec.clone(),
+                    from: o.from.clone(),
+                    speed: None,
+                }),
+                ..RunOptions::default()
+            })
+            .with_context(|| format!("variant {variant} on {}", rec.display()))?;
+            reports.push(read_report(&outcome.dir)?);
+        }
+        for &(label, pointer, scale) in FIGURES {
+            let a = figure(&reports[0], pointer, scale);
+            let b = figure(&reports[1], pointer, scale);
+            rows.push(AbFigure {
+                sequence: seq.clone(),
+                figure: label.to_string(),
+                a,
+                b,
+                difference: a.zip(b).map(|(a, b)| b - a),
+            });
+        }
+    }
+    if o.recordings.len() > 1 {
+        for &(label, _, _) in FIGURES {
+            let of = |f: fn(&AbFigure) -> Option<f64>| {
+                let v: Vec<f64> = rows.iter().filter(|r| r.figure == label).filter_map(f).collect();
+                (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
+            };
+            let (a, b) = (of(|r| r.a), of(|r| r.b));
+            rows.push(AbFigure {
+                sequence: "overall".into(),
+                figure: label.to_string(),
+                a,
+                b,
+                difference: a.zip(b).map(|(a, b)| b - a),
+            });
+        }
+    }
+    Ok(rows)
+}
+
+/// The comparison as a Markdown table.
+pub fn markdown(rows: &[AbFigure], o: &AbOptions) -> String {
+    let num = |v: Option<f64>| v.map_or("n/a".into(), |x| format!("{x:.3}"));
+    let mut s = format!(
+        "A/B on `{}` from `{}`: A = as written; B = swap {:?}, set {:?} (both: set {:?})\n\n\
+         | sequence | figure | A | B | B - A |\n|---|---|---:|---:|---:|\n",
+        o.graph.display(),
+        o.from,
+        o.swap,
+        o.set_b,
+        o.set
+    );
+    for r in rows {
+        s.push_str(&format!(
+            "| {} | {} | {} | {} | {} |\n",
+            r.sequence,
+            r.figure,
+            num(r.a),
+            num(r.b),
+            num(r.difference)
+        ));
+    }
+    s
+}

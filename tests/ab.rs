@@ -1,0 +1,126 @@
+//! `evseg ab`: two variants of a graph on the same recording. A variant identical to A gives
+//! zero differences (lock-step replay feeds both the same frames); a parameter change of B shows
+//! in its column; a swap to a binary with other ports is refused before anything runs.
+
+use std::path::Path;
+use std::time::Duration;
+
+use evseg_tests::{Launcher, free_port, read_json, write};
+
+fn graph(port: u16) -> String {
+    format!(
+        r#"name: ab{port}
+mode: lockstep
+window: 2
+zenoh:
+  machines:
+    local: {{ listen: ["tcp/127.0.0.1:{port}"] }}
+nodes:
+  - id: source
+    run: evseg-source
+    params: {{ kind: synthetic, scene: two-objects, seed: 7, seconds: 0.3 }}
+  - id: slicer
+    run: evseg-slicer
+    params: {{ window_ms: 30 }}
+    inputs: {{ events: source/events, truth: source/truth }}
+  - id: segmenter
+    run: evseg-baseline
+    inputs: {{ slices: slicer/slices }}
+  - id: evaluator
+    run: evseg-evaluator
+    params: {{ sequence: two-objects }}
+    inputs: {{ slices: slicer/slices, truth: slicer/truth, result: segmenter/tracks }}
+"#
+    )
+}
+
+fn evseg(dir: &Path, args: &[&str]) -> evseg_tests::Finished {
+    Launcher::start(dir, args, "ab").wait(Duration::from_secs(300))
+}
+
+#[test]
+fn ab_compares_two_variants_on_one_recording() {
+    let dir = tempfile::tempdir().unwrap();
+    let g = write(dir.path(), "g.yaml", &graph(free_port()));
+    let rec = dir.path().join("input.mcap");
+    let out = dir.path().join("orig");
+    let r = evseg(
+        dir.path(),
+        &[
+            "run",
+            g.to_str().unwrap(),
+            "--record",
+            rec.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "-q",
+        ],
+    );
+    assert!(r.status.success(), "recording run failed:\n{}", r.stderr);
+
+    // B = A (the same binary swapped in): every difference is exactly 0.
+    let work = dir.path().join("same");
+    let listen = format!("tcp/127.0.0.1:{}", free_port());
+    let r = evseg(
+        dir.path(),
+        &[
+            "ab",
+            g.to_str().unwrap(),
+            "--recording",
+            rec.to_str().unwrap(),
+            "--swap",
+            "segmenter=evseg-baseline",
+            "--work",
+            work.to_str().unwrap(),
+            "--listen",
+            &listen,
+        ],
+    );
+    assert!(r.status.success(), "ab failed:\n{}", r.stderr);
+    assert!(r.stdout.contains("| input | IoU mask (%) |"), "{}", r.stdout);
+    let rows = read_json(&work.join("ab.json"));
+    let rows = rows.as_array().unwrap();
+    assert_eq!(rows.len(), 7, "{rows:?}");
+    for row in rows {
+        assert_eq!(row["a"], row["b"], "{row}");
+        if let Some(d) = row["difference"].as_f64() {
+            assert_eq!(d, 0.0, "{row}");
+        }
+    }
+    assert!(work.join("ab.md").exists());
+    assert!(
+        work.join("input")
+            .join("a")
+            .join("report")
+            .join("report.json")
+            .exists()
+    );
+    assert!(
+        work.join("input")
+            .join("b")
+            .join("report")
+            .join("report.json")
+            .exists()
+    );
+
+    // A swap to a binary with other ports is refused before any variant runs, naming B's graph.
+    let work = dir.path().join("bad");
+    let r = evseg(
+        dir.path(),
+        &[
+            "ab",
+            g.to_str().unwrap(),
+            "--recording",
+            rec.to_str().unwrap(),
+            "--swap",
+            "segmenter=evseg-slicer",
+            "--work",
+            work.to_str().unwrap(),
+            "--listen",
+            &listen,
+        ],
+    );
+    assert!(!r.status.success());
+    assert!(r.stderr.contains("graph-b.yaml:"), "{}", r.stderr);
+    assert!(!work.join("input").exists(), "nothing may run");
+}
