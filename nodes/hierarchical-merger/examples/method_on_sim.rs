@@ -6,7 +6,7 @@
 //! env: SEED (1), SECONDS (2), FLOW (est | ideal; "ideal" puts n0 along the true flow, which
 //! makes the SVM degenerate), SET ("name=value,...": background-merger, hierarchical-merger and
 //! planar parameters, several variants separated by ';'), VERBOSE (per-slice cluster reports),
-//! DUMP=k (PNG panels of slice k: truth, planar, coarse, final, in /tmp/dump-<scene>.png).
+//! FLOW_MIN_CONF (the plane-fit estimator's min_confidence), DUMP=k (PNG panels of slice k: truth, planar, coarse, final, in /tmp/dump-<scene>.png).
 //! Diagnostics that replace the final labels: ORACLE_CLUSTERS (each cluster labelled by its
 //! ground-truth majority: the over-segmentation's ceiling), ORACLE_T=ratio (a cluster is
 //! background when the true camera translation explains it with a depth of its own).
@@ -172,7 +172,14 @@ fn main() -> anyhow::Result<()> {
                 slices.push((s.slice, s.truth.unwrap_or_default(), (s.t_start, s.t_end)));
             }
         }
-        let mut est = PlaneFitEstimator::new(&camera, PlaneFitParams::default())?;
+        let flow_conf: f64 = env_or("FLOW_MIN_CONF", PlaneFitParams::default().min_confidence)?;
+        let mut est = PlaneFitEstimator::new(
+            &camera,
+            PlaneFitParams {
+                min_confidence: flow_conf,
+                ..PlaneFitParams::default()
+            },
+        )?;
         let flows: Vec<NormalFlow> = slices
             .iter()
             .map(|(s, truth, _)| {
