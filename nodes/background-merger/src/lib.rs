@@ -366,13 +366,24 @@ fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
-/// Sums `(|r|, |n_derot|)` over `members` (one cluster) under translation `t` with the cluster's
-/// own inverse depth.
-fn cluster_residual(members: &[&FlowSample], t: [f64; 3]) -> (f64, f64) {
-    let rho = inverse_depth(members, t);
+/// Sums `(|r|, |n_derot|)` over `members` (one cluster) under translation `t` (`None`: no
+/// translation, `r = n_derot`) with the cluster's own inverse depth; `each` sees every sample
+/// with its residual `r`.
+fn cluster_fit(
+    members: &[&FlowSample],
+    t: Option<[f64; 3]>,
+    mut each: impl FnMut(&FlowSample, f64),
+) -> (f64, f64) {
+    let rho = t.map(|t| inverse_depth(members, t));
     let (mut sum_r, mut sum_n) = (0.0, 0.0);
     for s in members {
-        sum_r += (s.n_derot - rho * dot(s.x_row(), t)).abs();
+        let predicted = match (t, rho) {
+            (Some(t), Some(rho)) => rho * dot(s.x_row(), t),
+            _ => 0.0,
+        };
+        let r = s.n_derot - predicted;
+        each(s, r);
+        sum_r += r.abs();
         sum_n += s.n_derot.abs();
     }
     (sum_r, sum_n)
@@ -441,14 +452,13 @@ fn select_hypothesis(
         }
     }
     // Area of each cluster: distinct occupied cells.
-    let cell = usize::from(p.map_cell_px.max(1));
-    let cols = usize::from(cam.width).div_ceil(cell).max(1);
+    let grid = CellGrid::new(cam.width, cam.height, p.map_cell_px);
     let area: Vec<f64> = per_cluster
         .iter()
         .map(|m| {
             let mut cells: Vec<usize> = m
                 .iter()
-                .map(|s| usize::from(ev.y[s.index]) / cell * cols + usize::from(ev.x[s.index]) / cell)
+                .filter_map(|s| grid.cell(ev.x[s.index], ev.y[s.index]))
                 .collect();
             cells.sort_unstable();
             cells.dedup();
@@ -460,7 +470,7 @@ fn select_hypothesis(
         let consistent: Vec<bool> = per_cluster
             .iter()
             .map(|m| {
-                let (r, nsum) = cluster_residual(m, t);
+                let (r, nsum) = cluster_fit(m, Some(t), |_, _| {});
                 is_consistent(r, nsum, m.len(), p)
             })
             .collect();
@@ -492,18 +502,7 @@ fn explain(
         report.relative_residual = f64::NAN;
         return false;
     }
-    let rho = direction.map(|t| inverse_depth(members, t));
-    let (mut sum_r, mut sum_n) = (0.0, 0.0);
-    for s in members {
-        let predicted = match (direction, rho) {
-            (Some(t), Some(rho)) => rho * dot(s.x_row(), t),
-            _ => 0.0,
-        };
-        let r = s.n_derot - predicted;
-        residual[s.index] = r as f32;
-        sum_r += r.abs();
-        sum_n += s.n_derot.abs();
-    }
+    let (sum_r, sum_n) = cluster_fit(members, direction, |s, r| residual[s.index] = r as f32);
     report.relative_residual = if direction.is_some() && sum_n > 0.0 {
         sum_r / sum_n
     } else {

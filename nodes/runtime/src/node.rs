@@ -232,14 +232,14 @@ impl Outputs {
                 has_credit(consumed, &consumers, seq, window)
             })?;
         }
-        self.waited_ns += waiting.elapsed().as_nanos() as u64;
-        let p = self.port_mut(port)?;
+        let waited = waiting.elapsed().as_nanos() as u64;
         p.publisher
             .put(bytes)
             .wait()
             .map_err(|e| RuntimeError::Zenoh(e.to_string()))?;
         p.sent = p.sent.max(seq + 1);
         p.t_end = p.t_end.max(t_end);
+        self.waited_ns += waited;
         self.published.fetch_add(1, Ordering::Relaxed);
         Ok(())
     }
