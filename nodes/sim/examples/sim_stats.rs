@@ -23,13 +23,28 @@ struct Row {
 }
 
 fn run(name: &str, secs: f64, seed: u64) -> Result<Row, Box<dyn std::error::Error>> {
-    let cfg = evseg_sim::preset(name, seed)?;
+    let mut cfg = evseg_sim::preset(name, seed)?;
+    // Development overrides of the render schedule (defaults: the preset's).
+    if let Some(k) = std::env::var("SIM_STEPS_PER_KEYFRAME")
+        .ok()
+        .and_then(|s| s.parse().ok())
+    {
+        cfg.render.steps_per_keyframe = k;
+    }
+    if std::env::var("SIM_NO_SUPERSAMPLING").is_ok() {
+        cfg.render.edge_supersampling = false;
+    }
     let t0 = Instant::now();
     let mut sim = evseg_sim::Simulator::new(cfg)?;
     let setup = t0.elapsed().as_secs_f64();
     let cpu0 = thread_cpu_seconds();
     let t1 = Instant::now();
     let (mut n, mut on, mut obj) = (0usize, 0usize, 0usize);
+    // FNV-1a digest of every event and its truth: equal digests mean identical output.
+    let mut digest = 0xcbf2_9ce4_8422_2325u64;
+    let mut mix = |bits: u64| {
+        digest = (digest ^ bits).wrapping_mul(0x0100_0000_01b3);
+    };
     let mut t = 0.0;
     while t < secs.min(sim.duration()) - 1e-9 {
         t = (t + 0.05).min(secs);
@@ -37,6 +52,12 @@ fn run(name: &str, secs: f64, seed: u64) -> Result<Row, Box<dyn std::error::Erro
         n += c.events.len();
         on += c.events.p.iter().filter(|&&p| p == 1).count();
         obj += c.truth.event_object.iter().filter(|&&i| i != 0).count();
+        for i in 0..c.events.len() {
+            mix(c.events.t[i].to_bits());
+            mix(((c.events.x[i] as u64) << 32) | ((c.events.y[i] as u64) << 16) | c.events.p[i] as u64);
+            mix(c.truth.event_object[i] as u64);
+            mix(((c.truth.flow_x[i].to_bits() as u64) << 32) | c.truth.flow_y[i].to_bits() as u64);
+        }
     }
     let wall = t1.elapsed().as_secs_f64();
     let cpu = match (cpu0, thread_cpu_seconds()) {
@@ -44,6 +65,7 @@ fn run(name: &str, secs: f64, seed: u64) -> Result<Row, Box<dyn std::error::Erro
         _ => None,
     };
     let s = sim.stats();
+    println!("  output digest {digest:016x}");
     let px = 640.0 * 480.0;
     println!("preset {name} seed {seed}: {t:.2} s simulated in {wall:.2} s wall (setup {setup:.2} s)");
     println!(

@@ -31,6 +31,7 @@ use crate::esim::{self, NoiseSource, Thresholds};
 use crate::filters;
 use crate::render::FrameGeom;
 use crate::scene::{self, Scene};
+use crate::unstable::{PixelState, UnstableList};
 use crate::{SimStats, math};
 
 /// One event with its truth, before it is split into columns.
@@ -130,14 +131,8 @@ pub struct Engine {
     kf0: KeyFrame,
     kf1: KeyFrame,
     class: Vec<u8>,
-    // Unstable-pixel step buffers.
-    l_prev: Vec<f32>,
-    id_prev: Vec<u16>,
-    step_l: Vec<f32>,
-    step_key: Vec<u16>,
-    step_id: Vec<u16>,
-    stamp: Vec<u32>,
-    stamp_counter: u32,
+    /// Unstable pixels of the current interval.
+    unstable: UnstableList,
     // Filter buffers.
     lo: Vec<f32>,
     hi: Vec<f32>,
@@ -187,13 +182,7 @@ impl Engine {
             reference: vec![0.0; n],
             last_event: vec![f64::NEG_INFINITY; n],
             class: vec![QUIET; n],
-            l_prev: vec![0.0; n],
-            id_prev: vec![0; n],
-            step_l: vec![0.0; n],
-            step_key: vec![0; n],
-            step_id: vec![0; n],
-            stamp: vec![0; n],
-            stamp_counter: 0,
+            unstable: UnstableList::default(),
             lo: vec![0.0; n],
             hi: vec![0.0; n],
             scratch: Vec::new(),
@@ -300,15 +289,6 @@ impl Engine {
             }
         }
         worst as f32
-    }
-
-    fn next_stamp(&mut self) -> u32 {
-        self.stamp_counter = self.stamp_counter.wrapping_add(1);
-        if self.stamp_counter == 0 {
-            self.stamp.fill(0);
-            self.stamp_counter = 1;
-        }
-        self.stamp_counter
     }
 
     /// Ray casts every pixel at `kf1.geom` into `kf1` (edge pixels supersampled) and updates
@@ -558,16 +538,26 @@ impl Engine {
         self.stats.interpolated_samples += samples;
 
         // Unstable pixels: ray cast at every step.
-        let unstable: Vec<u32> = (0..n as u32)
-            .filter(|&i| self.class[i as usize] == UNSTABLE)
-            .collect();
-        for &p in &unstable {
-            self.l_prev[p as usize] = self.kf0.l[p as usize];
-            self.id_prev[p as usize] = self.kf0.id[p as usize];
-        }
+        let u = &mut self.unstable;
+        u.gather(
+            &self.class,
+            UNSTABLE,
+            &PixelState {
+                rays: &self.rays,
+                reference: &self.reference,
+                last_event: &self.last_event,
+                c_on: &self.thresholds.on,
+                c_off: &self.thresholds.off,
+                l0: &self.kf0.l,
+                id0: &self.kf0.id,
+            },
+        );
+        let w = self.rays.width;
         for s in 1..=k {
             if s < k {
-                self.render_step(cfg, &geoms[s], &unstable);
+                let ss = u.render(&self.scene, &geoms[s], w, cfg.render.edge_supersampling);
+                self.stats.pixel_renders += u.len() as u64;
+                self.stats.supersampled += ss;
             }
             let ctx = FireCtx {
                 scene: &self.scene,
@@ -575,32 +565,33 @@ impl Engine {
                 rays: &self.rays,
                 refractory: cfg.esim.refractory_s,
             };
-            for &p in &unstable {
-                let i = p as usize;
+            for j in 0..u.len() {
+                let i = u.pixel[j] as usize;
                 let (l1, id1) = if s < k {
-                    (self.step_l[i], self.step_id[i])
+                    (u.l[j], u.id[j])
                 } else {
                     (self.kf1.l[i], self.kf1.id[i])
                 };
                 let before = batch.len();
                 fire(
                     &ctx,
-                    &mut self.reference[i],
-                    &mut self.last_event[i],
+                    &mut u.reference[j],
+                    &mut u.last_event[j],
                     i,
-                    self.l_prev[i],
+                    u.l_prev[j],
                     l1,
                     (times[s - 1], times[s]),
                     (&geoms[s - 1], &geoms[s]),
-                    (self.id_prev[i], id1),
-                    (self.thresholds.on[i], self.thresholds.off[i]),
+                    (u.id_prev[j], id1),
+                    (u.c_on[j], u.c_off[j]),
                     &mut batch,
                 );
                 fired += (batch.len() - before) as u64;
-                self.l_prev[i] = l1;
-                self.id_prev[i] = id1;
+                u.l_prev[j] = l1;
+                u.id_prev[j] = id1;
             }
         }
+        u.scatter(&mut self.reference, &mut self.last_event);
         self.stats.model_events += fired + violations;
 
         // Noise, labelled with the surface at its pixel at the nearest render step.
@@ -683,55 +674,6 @@ impl Engine {
             } else {
                 UNSTABLE
             };
-        }
-    }
-
-    /// Ray casts the listed pixels at `geom` into the step buffers (edge pixels supersampled).
-    fn render_step(&mut self, cfg: &SceneConfig, geom: &FrameGeom, list: &[u32]) {
-        let stamp = self.next_stamp();
-        let w = self.rays.width;
-        for &p in list {
-            let i = p as usize;
-            let hit = geom.cast(
-                &self.scene,
-                self.rays.x[i],
-                self.rays.y[i],
-                (i % w) as i32,
-                (i / w) as i32,
-                None,
-            );
-            self.step_l[i] = hit.l;
-            self.step_id[i] = hit.id;
-            self.step_key[i] = hit.key;
-            self.stamp[i] = stamp;
-        }
-        self.stats.pixel_renders += list.len() as u64;
-        if !cfg.render.edge_supersampling {
-            return;
-        }
-        let n = self.stamp.len();
-        for &p in list {
-            let i = p as usize;
-            let (x, y) = (i % w, i / w);
-            let k = self.step_key[i];
-            let differs = |j: usize| self.stamp[j] == stamp && self.step_key[j] != k;
-            let edge = (x + 1 < w && differs(i + 1))
-                || (x > 0 && differs(i - 1))
-                || (i + w < n && differs(i + w))
-                || (y > 0 && differs(i - w));
-            if edge {
-                let r = &self.rays;
-                self.step_l[i] = geom.supersample(
-                    &self.scene,
-                    r.x[i],
-                    r.y[i],
-                    r.d_du[i],
-                    r.d_dv[i],
-                    x as i32,
-                    y as i32,
-                );
-                self.stats.supersampled += 1;
-            }
         }
     }
 }

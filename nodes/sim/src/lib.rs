@@ -36,6 +36,7 @@ pub mod scene;
 pub mod texture;
 pub mod trajectory;
 pub mod truth;
+pub mod unstable;
 
 use evseg_schemas::{CameraInfo, Events, ImuSample, Truth};
 

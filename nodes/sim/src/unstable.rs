@@ -1,0 +1,189 @@
+//! Unstable pixels (near silhouettes, creases and seams) of one key-frame interval, stepped
+//! together in a compact list.
+//!
+//! These pixels are ray cast at every render step. They are a few percent of the image,
+//! scattered along edges, so their per-pixel state (rays, thresholds, reference levels, the
+//! previous step's intensity) is gathered into dense arrays at the start of the interval and
+//! the reference levels are scattered back at its end: every step then reads contiguous memory
+//! instead of a dozen image-sized arrays at scattered indices. The results are identical to
+//! stepping the pixels in place.
+
+use crate::camera::Rays;
+use crate::render::FrameGeom;
+use crate::scene::Scene;
+
+/// Marks "no unstable neighbour" in [`UnstableList::neighbours`].
+pub const NONE: u32 = u32::MAX;
+
+/// Per-pixel state of the unstable pixels of one interval (structure of arrays, in pixel
+/// order).
+#[derive(Debug, Clone, Default)]
+pub struct UnstableList {
+    /// Row-major pixel index.
+    pub pixel: Vec<u32>,
+    /// Undistorted normalized ray of the pixel centre.
+    pub x: Vec<f32>,
+    /// Undistorted normalized ray of the pixel centre.
+    pub y: Vec<f32>,
+    /// Change of the normalized ray per pixel along the row and down the column.
+    pub d_du: Vec<[f32; 2]>,
+    /// Change of the normalized ray per pixel along the row and down the column.
+    pub d_dv: Vec<[f32; 2]>,
+    /// List indices of the right, left, lower and upper neighbours when they are unstable too
+    /// ([`NONE`] otherwise or outside the image).
+    pub neighbours: Vec<[u32; 4]>,
+    /// ESIM reference level, log units.
+    pub reference: Vec<f32>,
+    /// Time of the last emitted event, s.
+    pub last_event: Vec<f64>,
+    /// ON threshold, log units.
+    pub c_on: Vec<f32>,
+    /// OFF threshold, log units.
+    pub c_off: Vec<f32>,
+    /// Log intensity at the previous render step.
+    pub l_prev: Vec<f32>,
+    /// Object id at the pixel centre at the previous render step.
+    pub id_prev: Vec<u16>,
+    /// Log intensity of the current render step.
+    pub l: Vec<f32>,
+    /// Surface key of the current render step.
+    pub key: Vec<u16>,
+    /// Object id of the current render step.
+    pub id: Vec<u16>,
+    /// Image-sized map from pixel index to list index ([`NONE`] outside the list); all
+    /// [`NONE`] between calls.
+    index_of: Vec<u32>,
+}
+
+/// The per-pixel image arrays an [`UnstableList`] is gathered from.
+pub struct PixelState<'a> {
+    /// Rays of every pixel.
+    pub rays: &'a Rays,
+    /// Reference levels, log units.
+    pub reference: &'a [f32],
+    /// Times of the last events, s.
+    pub last_event: &'a [f64],
+    /// ON thresholds, log units.
+    pub c_on: &'a [f32],
+    /// OFF thresholds, log units.
+    pub c_off: &'a [f32],
+    /// Log intensities of the interval's first key frame.
+    pub l0: &'a [f32],
+    /// Object ids of the interval's first key frame.
+    pub id0: &'a [u16],
+}
+
+impl UnstableList {
+    /// Number of pixels in the list.
+    pub fn len(&self) -> usize {
+        self.pixel.len()
+    }
+
+    /// True when the list is empty.
+    pub fn is_empty(&self) -> bool {
+        self.pixel.is_empty()
+    }
+
+    /// Gathers the pixels whose `class` equals `unstable`, in pixel order, with their state
+    /// from `src` at the start of the interval.
+    pub fn gather(&mut self, class: &[u8], unstable: u8, src: &PixelState) {
+        let (w, n) = (src.rays.width, class.len());
+        self.pixel.clear();
+        self.pixel
+            .extend((0..n as u32).filter(|&i| class[i as usize] == unstable));
+        let pix = &self.pixel;
+        let r = src.rays;
+        let g = |out: &mut Vec<f32>, a: &[f32]| {
+            out.clear();
+            out.extend(pix.iter().map(|&p| a[p as usize]));
+        };
+        g(&mut self.x, &r.x);
+        g(&mut self.y, &r.y);
+        g(&mut self.reference, src.reference);
+        g(&mut self.c_on, src.c_on);
+        g(&mut self.c_off, src.c_off);
+        g(&mut self.l_prev, src.l0);
+        self.d_du.clear();
+        self.d_du.extend(pix.iter().map(|&p| r.d_du[p as usize]));
+        self.d_dv.clear();
+        self.d_dv.extend(pix.iter().map(|&p| r.d_dv[p as usize]));
+        self.last_event.clear();
+        self.last_event
+            .extend(pix.iter().map(|&p| src.last_event[p as usize]));
+        self.id_prev.clear();
+        self.id_prev.extend(pix.iter().map(|&p| src.id0[p as usize]));
+        let m = pix.len();
+        self.l.clear();
+        self.l.resize(m, 0.0);
+        self.key.clear();
+        self.key.resize(m, 0);
+        self.id.clear();
+        self.id.resize(m, 0);
+        if self.index_of.len() != n {
+            self.index_of = vec![NONE; n];
+        }
+        for (j, &p) in pix.iter().enumerate() {
+            self.index_of[p as usize] = j as u32;
+        }
+        self.neighbours.clear();
+        for &p in pix {
+            let i = p as usize;
+            let (x, y) = (i % w, i / w);
+            let at = |ok: bool, k: usize| if ok { self.index_of[k] } else { NONE };
+            self.neighbours.push([
+                at(x + 1 < w, i + 1),
+                at(x > 0, i.wrapping_sub(1)),
+                at(i + w < n, i + w),
+                at(y > 0, i.wrapping_sub(w)),
+            ]);
+        }
+        for &p in pix {
+            self.index_of[p as usize] = NONE;
+        }
+    }
+
+    /// Ray casts every listed pixel at `geom` into `l`, `key` and `id`; with `supersample`,
+    /// pixels whose surface differs from an (also listed) 4-neighbour's are 2x2 supersampled.
+    /// Returns the number of supersampled pixels.
+    pub fn render(&mut self, scene: &Scene, geom: &FrameGeom, w: usize, supersample: bool) -> u64 {
+        for j in 0..self.pixel.len() {
+            let i = self.pixel[j] as usize;
+            let hit = geom.cast(scene, self.x[j], self.y[j], (i % w) as i32, (i / w) as i32, None);
+            self.l[j] = hit.l;
+            self.key[j] = hit.key;
+            self.id[j] = hit.id;
+        }
+        if !supersample {
+            return 0;
+        }
+        let mut count = 0;
+        for j in 0..self.pixel.len() {
+            let k = self.key[j];
+            let edge = self.neighbours[j]
+                .iter()
+                .any(|&nb| nb != NONE && self.key[nb as usize] != k);
+            if edge {
+                let i = self.pixel[j] as usize;
+                self.l[j] = geom.supersample(
+                    scene,
+                    self.x[j],
+                    self.y[j],
+                    self.d_du[j],
+                    self.d_dv[j],
+                    (i % w) as i32,
+                    (i / w) as i32,
+                );
+                count += 1;
+            }
+        }
+        count
+    }
+
+    /// Writes the reference levels and last-event times back to the image arrays.
+    pub fn scatter(&self, reference: &mut [f32], last_event: &mut [f64]) {
+        for (j, &p) in self.pixel.iter().enumerate() {
+            reference[p as usize] = self.reference[j];
+            last_event[p as usize] = self.last_event[j];
+        }
+    }
+}
