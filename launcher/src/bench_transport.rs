@@ -5,7 +5,10 @@
 //! code). In-process, the three are called one after the other in a loop. Over Zenoh, they are
 //! three processes started by `evseg run` in lock-step mode; throughput there is counted from the
 //! source's first publication to the inspector's last arrival (process start-up is reported
-//! apart), and the run is checked to have delivered every event exactly once.
+//! apart), and the run is checked to have delivered every event exactly once. The graph runs
+//! twice: with Zenoh shared memory between the processes (the default for nodes on one
+//! machine), and with it switched off, so every slice crosses a loopback socket as it would
+//! between two machines.
 
 use std::path::Path;
 use std::time::Instant;
@@ -32,10 +35,15 @@ pub struct Row {
     pub events: u64,
     /// In-process throughput, events per second.
     pub in_process: f64,
-    /// Multi-process throughput over Zenoh, events per second.
+    /// Multi-process throughput over Zenoh with shared memory, events per second.
     pub graph: f64,
     /// graph / in_process.
     pub ratio: f64,
+    /// Multi-process throughput over Zenoh without shared memory (loopback TCP), events per
+    /// second.
+    pub graph_socket: f64,
+    /// graph_socket / in_process.
+    pub ratio_socket: f64,
     /// Seconds from launcher start to the source's first publication.
     pub startup_s: f64,
 }
@@ -81,7 +89,7 @@ fn in_process(slice_events: u64, seconds: f64) -> anyhow::Result<(u64, f64)> {
     Ok((r.digest.count, dt))
 }
 
-fn graph_text(slice_events: u64, seconds: f64, port: u16) -> String {
+fn graph_text(slice_events: u64, seconds: f64, port: u16, shared_memory: bool) -> String {
     let window_ms = slice_events as f64 / RATE * 1e3;
     format!(
         r#"name: bench{port}
@@ -89,6 +97,7 @@ mode: lockstep
 zenoh:
   machines:
     local: {{ listen: ["tcp/127.0.0.1:{port}"] }}
+  shared_memory: {{ enabled: {shared_memory} }}
 nodes:
   - id: source
     run: evseg-source
@@ -111,11 +120,17 @@ fn free_port() -> anyhow::Result<u16> {
     Ok(l.local_addr()?.port())
 }
 
-fn over_zenoh(slice_events: u64, seconds: f64, work: &Path) -> anyhow::Result<(u64, f64, f64)> {
+fn over_zenoh(
+    slice_events: u64,
+    seconds: f64,
+    work: &Path,
+    shared_memory: bool,
+) -> anyhow::Result<(u64, f64, f64)> {
     let port = free_port()?;
-    let graph = work.join(format!("transport-{slice_events}.yaml"));
-    std::fs::write(&graph, graph_text(slice_events, seconds, port))?;
-    let out = work.join(format!("run-{slice_events}"));
+    let link = if shared_memory { "shm" } else { "socket" };
+    let graph = work.join(format!("transport-{slice_events}-{link}.yaml"));
+    std::fs::write(&graph, graph_text(slice_events, seconds, port, shared_memory))?;
+    let out = work.join(format!("run-{slice_events}-{link}"));
     let launched = evseg_inspect::now_ns();
     let outcome = run(&RunOptions {
         graph,
@@ -154,9 +169,10 @@ pub fn bench(sizes: &[u64], work: &Path) -> anyhow::Result<Vec<Row>> {
         let events = MIN_EVENTS.max(20 * n);
         let seconds = events as f64 / RATE;
         let (count_a, dt_a) = in_process(n, seconds)?;
-        let (count_b, dt_b, startup) = over_zenoh(n, seconds, work)?;
-        if count_a != count_b {
-            bail!("in-process saw {count_a} events, the graph {count_b}");
+        let (count_b, dt_b, startup) = over_zenoh(n, seconds, work, true)?;
+        let (count_c, dt_c, _) = over_zenoh(n, seconds, work, false)?;
+        if count_a != count_b || count_a != count_c {
+            bail!("in-process saw {count_a} events, the graph {count_b} (shared memory), {count_c} (sockets)");
         }
         let row = Row {
             slice_events: n,
@@ -164,14 +180,18 @@ pub fn bench(sizes: &[u64], work: &Path) -> anyhow::Result<Vec<Row>> {
             in_process: count_a as f64 / dt_a,
             graph: count_b as f64 / dt_b,
             ratio: (count_b as f64 / dt_b) / (count_a as f64 / dt_a),
+            graph_socket: count_c as f64 / dt_c,
+            ratio_socket: (count_c as f64 / dt_c) / (count_a as f64 / dt_a),
             startup_s: startup,
         };
         eprintln!(
-            "{:>9} events/slice: in-process {:>7.1} M ev/s, graph {:>7.1} M ev/s, ratio {:.2} (start-up {:.2} s)",
+            "{:>9} events/slice: in-process {:>7.1} M ev/s, graph {:>7.1} M ev/s (ratio {:.2}), without shared memory {:>7.1} M ev/s (ratio {:.2}); start-up {:.2} s",
             n,
             row.in_process / 1e6,
             row.graph / 1e6,
             row.ratio,
+            row.graph_socket / 1e6,
+            row.ratio_socket,
             row.startup_s
         );
         rows.push(row);
@@ -182,16 +202,18 @@ pub fn bench(sizes: &[u64], work: &Path) -> anyhow::Result<Vec<Row>> {
 /// The rows as a Markdown table.
 pub fn markdown(rows: &[Row]) -> String {
     let mut s = String::from(
-        "| events per slice | events | in-process (M ev/s) | 3 processes over Zenoh (M ev/s) | ratio |\n|---:|---:|---:|---:|---:|\n",
+        "| events per slice | events | in-process (M ev/s) | 3 processes, shared memory (M ev/s) | ratio | 3 processes, loopback TCP (M ev/s) | ratio |\n|---:|---:|---:|---:|---:|---:|---:|\n",
     );
     for r in rows {
         s.push_str(&format!(
-            "| {} | {} | {:.1} | {:.1} | {:.2} |\n",
+            "| {} | {} | {:.1} | {:.1} | {:.2} | {:.1} | {:.2} |\n",
             r.slice_events,
             r.events,
             r.in_process / 1e6,
             r.graph / 1e6,
-            r.ratio
+            r.ratio,
+            r.graph_socket / 1e6,
+            r.ratio_socket
         ));
     }
     s

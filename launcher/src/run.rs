@@ -8,7 +8,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
 use evseg_graph::{Graph, NodeSpec};
-use evseg_runtime::config::{ConsumerRef, InputBinding, NodeConfig, OutputBinding, ZenohSettings};
+use evseg_runtime::config::{ConsumerRef, InputBinding, NodeConfig, OutputBinding, ShmSettings, ZenohSettings};
 use evseg_runtime::progress::Stats;
 use evseg_runtime::{Mode, signals};
 use evseg_schemas::keys;
@@ -117,6 +117,10 @@ pub fn node_config(graph: &Graph, node: &NodeSpec, router: &[String], run_dir: &
             mode: "peer".into(),
             connect: router.iter().map(|e| local_endpoint(e)).collect(),
             listen: vec!["tcp/127.0.0.1:0".into()],
+            shared_memory: ShmSettings {
+                enabled: graph.shared_memory.enabled,
+                pool_bytes: u64::from(graph.shared_memory.pool_mib) << 20,
+            },
         },
         params: node.params.clone(),
         inputs: node
@@ -161,6 +165,7 @@ fn open_router(listen: &[String], connect: &[String]) -> anyhow::Result<zenoh::S
         mode: "router".into(),
         connect: connect.to_vec(),
         listen: listen.to_vec(),
+        shared_memory: ShmSettings::default(),
     };
     let mut config = zenoh::Config::default();
     let list = |v: &[String]| serde_json::to_string(v).unwrap_or_else(|_| "[]".into());

@@ -112,6 +112,7 @@ pub(crate) fn check(raw: &RawGraph<'_>, resolver: Resolver<'_>, p: &mut Problems
         window: raw.window,
         queue: raw.queue,
         machines,
+        shared_memory: raw.shared_memory,
         nodes: build_nodes(&raw.nodes, work, &order)?,
     })
 }

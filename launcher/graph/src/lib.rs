@@ -25,7 +25,7 @@ pub use check::Resolver;
 pub use diagnostic::{Diagnostic, Span};
 pub use model::{
     Consumer, Graph, InputSpec, Machine, Mode, NodeKeys, NodeSpec, OutputSpec, PortKey, RecordSpec, Restart,
-    RestartPolicy,
+    RestartPolicy, SharedMemory,
 };
 pub use swap::swap_binary;
 
@@ -106,6 +106,7 @@ pub fn load(path: &Path, resolver: Resolver<'_>) -> Result<Graph, GraphError> {
 ///   machines:              # default: one machine `local` listening on tcp/127.0.0.1:7447
 ///     robot: { listen: ["tcp/127.0.0.1:7447"] }
 ///     base:  { listen: ["tcp/127.0.0.1:7448"], connect: ["tcp/127.0.0.1:7447"] }
+///   shared_memory: { enabled: true, pool_mib: 64 }   # local links (the defaults)
 /// nodes:
 ///   - id: slicer           # unique, a key chunk
 ///     run: evseg-slicer    # binary

@@ -62,6 +62,45 @@ impl Machine {
     }
 }
 
+/// Zenoh shared memory between the nodes of one machine (`zenoh.shared_memory` in graph.yaml).
+///
+/// When enabled, a node's Zenoh session puts every message of at least a few KiB into a
+/// shared-memory pool of its own and sends only a reference to consumers on the same machine
+/// (Zenoh's "transport optimization"); consumers on other machines, and messages that do not fit
+/// in the pool at that moment, go over the network as before. Nothing else changes: the bytes a
+/// consumer sees are the same.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct SharedMemory {
+    /// Use shared memory for local links (default true).
+    pub enabled: bool,
+    /// Size of each node's pool, MiB (default [`SharedMemory::DEFAULT_POOL_MIB`]). A message
+    /// stays in the pool until every local consumer has released it, so the pool should hold
+    /// `window` messages of the largest output: 100k-event slices are 1.3 MB, 1M-event slices
+    /// 13 MB.
+    pub pool_mib: u32,
+}
+
+impl SharedMemory {
+    /// Default pool size, MiB: four in-flight 1M-event slices (13 MB each) with room to spare.
+    /// Pages are touched only as they are used.
+    pub const DEFAULT_POOL_MIB: u32 = 64;
+
+    /// True for the defaults (left out of the canonical form, so graphs that do not mention
+    /// shared memory hash as before).
+    pub fn is_default(&self) -> bool {
+        *self == Self::default()
+    }
+}
+
+impl Default for SharedMemory {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            pool_mib: Self::DEFAULT_POOL_MIB,
+        }
+    }
+}
+
 /// When the launcher restarts a node whose process failed.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
@@ -230,6 +269,9 @@ pub struct Graph {
     pub queue: u32,
     /// Machines in declaration order (at least one).
     pub machines: Vec<Machine>,
+    /// Shared memory between the nodes of one machine.
+    #[serde(default, skip_serializing_if = "SharedMemory::is_default")]
+    pub shared_memory: SharedMemory,
     /// Nodes in a topological order of the non-feedback edges (producers before consumers; ties
     /// keep the order of the file).
     pub nodes: Vec<NodeSpec>,

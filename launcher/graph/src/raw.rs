@@ -3,13 +3,14 @@
 //! that could not be read is left out (so it is reported once, not again as "missing").
 
 use crate::diagnostic::{Problems, Span};
-use crate::model::{Graph, Mode, Restart, RestartPolicy};
+use crate::model::{Graph, Mode, Restart, RestartPolicy, SharedMemory};
 use crate::shape::{self, Spanned};
 use crate::yaml::{Entry, Node, Value};
 
 const TOP_KEYS: &[&str] = &["name", "mode", "window", "queue", "zenoh", "nodes", "record"];
 const RECORD_KEYS: &[&str] = &["path", "outputs"];
-const ZENOH_KEYS: &[&str] = &["machines"];
+const ZENOH_KEYS: &[&str] = &["machines", "shared_memory"];
+const SHARED_MEMORY_KEYS: &[&str] = &["enabled", "pool_mib"];
 const MACHINE_KEYS: &[&str] = &["listen", "connect"];
 const NODE_KEYS: &[&str] = &["id", "run", "machine", "params", "inputs", "outputs", "restart"];
 const INPUT_KEYS: &[&str] = &["from", "feedback"];
@@ -75,6 +76,8 @@ pub(crate) struct RawGraph<'a> {
     pub queue: u32,
     /// Declared machines; empty when graph.yaml declares none.
     pub machines: Vec<RawMachine>,
+    /// `zenoh.shared_memory`, defaults filled in.
+    pub shared_memory: SharedMemory,
     pub nodes: Vec<RawNode<'a>>,
 }
 
@@ -100,7 +103,7 @@ pub(crate) fn read<'a>(root: &'a Node, p: &mut Problems) -> Option<RawGraph<'a>>
         .get("queue")
         .and_then(|n| shape::count(n, "`queue`", 1, p))
         .unwrap_or(Graph::DEFAULT_QUEUE);
-    let machines = top.get("zenoh").map(|n| read_zenoh(n, p)).unwrap_or_default();
+    let (machines, shared_memory) = top.get("zenoh").map(|n| read_zenoh(n, p)).unwrap_or_default();
     let nodes = match top.get("nodes") {
         Some(node) => read_nodes(node, p),
         None => {
@@ -116,6 +119,7 @@ pub(crate) fn read<'a>(root: &'a Node, p: &mut Problems) -> Option<RawGraph<'a>>
         window,
         queue,
         machines,
+        shared_memory,
         nodes,
     })
 }
@@ -157,11 +161,20 @@ fn read_record(node: &Node, p: &mut Problems) -> Option<RawRecord> {
     })
 }
 
-fn read_zenoh(node: &Node, p: &mut Problems) -> Vec<RawMachine> {
+/// The `zenoh:` section: declared machines (empty when none) and the shared-memory settings.
+fn read_zenoh(node: &Node, p: &mut Problems) -> (Vec<RawMachine>, SharedMemory) {
     let Some(zenoh) = shape::mapping(node, "`zenoh`", ZENOH_KEYS, p) else {
-        return Vec::new();
+        return Default::default();
     };
-    let Some(machines) = zenoh.get("machines") else {
+    let shm = zenoh
+        .get("shared_memory")
+        .map(|n| read_shared_memory(n, p))
+        .unwrap_or_default();
+    (read_machines(zenoh.get("machines"), p), shm)
+}
+
+fn read_machines(machines: Option<&Node>, p: &mut Problems) -> Vec<RawMachine> {
+    let Some(machines) = machines else {
         return Vec::new();
     };
     let Some(entries) = shape::entries(machines, "`zenoh.machines`", p) else {
@@ -174,6 +187,27 @@ fn read_zenoh(node: &Node, p: &mut Problems) -> Vec<RawMachine> {
         );
     }
     entries.iter().map(|e| read_machine(e, p)).collect()
+}
+
+/// `zenoh.shared_memory: { enabled: true, pool_mib: 64 }`, defaults for what is left out.
+fn read_shared_memory(section: &Node, p: &mut Problems) -> SharedMemory {
+    let mut shm = SharedMemory::default();
+    let Some(fields) = shape::mapping(section, "`zenoh.shared_memory`", SHARED_MEMORY_KEYS, p) else {
+        return shm;
+    };
+    if let Some(b) = fields
+        .get("enabled")
+        .and_then(|n| shape::boolean(n, "`zenoh.shared_memory.enabled`", p))
+    {
+        shm.enabled = b;
+    }
+    if let Some(n) = fields
+        .get("pool_mib")
+        .and_then(|n| shape::count(n, "`zenoh.shared_memory.pool_mib`", 1, p))
+    {
+        shm.pool_mib = n;
+    }
+    shm
 }
 
 fn read_machine(entry: &Entry, p: &mut Problems) -> RawMachine {

@@ -405,6 +405,37 @@ fn undeclared_machine() {
 }
 
 #[test]
+fn bad_shared_memory_settings() {
+    let lines = [
+        "name: z",
+        "zenoh:",
+        "  shared_memory: { enabled: yes-please, pool_mb: 64 }",
+        "nodes:",
+        "  - id: source",
+        "    run: evseg-source",
+    ];
+    let found = errors(&lines);
+    assert_eq!(found.len(), 2, "{found:?}");
+    let unknown = found.iter().find(|d| d.message.contains("unknown key `pool_mb`"));
+    let unknown = unknown.unwrap_or_else(|| panic!("{found:?}"));
+    assert!(unknown.message.contains("`pool_mib`"), "{}", unknown.message);
+    assert_eq!((unknown.line, unknown.column), (3, 41));
+    let enabled = found.iter().find(|d| d.message.contains("`zenoh.shared_memory.enabled`"));
+    let enabled = enabled.unwrap_or_else(|| panic!("{found:?}"));
+    assert_eq!((enabled.line, enabled.column), (3, 29));
+
+    let lines = [
+        "name: z",
+        "zenoh:",
+        "  shared_memory: { pool_mib: 0 }",
+        "nodes:",
+        "  - id: source",
+        "    run: evseg-source",
+    ];
+    single_error(&lines, 3, 30, &["`zenoh.shared_memory.pool_mib`", "at least 1"]);
+}
+
+#[test]
 fn bad_endpoint() {
     let lines = [
         "name: z",

@@ -3,7 +3,7 @@
 mod common;
 
 use common::{VALID, check, text};
-use evseg_graph::{Consumer, GraphError, Machine, Mode, Restart, Span, check_str};
+use evseg_graph::{Consumer, GraphError, Machine, Mode, Restart, SharedMemory, Span, check_str};
 use serde_json::json;
 
 #[test]
@@ -151,6 +151,44 @@ fn machines_in_declaration_order_and_default_first_machine() {
     assert_eq!(graph.node("source").unwrap().machine, "robot");
     let on_base: Vec<&str> = graph.nodes_on("base").iter().map(|n| n.id.as_str()).collect();
     assert_eq!(on_base, ["slicer"]);
+}
+
+#[test]
+fn shared_memory_defaults_and_settings() {
+    let graph = check(VALID).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(graph.shared_memory, SharedMemory::default());
+    assert!(graph.shared_memory.enabled);
+    // Defaults stay out of the canonical form, so older graphs hash as before.
+    let json = serde_json::to_value(&graph).unwrap();
+    assert!(json.get("shared_memory").is_none(), "{json}");
+
+    let lines = [
+        "name: z",
+        "zenoh:",
+        "  shared_memory: { enabled: false }",
+        "nodes:",
+        "  - id: source",
+        "    run: evseg-source",
+    ];
+    let graph = check(&lines).unwrap_or_else(|e| panic!("{e}"));
+    assert!(!graph.shared_memory.enabled);
+    assert_eq!(graph.shared_memory.pool_mib, SharedMemory::DEFAULT_POOL_MIB);
+    assert_eq!(graph.machines, [Machine::default_local()]);
+    let json = serde_json::to_value(&graph).unwrap();
+    assert_eq!(json["shared_memory"], json!({"enabled": false, "pool_mib": 64}));
+
+    let lines = [
+        "name: z",
+        "zenoh:",
+        "  shared_memory:",
+        "    pool_mib: 256",
+        "nodes:",
+        "  - id: source",
+        "    run: evseg-source",
+    ];
+    let graph = check(&lines).unwrap_or_else(|e| panic!("{e}"));
+    assert!(graph.shared_memory.enabled);
+    assert_eq!(graph.shared_memory.pool_mib, 256);
 }
 
 #[test]

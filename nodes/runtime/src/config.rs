@@ -30,6 +30,29 @@ pub struct ZenohSettings {
     /// Endpoints to listen on (peers only; empty for clients).
     #[serde(default)]
     pub listen: Vec<String>,
+    /// Shared memory for links to nodes on the same machine.
+    #[serde(default)]
+    pub shared_memory: ShmSettings,
+}
+
+/// Zenoh shared memory of one session: large messages to consumers on the same machine are
+/// placed in a pool of the session's own and only a reference crosses the socket.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ShmSettings {
+    /// Use shared memory where the consumer supports it.
+    pub enabled: bool,
+    /// Pool size, bytes. A message that does not fit at the moment goes over the socket.
+    pub pool_bytes: u64,
+}
+
+impl Default for ShmSettings {
+    /// Enabled, 64 MiB (the graph's default, see `evseg_graph::SharedMemory`).
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            pool_bytes: 64 << 20,
+        }
+    }
 }
 
 /// One consumer of an output: a node's input port.

@@ -49,6 +49,22 @@ pub fn open_session(z: &ZenohSettings) -> Result<zenoh::Session, RuntimeError> {
     // Keep retrying the connection to the router for a while instead of failing at once: the
     // launcher may still be binding its port.
     config.insert_json5("connect/timeout_ms", "10000").map_err(zerr)?;
+    let shm = &z.shared_memory;
+    config
+        .insert_json5("transport/shared_memory/enabled", &shm.enabled.to_string())
+        .map_err(zerr)?;
+    config
+        .insert_json5(
+            "transport/shared_memory/transport_optimization/enabled",
+            &shm.enabled.to_string(),
+        )
+        .map_err(zerr)?;
+    config
+        .insert_json5(
+            "transport/shared_memory/transport_optimization/pool_size",
+            &shm.pool_bytes.max(1).to_string(),
+        )
+        .map_err(zerr)?;
     config
         .insert_json5("connect/exit_on_failure", "true")
         .map_err(zerr)?;
