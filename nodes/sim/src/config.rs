@@ -30,9 +30,9 @@ pub struct RenderConfig {
     /// before the next key frame stay inside its thresholds by this margin (covers sub-pixel
     /// peaks and the slow change of texture filtering with distance).
     pub quiet_margin_log: f64,
-    /// Safety margin, log units, of the same test for pixels that keep their surface between
-    /// key frames, where the bound comes from the texture values along the pixel's path
-    /// (covers the small non-linearity of that path).
+    /// Safety margin, log units, of a test by texture bounds along the path of pixels that keep
+    /// their surface between key frames. Kept for configuration compatibility; unused since
+    /// such pixels are sampled along their whole path (cheaper than bounding it).
     pub path_margin_log: f64,
     /// Factor applied to the smallest background depth seen in the last key frame before it is
     /// used to bound image speeds.

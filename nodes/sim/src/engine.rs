@@ -5,23 +5,17 @@
 //! ray-cast every pixel. In between, every pixel gets one of three treatments:
 //!
 //! - **quiet**: it cannot cross a threshold during the interval, so it goes straight from `t0`
-//!   to `t1` (a firing there is counted as a violation, the events are kept). For a pixel that
-//!   keeps its surface, the bound is the range of texture values along its path between the
-//!   two key-frame texture coordinates (from a min/max pyramid of the texture) plus the
-//!   shading change, with `path_margin_log`. Otherwise (near edges) it is the range of both key
-//!   frames' log intensities within the distance any scene point travels in the interval, with
-//!   `quiet_margin_log`: whatever passes the pixel comes from that neighbourhood (brightness
-//!   constancy; content entering the view or uncovered is visible in the later key frame).
+//!   to `t1` (a firing there is counted as a violation, the events are kept). The bound is the
+//!   range of both key frames' log intensities within the distance any scene point travels in
+//!   the interval, with `quiet_margin_log` (plus the shading change of moving objects): whatever
+//!   passes the pixel comes from that neighbourhood (brightness constancy; content entering the
+//!   view or uncovered is visible in the later key frame).
 //! - **stable**: the pixel sees the same surface at both key frames and is not on an edge in
 //!   either, so its texture coordinates move smoothly; they are interpolated linearly between
 //!   the key frames and the texture is sampled at steps of at most `max_px_per_step` of this
-//!   pixel's own image motion (no ray casting). Grid points that provably stay strictly inside
-//!   the pixel's thresholds are skipped: from the last sample, the log intensity can change by
-//!   at most `rate * (fraction of the interval) + slack` (texture Lipschitz bound from a
-//!   pyramid of texel differences, times the texture-coordinate motion, plus the shading
-//!   change; `slack` covers the slowly changing mip level), and a window's value range from the
-//!   min/max pyramid may keep it inside. Skipped points could not fire and leave the reference
-//!   level unchanged, so the events are exactly those of sampling every grid point.
+//!   pixel's own image motion (no ray casting). All samples of a pixel are taken first (they
+//!   do not depend on its reference level, so they pipeline), and the threshold test runs only
+//!   when one of them reaches a threshold.
 //! - **unstable** (near a silhouette, crease or seam): ray cast at every render step with edge
 //!   supersampling.
 
@@ -105,16 +99,6 @@ struct DepthBlock {
     zmin: f64,
 }
 
-/// Safety margin, log units, of the exact sample skipping along stable paths (covers f32
-/// rounding of the interpolated samples; not a modelling parameter).
-const SKIP_EPS_LOG: f32 = 1e-4;
-
-/// Stable paths: a jump shorter than this many grid points from the whole-path bound tries
-/// the bound of the next `LOCAL_WINDOW` points (a cost/benefit choice, not a model parameter).
-const LOCAL_MIN_JUMP: usize = 3;
-/// Grid points covered by the local bound of a stable path.
-const LOCAL_WINDOW: usize = 8;
-
 const QUIET: u8 = 0;
 const STABLE: u8 = 1;
 const UNSTABLE: u8 = 2;
@@ -137,11 +121,6 @@ pub struct Engine {
     lo: Vec<f32>,
     hi: Vec<f32>,
     scratch: Vec<f32>,
-    /// Stable pixels: bound of |d(log intensity) / d(fraction of the interval)| along the
-    /// interpolated path, log units.
-    rate: Vec<f32>,
-    /// Stable pixels: bound of the change of log intensity from the changing mip level.
-    slack: Vec<f32>,
     blocks: Vec<DepthBlock>,
     zmin_bg: f64,
     last_dt: f64,
@@ -186,8 +165,6 @@ impl Engine {
             lo: vec![0.0; n],
             hi: vec![0.0; n],
             scratch: Vec::new(),
-            rate: vec![0.0; n],
-            slack: vec![0.0; n],
             blocks: Vec::new(),
             zmin_bg: 1.0,
             last_dt: cfg.render.max_step_s,
@@ -416,6 +393,7 @@ impl Engine {
         let mut violations = 0u64;
         let mut samples = 0u64;
         let mut fired = 0u64;
+        let mut path: Vec<f32> = Vec::new();
         let n = self.class.len();
         for i in 0..n {
             let (kf0, kf1) = (&self.kf0, &self.kf1);
@@ -449,69 +427,43 @@ impl Engine {
                     let disp = (du * du + dv * dv).sqrt() / size;
                     let m = ((disp / max_px).ceil() as usize).clamp(1, 4096);
                     let id = kf0.id[i];
-                    let mut l_prev = kf0.l[i];
-                    let mut t_prev = t0;
-                    let before = batch.len();
-                    // Samples j/m along the path; grid points that provably stay strictly
-                    // inside the thresholds (Lipschitz bound `rate`, plus `slack`) are skipped:
-                    // they could not fire, and the reference level does not change there.
-                    let (rate, slack) = (self.rate[i], self.slack[i] + SKIP_EPS_LOG);
                     let mf = m as f32;
-                    let mut j = 0usize;
-                    // No local bound is tried again before this grid index.
-                    let mut local_after = 0usize;
-                    while j < m {
-                        let r = self.reference[i];
-                        let room = (r + c_on - l_prev).min(l_prev - (r - c_off)) - slack;
-                        let mut jump = if room <= 0.0 {
-                            1
-                        } else if rate > 0.0 {
-                            ((room / rate * mf) as usize).max(1)
+                    // Log intensities at the grid points j/m, j = 1..m, of the interpolated
+                    // path (the last is the key frame's). They do not depend on the pixel's
+                    // reference level, so they are computed first, free of the serial chain of
+                    // the threshold test, and the test is skipped when none can reach a
+                    // threshold.
+                    let (u0, v0, fp0, dfp) = (
+                        kf0.u[i],
+                        kf0.v[i],
+                        kf0.footprint[i],
+                        kf1.footprint[i] - kf0.footprint[i],
+                    );
+                    path.clear();
+                    path.extend((1..m).map(|j| {
+                        let f = j as f32 / mf;
+                        tex.sample(u0 + f * du, v0 + f * dv, fp0 + f * dfp) + s0 + f * (s1 - s0)
+                    }));
+                    path.push(kf1.l[i]);
+                    samples += (m - 1) as u64;
+                    let l_start = kf0.l[i];
+                    let (lo, hi) = path
+                        .iter()
+                        .fold((l_start, l_start), |(lo, hi), &l| (lo.min(l), hi.max(l)));
+                    let r = self.reference[i];
+                    if hi < r + c_on && lo > r - c_off {
+                        // Strictly inside both thresholds: no crossing, reference unchanged.
+                        continue;
+                    }
+                    let before = batch.len();
+                    let (mut l_prev, mut t_prev) = (l_start, t0);
+                    for (j, &l) in path.iter().enumerate() {
+                        let next = j + 1;
+                        let t = if next == m {
+                            t1
                         } else {
-                            m
+                            t0 + (t1 - t0) * (next as f32 / mf) as f64
                         };
-                        if jump < LOCAL_MIN_JUMP && j >= local_after && m - j > LOCAL_MIN_JUMP {
-                            // Bounds of the next few grid points only (smaller texture region).
-                            let w = (m - j).min(LOCAL_WINDOW);
-                            let (fa, fb) = (j as f32 / mf, (j + w) as f32 / mf);
-                            let b = tex.path_bounds(
-                                kf0.u[i] + fa * du,
-                                kf0.v[i] + fa * dv,
-                                kf0.u[i] + fb * du,
-                                kf0.v[i] + fb * dv,
-                                kf0.footprint[i].max(kf1.footprint[i]),
-                            );
-                            let (sa, sb) = (s0 + fa * (s1 - s0), s0 + fb * (s1 - s0));
-                            let inside = b.hi + sa.max(sb) + SKIP_EPS_LOG < r + c_on
-                                && b.lo + sa.min(sb) - SKIP_EPS_LOG > r - c_off;
-                            let local_rate = b.grad_per_m * (du * du + dv * dv).sqrt() + (s1 - s0).abs();
-                            jump = if inside {
-                                w
-                            } else if room > 0.0 && local_rate > 0.0 {
-                                ((room / local_rate * mf) as usize).clamp(1, w)
-                            } else {
-                                1
-                            };
-                            if jump < LOCAL_MIN_JUMP {
-                                local_after = j + w / 2;
-                            }
-                        }
-                        let next = (j + jump).min(m);
-                        let f = next as f32 / mf;
-                        let t = if next == m { t1 } else { t0 + (t1 - t0) * f as f64 };
-                        let l = if next == m {
-                            kf1.l[i]
-                        } else {
-                            samples += 1;
-                            let fp = kf0.footprint[i] + f * (kf1.footprint[i] - kf0.footprint[i]);
-                            tex.sample(kf0.u[i] + f * du, kf0.v[i] + f * dv, fp) + s0 + f * (s1 - s0)
-                        };
-                        j = next;
-                        if jump > 1 {
-                            l_prev = l;
-                            t_prev = t;
-                            continue;
-                        }
                         fire_segment(
                             &ctx,
                             &mut self.reference[i],
@@ -638,7 +590,7 @@ impl Engine {
         }
         filters::window_min_max_in_place(&mut self.lo, &mut self.hi, w, h, radius, &mut self.scratch);
         let margin = cfg.render.quiet_margin_log as f32;
-        let path_margin = cfg.render.path_margin_log as f32;
+        let (on, off) = (&self.thresholds.on, &self.thresholds.off);
         for i in 0..w * h {
             let m = margin
                 + if kf0.id[i] != 0 || kf1.id[i] != 0 {
@@ -647,30 +599,14 @@ impl Engine {
                     0.0
                 };
             let r = self.reference[i];
-            let quiet =
-                self.hi[i] + m < r + self.thresholds.on[i] && self.lo[i] - m > r - self.thresholds.off[i];
+            let quiet = self.hi[i] + m < r + on[i] && self.lo[i] - m > r - off[i];
             let same = kf0.key[i] == kf1.key[i] && !kf0.edge[i] && !kf1.edge[i] && kf0.key[i] != u16::MAX;
+            // Stable pixels are sampled along their whole path (see `advance`): a bound of the
+            // texture along the path would cost more than the samples it could save.
             self.class[i] = if quiet {
                 QUIET
             } else if same {
-                // The pixel's path over the texture is known: bound its intensities directly.
-                let key = kf0.key[i] as usize;
-                let tex = &self.scene.textures[self.scene.key_texture[key]];
-                let (fp0, fp1) = (kf0.footprint[i], kf1.footprint[i]);
-                let b = tex.path_bounds(kf0.u[i], kf0.v[i], kf1.u[i], kf1.v[i], fp0.max(fp1));
-                let (s0, s1) = (kf0.geom.shade_by_key[key], kf1.geom.shade_by_key[key]);
-                let (lo, hi) = (b.lo + s0.min(s1), b.hi + s0.max(s1));
-                let quiet_path = hi + path_margin < r + self.thresholds.on[i]
-                    && lo - path_margin > r - self.thresholds.off[i];
-                if quiet_path {
-                    QUIET
-                } else {
-                    // Bounds for skipping samples along the interpolated path (see `advance`).
-                    let (du, dv) = (kf1.u[i] - kf0.u[i], kf1.v[i] - kf0.v[i]);
-                    self.rate[i] = b.grad_per_m * (du * du + dv * dv).sqrt() + (s1 - s0).abs();
-                    self.slack[i] = (tex.lod(fp1) - tex.lod(fp0)).abs() * (b.hi - b.lo);
-                    STABLE
-                }
+                STABLE
             } else {
                 UNSTABLE
             };

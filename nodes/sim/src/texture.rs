@@ -100,10 +100,8 @@ impl TextureConfig {
 /// A baked, mip-mapped texture of log intensities.
 #[derive(Debug, Clone)]
 pub struct Texture {
-    levels: Vec<Vec<f32>>,
-    sizes: Vec<u32>,
-    /// Texels per metre of each level.
-    scales: Vec<f32>,
+    /// Mip levels, finest first.
+    mips: Vec<MipLevel>,
     inv_texel: f32,
     max_level: f32,
     /// Per level k: min and max of the level-0 texels in each aligned 2^k x 2^k cell.
@@ -113,6 +111,26 @@ pub struct Texture {
     /// either axis in each aligned 2^k x 2^k cell (cells include the differences to their
     /// right and lower neighbours, wrapping).
     grad_max: Vec<Vec<f32>>,
+}
+
+/// One mip level: a square, periodic image of log intensities.
+#[derive(Debug, Clone)]
+struct MipLevel {
+    /// Texels, row-major.
+    data: Vec<f32>,
+    /// Texels per side (a power of two).
+    size: u32,
+    /// Texels per metre.
+    scale: f32,
+}
+
+/// `floor(x)` as an integer and `x - floor(x)` (valid for |x| < 2^31; the same values as
+/// `floor_fast`, with one float-to-integer conversion).
+#[inline(always)]
+fn floor_split(x: f32) -> (i32, f32) {
+    let t = x as i32;
+    let i = t - i32::from((t as f32) > x);
+    (i, x - i as f32)
 }
 
 /// Bounds of a texture along a straight path of surface coordinates (see
@@ -195,9 +213,6 @@ impl Texture {
         }
         let max_level = (levels.len() - 1) as f32;
         let inv_texel = (1.0 / cfg.texel_m) as f32;
-        let scales = (0..levels.len())
-            .map(|k| inv_texel / (1u32 << k) as f32)
-            .collect();
         let mut range_min = vec![levels[0].clone()];
         let mut range_max = vec![levels[0].clone()];
         let mut m = cfg.size as usize;
@@ -223,10 +238,18 @@ impl Texture {
             m = h;
         }
         let grad_max = Self::gradient_pyramid(&levels[0], cfg.size as usize);
+        let mips = levels
+            .into_iter()
+            .zip(sizes)
+            .enumerate()
+            .map(|(k, (data, size))| MipLevel {
+                data,
+                size,
+                scale: inv_texel / (1u32 << k) as f32,
+            })
+            .collect();
         Self {
-            levels,
-            sizes,
-            scales,
+            mips,
             inv_texel,
             max_level,
             range_min,
@@ -362,21 +385,17 @@ impl Texture {
         out
     }
 
-    #[inline]
+    #[inline(always)]
     fn bilinear(&self, level: usize, u: f32, v: f32) -> f32 {
-        let size = self.sizes[level];
-        let mask = size - 1;
-        let scale = self.scales[level];
-        let fu = u * scale - 0.5;
-        let fv = v * scale - 0.5;
-        let iu = floor_fast(fu);
-        let iv = floor_fast(fv);
-        let (a, b) = (fu - iu, fv - iv);
-        let x0 = (iu as i32 as u32) & mask;
-        let y0 = (iv as i32 as u32) & mask;
+        let m = &self.mips[level];
+        let (size, mask) = (m.size, m.size - 1);
+        let (iu, a) = floor_split(u * m.scale - 0.5);
+        let (iv, b) = floor_split(v * m.scale - 0.5);
+        let x0 = (iu as u32) & mask;
+        let y0 = (iv as u32) & mask;
         let x1 = (x0 + 1) & mask;
         let y1 = (y0 + 1) & mask;
-        let d = &self.levels[level];
+        let d = &m.data[..];
         let (r0, r1) = ((y0 * size) as usize, (y1 * size) as usize);
         let top = d[r0 + x0 as usize] + a * (d[r0 + x1 as usize] - d[r0 + x0 as usize]);
         let bot = d[r1 + x0 as usize] + a * (d[r1 + x1 as usize] - d[r1 + x0 as usize]);
@@ -442,7 +461,7 @@ impl Texture {
         let extent = (a1 - a0).max(b1 - b0).max(1.0);
         // Cells of 2^k texels with 2 * 2^k >= extent: the rectangle touches at most 3 x 3.
         let k = ((fast_log2(extent).ceil() as usize).saturating_sub(1)).min(self.range_min.len() - 1);
-        let n = (self.sizes[0] >> k).max(1);
+        let n = (self.mips[0].size >> k).max(1);
         let grad = |g: f32| g * s * std::f32::consts::SQRT_2;
         if n <= 3 {
             let last = self.range_min.len() - 1;
@@ -476,7 +495,7 @@ impl Texture {
 
     /// The coarsest level's mean, i.e. the texture's average log intensity.
     pub fn mean(&self) -> f32 {
-        let last = &self.levels[self.levels.len() - 1];
+        let last = &self.mips[self.mips.len() - 1].data;
         last.iter().sum::<f32>() / last.len() as f32
     }
 }
@@ -532,8 +551,8 @@ mod tests {
             let m = t.mean();
             assert!((t.sample(0.3, 0.1, 10.0) - m).abs() < 0.5, "{p:?}");
             // Contrast: level 0 spans a real range.
-            let lo = t.levels[0].iter().cloned().fold(f32::MAX, f32::min);
-            let hi = t.levels[0].iter().cloned().fold(f32::MIN, f32::max);
+            let lo = t.mips[0].data.iter().cloned().fold(f32::MAX, f32::min);
+            let hi = t.mips[0].data.iter().cloned().fold(f32::MIN, f32::max);
             assert!(hi - lo > 0.3, "{p:?}: range {lo}..{hi}");
         }
         // Range bounds hold every sample inside the rectangle.
