@@ -346,9 +346,16 @@ impl Engine {
                 if kf.edge[i] {
                     let r = &self.rays;
                     let (x, y) = ((i % w) as i32, (i / w) as i32);
-                    kf.l[i] = kf
-                        .geom
-                        .supersample(&self.scene, r.x[i], r.y[i], r.d_du[i], r.d_dv[i], x, y);
+                    kf.l[i] = kf.geom.edge_sample(
+                        &self.scene,
+                        r.x[i],
+                        r.y[i],
+                        r.d_du[i],
+                        r.d_dv[i],
+                        x,
+                        y,
+                        (kf.l[i], kf.key[i]),
+                    );
                     self.stats.supersampled += 1;
                 }
             }

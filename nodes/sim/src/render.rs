@@ -23,6 +23,8 @@ const FACE_OFFSET: [[f32; 2]; 6] = [
     [0.59, 0.29],
     [0.97, 0.77],
 ];
+/// Offsets (px, along the row and down the column) of the 2x2 edge sub-samples.
+const SUBSAMPLES: [(f32, f32); 4] = [(-0.25, -0.25), (0.25, -0.25), (-0.25, 0.25), (0.25, 0.25)];
 /// Smallest cosine of incidence used for the texture footprint (caps the blur at grazing view).
 const MIN_COS: f32 = 0.25;
 
@@ -43,6 +45,37 @@ pub struct Hit {
     pub v: f32,
     /// Pixel footprint on the surface, m (selects the mip level).
     pub footprint: f32,
+}
+
+/// Which surface a ray hits (see [`FrameGeom::locate`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Surface {
+    /// Nothing (the ray leaves the scene).
+    Nothing,
+    /// Background plane, by index in the frame's plane list.
+    Plane(usize),
+    /// Box face, by index in the frame's (visible) box list.
+    Box {
+        /// Index in the frame's visible box list.
+        index: usize,
+        /// Face 0..6 (axis `face / 2`, negative side for even faces).
+        face: usize,
+        /// Ray direction in box coordinates.
+        db: [f32; 3],
+    },
+}
+
+/// The nearest surface on a ray, before texturing.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Located {
+    /// The surface.
+    pub surface: Surface,
+    /// Surface key (plane index, or box face key); `u16::MAX` when nothing was hit.
+    pub key: u16,
+    /// Object id (0 = background).
+    pub id: u16,
+    /// Depth along the optical axis, m (infinite when nothing was hit).
+    pub z: f32,
 }
 
 #[derive(Debug, Clone)]
@@ -184,6 +217,13 @@ impl FrameGeom {
     /// the search to surfaces of one object id (background planes and boxes for 0).
     #[inline]
     pub fn cast(&self, scene: &Scene, x: f32, y: f32, px: i32, py: i32, only: Option<u16>) -> Hit {
+        self.shade(scene, x, y, &self.locate(x, y, px, py, only))
+    }
+
+    /// The nearest surface on the ray through undistorted normalized `(x, y)` of pixel
+    /// `(px, py)` (geometry only, no texture sample); `only` as in [`FrameGeom::cast`].
+    #[inline]
+    pub fn locate(&self, x: f32, y: f32, px: i32, py: i32, only: Option<u16>) -> Located {
         let mut best_inv = 0.0f32;
         let mut best_plane = usize::MAX;
         if only.is_none_or(|id| id == 0) {
@@ -236,33 +276,63 @@ impl FrameGeom {
                 box_db = db;
             }
         }
-        let dn = (x * x + y * y + 1.0).sqrt();
         if best_box != usize::MAX {
             let b = &self.boxes[best_box];
-            let axis = box_face / 2;
-            let hp = [
-                b.o_b[0] + s * box_db[0],
-                b.o_b[1] + s * box_db[1],
-                b.o_b[2] + s * box_db[2],
-            ];
-            let (j, k) = ((axis + 1) % 3, (axis + 2) % 3);
-            let cos = (box_db[axis].abs() / dn).max(MIN_COS);
-            let footprint = s * self.inv_f / cos;
-            let off = FACE_OFFSET[box_face];
-            let (u, v) = (hp[j] + off[0], hp[k] + off[1]);
-            let l = scene.textures[b.tex].sample(u, v, footprint) + b.ln_shade[box_face];
-            return Hit {
-                l,
+            Located {
+                surface: Surface::Box {
+                    index: best_box,
+                    face: box_face,
+                    db: box_db,
+                },
                 key: b.key_base + box_face as u16,
                 id: b.id,
                 z: s,
-                u,
-                v,
-                footprint,
-            };
+            }
+        } else if best_plane == usize::MAX {
+            Located {
+                surface: Surface::Nothing,
+                key: u16::MAX,
+                id: 0,
+                z: f32::INFINITY,
+            }
+        } else {
+            Located {
+                surface: Surface::Plane(best_plane),
+                key: self.planes[best_plane].key,
+                id: 0,
+                z: s,
+            }
         }
-        if best_plane == usize::MAX {
-            return Hit {
+    }
+
+    /// Texture coordinates, footprint and log intensity of the surface `loc` found by
+    /// [`FrameGeom::locate`] on the ray `(x, y)`.
+    #[inline]
+    pub fn shade(&self, scene: &Scene, x: f32, y: f32, loc: &Located) -> Hit {
+        let dn = (x * x + y * y + 1.0).sqrt();
+        let s = loc.z;
+        match loc.surface {
+            Surface::Box { index, face, db } => {
+                let b = &self.boxes[index];
+                let axis = face / 2;
+                let hp = [b.o_b[0] + s * db[0], b.o_b[1] + s * db[1], b.o_b[2] + s * db[2]];
+                let (j, k) = ((axis + 1) % 3, (axis + 2) % 3);
+                let cos = (db[axis].abs() / dn).max(MIN_COS);
+                let footprint = s * self.inv_f / cos;
+                let off = FACE_OFFSET[face];
+                let (u, v) = (hp[j] + off[0], hp[k] + off[1]);
+                let l = scene.textures[b.tex].sample(u, v, footprint) + b.ln_shade[face];
+                Hit {
+                    l,
+                    key: loc.key,
+                    id: loc.id,
+                    z: s,
+                    u,
+                    v,
+                    footprint,
+                }
+            }
+            Surface::Nothing => Hit {
                 l: 0.0,
                 key: u16::MAX,
                 id: 0,
@@ -270,22 +340,24 @@ impl FrameGeom {
                 u: 0.0,
                 v: 0.0,
                 footprint: 1.0,
-            };
-        }
-        let p = &self.planes[best_plane];
-        let u = s * dot3(&p.e1, x, y) + p.off1;
-        let v = s * dot3(&p.e2, x, y) + p.off2;
-        let cos = (dot3(&p.n, x, y).abs() / dn).max(MIN_COS);
-        let footprint = s * self.inv_f / cos;
-        let l = scene.textures[p.tex].sample(u, v, footprint) + p.ln_shade;
-        Hit {
-            l,
-            key: p.key,
-            id: 0,
-            z: s,
-            u,
-            v,
-            footprint,
+            },
+            Surface::Plane(index) => {
+                let p = &self.planes[index];
+                let u = s * dot3(&p.e1, x, y) + p.off1;
+                let v = s * dot3(&p.e2, x, y) + p.off2;
+                let cos = (dot3(&p.n, x, y).abs() / dn).max(MIN_COS);
+                let footprint = s * self.inv_f / cos;
+                let l = scene.textures[p.tex].sample(u, v, footprint) + p.ln_shade;
+                Hit {
+                    l,
+                    key: p.key,
+                    id: 0,
+                    z: s,
+                    u,
+                    v,
+                    footprint,
+                }
+            }
         }
     }
 
@@ -303,10 +375,41 @@ impl FrameGeom {
         py: i32,
     ) -> f32 {
         let mut acc = 0.0f32;
-        for (ou, ov) in [(-0.25f32, -0.25f32), (0.25, -0.25), (-0.25, 0.25), (0.25, 0.25)] {
+        for (ou, ov) in SUBSAMPLES {
             let sx = x + ou * du[0] + ov * dv[0];
             let sy = y + ou * du[1] + ov * dv[1];
             acc += self.cast(scene, sx, sy, px, py, None).l.exp();
+        }
+        (0.25 * acc).ln()
+    }
+
+    /// Log intensity of an edge pixel `(px, py)` whose centre ray `(x, y)` hit `centre`: the
+    /// 2x2 sub-samples of [`FrameGeom::supersample`] when they do not all see the centre's
+    /// surface, else the centre's value. Sub-samples on one surface differ from the centre only
+    /// by texture detail finer than the pixel (which the mip-mapped texture already averages),
+    /// so only geometric edges inside the sub-sample square are anti-aliased, and their
+    /// sub-rays are located first and textured only then.
+    #[allow(clippy::too_many_arguments)]
+    #[inline]
+    pub fn edge_sample(
+        &self,
+        scene: &Scene,
+        x: f32,
+        y: f32,
+        du: [f32; 2],
+        dv: [f32; 2],
+        px: i32,
+        py: i32,
+        centre: (f32, u16),
+    ) -> f32 {
+        let rays = SUBSAMPLES.map(|(ou, ov)| (x + ou * du[0] + ov * dv[0], y + ou * du[1] + ov * dv[1]));
+        let found = rays.map(|(sx, sy)| self.locate(sx, sy, px, py, None));
+        if found.iter().all(|f| f.key == centre.1) {
+            return centre.0;
+        }
+        let mut acc = 0.0f32;
+        for ((sx, sy), f) in rays.iter().zip(&found) {
+            acc += self.shade(scene, *sx, *sy, f).l.exp();
         }
         (0.25 * acc).ln()
     }
@@ -316,7 +419,7 @@ impl FrameGeom {
     #[allow(clippy::too_many_arguments)]
     pub fn flow(
         &self,
-        scene: &Scene,
+        _scene: &Scene,
         cam: &CameraConfig,
         x: f32,
         y: f32,
@@ -324,7 +427,7 @@ impl FrameGeom {
         py: i32,
         id: u16,
     ) -> Option<(f64, f64)> {
-        let hit = self.cast(scene, x, y, px, py, Some(id));
+        let hit = self.locate(x, y, px, py, Some(id));
         if !hit.z.is_finite() || hit.key == u16::MAX {
             return None;
         }

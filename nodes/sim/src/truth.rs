@@ -34,7 +34,7 @@ pub fn object_poses(t: f64, scene: &Scene, cam: &RigidState, out: &mut Vec<Objec
 }
 
 /// Object id of the nearest surface at every pixel centre (0 = background), row-major.
-pub fn mask(scene: &Scene, rays: &Rays, geom: &FrameGeom) -> Mask {
+pub fn mask(_scene: &Scene, rays: &Rays, geom: &FrameGeom) -> Mask {
     let (w, h) = (rays.width, rays.height);
     let mut ids = vec![0u16; w * h];
     let boxes: Vec<[i32; 4]> = geom.object_bboxes().map(|(_, bb)| bb).collect();
@@ -48,7 +48,7 @@ pub fn mask(scene: &Scene, rays: &Rays, geom: &FrameGeom) -> Mask {
                 continue;
             }
             let i = v * w + u;
-            *id = geom.cast(scene, rays.x[i], rays.y[i], ui, vi, None).id;
+            *id = geom.locate(rays.x[i], rays.y[i], ui, vi, None).id;
         }
     }
     Mask {

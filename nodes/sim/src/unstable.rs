@@ -164,7 +164,7 @@ impl UnstableList {
                 .any(|&nb| nb != NONE && self.key[nb as usize] != k);
             if edge {
                 let i = self.pixel[j] as usize;
-                self.l[j] = geom.supersample(
+                self.l[j] = geom.edge_sample(
                     scene,
                     self.x[j],
                     self.y[j],
@@ -172,6 +172,7 @@ impl UnstableList {
                     self.d_dv[j],
                     (i % w) as i32,
                     (i / w) as i32,
+                    (self.l[j], k),
                 );
                 count += 1;
             }
