@@ -99,6 +99,13 @@ struct DepthBlock {
     zmin: f64,
 }
 
+/// Rounding allowance, log units, of bounds of interpolated texture samples (f32 rounding of
+/// the blends; not a modelling parameter).
+const SAMPLE_EPS_LOG: f32 = 1e-4;
+/// Largest texel span per axis of a stable path bounded by its texels before sampling (a
+/// cost choice: 16 texel reads cost less than the samples they usually save).
+const PATH_RANGE_TEXELS: u32 = 4;
+
 const QUIET: u8 = 0;
 const STABLE: u8 = 1;
 const UNSTABLE: u8 = 2;
@@ -446,18 +453,30 @@ impl Engine {
                         kf0.footprint[i],
                         kf1.footprint[i] - kf0.footprint[i],
                     );
-                    path.clear();
-                    path.extend((1..m).map(|j| {
-                        let f = j as f32 / mf;
-                        tex.sample(u0 + f * du, v0 + f * dv, fp0 + f * dfp) + s0 + f * (s1 - s0)
-                    }));
+                    let r = self.reference[i];
+                    // Exact shortcut: when the texels under the whole path keep every sample
+                    // strictly inside the thresholds, none can fire and the reference stays.
+                    let fp1 = fp0 + dfp;
+                    if let Some((lo, hi)) = tex.path_range(
+                        u0,
+                        v0,
+                        u0 + du,
+                        v0 + dv,
+                        fp0.min(fp1),
+                        fp0.max(fp1),
+                        PATH_RANGE_TEXELS,
+                    ) && hi + s0.max(s1) + SAMPLE_EPS_LOG < r + c_on
+                        && lo + s0.min(s1) - SAMPLE_EPS_LOG > r - c_off
+                    {
+                        continue;
+                    }
+                    tex.sample_path([u0, v0, fp0, s0], [du, dv, dfp, s1 - s0], m, &mut path);
                     path.push(kf1.l[i]);
                     samples += (m - 1) as u64;
                     let l_start = kf0.l[i];
                     let (lo, hi) = path
                         .iter()
                         .fold((l_start, l_start), |(lo, hi), &l| (lo.min(l), hi.max(l)));
-                    let r = self.reference[i];
                     if hi < r + c_on && lo > r - c_off {
                         // Strictly inside both thresholds: no crossing, reference unchanged.
                         continue;

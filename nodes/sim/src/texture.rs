@@ -420,6 +420,79 @@ impl Texture {
         a + f * (b - a)
     }
 
+    /// Samples at `j / m` for `j = 1..m` (exclusive) of the straight path from `start` to
+    /// `start + delta`, replacing `out`. Both hold `[u (m), v (m), footprint (m), offset (log
+    /// units)]`; each sample is `sample(u, v, footprint) + offset` at the interpolated values.
+    #[inline(never)]
+    pub fn sample_path(&self, start: [f32; 4], delta: [f32; 4], m: usize, out: &mut Vec<f32>) {
+        out.clear();
+        let mf = m as f32;
+        out.resize(m.saturating_sub(1), 0.0);
+        for (j, o) in out.iter_mut().enumerate() {
+            let f = (j + 1) as f32 / mf;
+            *o = self.sample(
+                start[0] + f * delta[0],
+                start[1] + f * delta[1],
+                start[2] + f * delta[2],
+            ) + start[3]
+                + f * delta[3];
+        }
+    }
+
+    /// Bounds `(min, max)` of every value [`Texture::sample`] returns on the straight path
+    /// from `(u0, v0)` to `(u1, v1)` (m) with footprints between `fp_min` and `fp_max` (m),
+    /// when the bilinear taps of every level those footprints blend span at most `max_texels`
+    /// texels per axis (else `None`): the extremes of those texels. A bilinear sample is a
+    /// convex blend of its four texels and a trilinear one of two bilinear samples, so this
+    /// holds up to f32 rounding (callers add an allowance).
+    #[inline]
+    #[allow(clippy::too_many_arguments)]
+    pub fn path_range(
+        &self,
+        u0: f32,
+        v0: f32,
+        u1: f32,
+        v1: f32,
+        fp_min: f32,
+        fp_max: f32,
+        max_texels: u32,
+    ) -> Option<(f32, f32)> {
+        let (lod_lo, lod_hi) = (self.lod(fp_min), self.lod(fp_max));
+        if !(lod_lo.is_finite() && lod_hi.is_finite()) {
+            return None;
+        }
+        let first = lod_lo as usize;
+        let last = if lod_hi <= 0.0 {
+            0
+        } else {
+            (lod_hi as usize + 1).min(self.mips.len() - 1)
+        };
+        let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+        for m in &self.mips[first..=last] {
+            let (fu0, fu1) = (u0 * m.scale - 0.5, u1 * m.scale - 0.5);
+            let (fv0, fv1) = (v0 * m.scale - 0.5, v1 * m.scale - 0.5);
+            let (x0, _) = floor_split(fu0.min(fu1));
+            let (x1, _) = floor_split(fu0.max(fu1));
+            let (y0, _) = floor_split(fv0.min(fv1));
+            let (y1, _) = floor_split(fv0.max(fv1));
+            // Taps reach one texel past the floor on either axis.
+            let (nx, ny) = ((x1 - x0 + 2) as u32, (y1 - y0 + 2) as u32);
+            if nx > max_texels || ny > max_texels {
+                return None;
+            }
+            let mask = m.size - 1;
+            for dy in 0..ny {
+                let row = (((y0 as u32).wrapping_add(dy) & mask) * m.size) as usize;
+                for dx in 0..nx {
+                    let t = m.data[row + ((x0 as u32).wrapping_add(dx) & mask) as usize];
+                    lo = lo.min(t);
+                    hi = hi.max(t);
+                }
+            }
+        }
+        Some((lo, hi))
+    }
+
     /// Bounds `(min, max)` of every value [`Texture::sample`] can return at points of the
     /// rectangle spanned by `(u0, v0)` and `(u1, v1)` (m) with footprints up to `footprint_m`.
     #[inline]
@@ -638,6 +711,44 @@ mod tests {
             // The bounds are local: most short paths see much less than the texture's range.
             assert!(tight > 40, "{p:?}: only {tight} tight ranges");
         }
+    }
+
+    #[test]
+    fn path_range_holds_every_sample_along_the_path() {
+        // Paths across levels 0..3, with footprints changing along the path.
+        let t = Texture::bake(
+            &cfg(Pattern::Blobs {
+                per_m2: 30.0,
+                radius_m: 0.05,
+            }),
+            5,
+            0.01,
+        );
+        let mut rng = Rng::new(7, 2);
+        let (mut bounded, mut tight) = (0usize, 0usize);
+        for _ in 0..2000 {
+            let (u0, v0) = (rng.range(-1.0, 1.0) as f32, rng.range(-1.0, 1.0) as f32);
+            let (du, dv) = (rng.range(-0.03, 0.03) as f32, rng.range(-0.03, 0.03) as f32);
+            let fp0 = [0.002f32, 0.008, 0.015, 0.05][rng.below(4) as usize];
+            let fp1 = fp0 * rng.range(0.8, 1.25) as f32;
+            let Some((lo, hi)) = t.path_range(u0, v0, u0 + du, v0 + dv, fp0.min(fp1), fp0.max(fp1), 4) else {
+                continue;
+            };
+            bounded += 1;
+            let mut out = Vec::new();
+            t.sample_path([u0, v0, fp0, 0.0], [du, dv, fp1 - fp0, 0.0], 40, &mut out);
+            out.push(t.sample(u0, v0, fp0));
+            out.push(t.sample(u0 + du, v0 + dv, fp1));
+            for s in out {
+                assert!(s >= lo - 1e-5 && s <= hi + 1e-5, "{s} outside {lo}..{hi}");
+            }
+            tight += usize::from(hi - lo < 0.3);
+        }
+        // Most short paths are bounded, and the bounds are local.
+        assert!(
+            bounded > 1000 && tight > bounded / 4,
+            "{bounded} bounded, {tight} tight"
+        );
     }
 
     #[test]
