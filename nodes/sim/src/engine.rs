@@ -23,6 +23,7 @@ use crate::camera::{CameraConfig, Rays};
 use crate::config::SceneConfig;
 use crate::esim::{self, NoiseSource, Thresholds};
 use crate::filters;
+use crate::local_speed::{self, LocalSpeed};
 use crate::render::FrameGeom;
 use crate::scene::{self, Scene};
 use crate::unstable::{PixelState, UnstableList};
@@ -97,6 +98,8 @@ struct DepthBlock {
     rot_margin: f64,
     /// Smallest background depth in the block, m (infinite if none).
     zmin: f64,
+    /// The same at the key frame before.
+    zmin_prev: f64,
 }
 
 /// Rounding allowance, log units, of bounds of interpolated texture samples (f32 rounding of
@@ -229,6 +232,87 @@ impl Engine {
         s * c.fx.max(c.fy) * self.rays.max_jacobian
     }
 
+    /// Local image-speed bounds (px/s, with `speed_safety`) over an interval rendered at
+    /// `geoms` (see [`local_speed`]): per block the background's from the smaller of the last
+    /// two key frames' depths of the 3 x 3 blocks around it, maxed over 3 x 3 blocks; every
+    /// moving object's from a ball around its centre, over the union of its pixel bounding
+    /// boxes.
+    fn local_speeds(&self, cfg: &SceneConfig, geoms: &[FrameGeom]) -> LocalSpeed {
+        let (w, h) = (self.rays.width, self.rays.height);
+        let (bw, bh) = (w.div_ceil(BLOCK), h.div_ceil(BLOCK));
+        let c = &cfg.camera;
+        let to_px = c.fx.max(c.fy) * self.rays.max_jacobian * cfg.render.speed_safety;
+        let zb: Vec<f64> = self
+            .blocks
+            .iter()
+            .map(|b| {
+                let z = b.zmin.min(b.zmin_prev);
+                if z.is_finite() {
+                    z.min(self.zmin_bg * 4.0)
+                } else {
+                    self.zmin_bg
+                }
+            })
+            .collect();
+        let around = |v: &[f64], i: usize, pick: fn(f64, f64) -> f64, init: f64| {
+            let (bx, by) = (i % bw, i / bw);
+            let mut r = init;
+            for y in by.saturating_sub(1)..(by + 2).min(bh) {
+                for x in bx.saturating_sub(1)..(bx + 2).min(bw) {
+                    r = pick(r, v[y * bw + x]);
+                }
+            }
+            r
+        };
+        let safety = cfg.render.depth_safety;
+        let z3: Vec<f64> = (0..bw * bh)
+            .map(|i| around(&zb, i, f64::min, f64::INFINITY) * safety)
+            .collect();
+        let mut own = vec![0.0f64; bw * bh];
+        for g in geoms {
+            let bg = &g.motions[0];
+            for (i, b) in self.blocks.iter().enumerate() {
+                let (rot, trans) = bg.flow_parts(b.x, b.y);
+                own[i] = own[i].max(rot * b.rot_margin + trans / z3[i]);
+            }
+        }
+        let background = (0..bw * bh)
+            .map(|i| (around(&own, i, f64::max, 0.0) * to_px) as f32)
+            .collect();
+        let r_max = self.rays.max_abs_x.hypot(self.rays.max_abs_y);
+        let mut objects = Vec::new();
+        for b in self.scene.boxes.iter().filter(|b| b.id != 0) {
+            let mut bbox: Option<[i32; 4]> = None;
+            let mut speed = 0.0f64;
+            for g in geoms {
+                let Some((_, bb)) = g.object_bboxes().find(|(id, _)| *id == b.id) else {
+                    continue;
+                };
+                bbox = Some(bbox.map_or(bb, |a| {
+                    [a[0].min(bb[0]), a[1].min(bb[1]), a[2].max(bb[2]), a[3].max(bb[3])]
+                }));
+                let bs = b.trajectory.state(g.t);
+                let pose = scene::BoxPose::new(&g.cam, &bs);
+                let zmin = pose
+                    .corners(b.half)
+                    .iter()
+                    .map(|c| c[2])
+                    .fold(f64::INFINITY, f64::min);
+                let m = scene::RelativeMotion::new(&g.cam, Some(&bs));
+                speed = speed.max(m.speed_bound_ball(pose.center, math::norm(b.half), zmin.max(0.1), r_max));
+            }
+            if let Some(bb) = bbox {
+                objects.push((bb, (speed * to_px) as f32));
+            }
+        }
+        LocalSpeed {
+            blocks_x: bw,
+            block: BLOCK,
+            background,
+            objects,
+        }
+    }
+
     /// Render times of the next interval and the bound (px) of how far any scene point moves.
     fn plan(&mut self, cfg: &SceneConfig) -> (Vec<f64>, f64) {
         let r = &cfg.render;
@@ -298,6 +382,7 @@ impl Engine {
                         y,
                         rot_margin,
                         zmin: f64::INFINITY,
+                        zmin_prev: f64::INFINITY,
                     });
                 }
             }
@@ -332,6 +417,7 @@ impl Engine {
         }
         let mut zmin = f32::INFINITY;
         for (b, z) in self.blocks.iter_mut().zip(&block_z) {
+            b.zmin_prev = b.zmin;
             b.zmin = *z as f64;
             zmin = zmin.min(*z);
         }
@@ -515,7 +601,8 @@ impl Engine {
         self.stats.skip_violations += violations;
         self.stats.interpolated_samples += samples;
 
-        // Unstable pixels: ray cast at every step.
+        // Unstable pixels: ray cast every `stride` steps (their local speed bound).
+        let speeds = self.local_speeds(cfg, &geoms);
         let u = &mut self.unstable;
         u.gather(
             &self.class,
@@ -528,13 +615,21 @@ impl Engine {
                 c_off: &self.thresholds.off,
                 l0: &self.kf0.l,
                 id0: &self.kf0.id,
+                key0: &self.kf0.key,
             },
         );
         let w = self.rays.width;
+        let windows = local_speed::stride_windows(&times);
+        let max_px = cfg.render.max_px_per_step;
+        for (j, &p) in u.pixel.iter().enumerate() {
+            let p = p as usize;
+            u.stride[j] = local_speed::stride_for(&windows, speeds.at(p % w, p / w), max_px) as u32;
+        }
         for s in 1..=k {
             if s < k {
+                u.select(s);
                 let ss = u.render(&self.scene, &geoms[s], w, cfg.render.edge_supersampling);
-                self.stats.pixel_renders += u.len() as u64;
+                self.stats.pixel_renders += u.active.len() as u64;
                 self.stats.supersampled += ss;
             }
             let ctx = FireCtx {
@@ -543,13 +638,16 @@ impl Engine {
                 rays: &self.rays,
                 refractory: cfg.esim.refractory_s,
             };
-            for j in 0..u.len() {
+            let count = if s < k { u.active.len() } else { u.len() };
+            for a in 0..count {
+                let j = if s < k { u.active[a] as usize } else { a };
                 let i = u.pixel[j] as usize;
                 let (l1, id1) = if s < k {
                     (u.l[j], u.id[j])
                 } else {
                     (self.kf1.l[i], self.kf1.id[i])
                 };
+                let sp = u.s_prev[j] as usize;
                 let before = batch.len();
                 fire(
                     &ctx,
@@ -558,8 +656,8 @@ impl Engine {
                     i,
                     u.l_prev[j],
                     l1,
-                    (times[s - 1], times[s]),
-                    (&geoms[s - 1], &geoms[s]),
+                    (times[sp], times[s]),
+                    (&geoms[sp], &geoms[s]),
                     (u.id_prev[j], id1),
                     (u.c_on[j], u.c_off[j]),
                     &mut batch,
@@ -567,6 +665,7 @@ impl Engine {
                 fired += (batch.len() - before) as u64;
                 u.l_prev[j] = l1;
                 u.id_prev[j] = id1;
+                u.s_prev[j] = s as u32;
             }
         }
         u.scatter(&mut self.reference, &mut self.last_event);

@@ -28,6 +28,7 @@ pub mod engine;
 pub mod esim;
 pub mod filters;
 pub mod imu;
+pub mod local_speed;
 pub mod math;
 pub mod presets;
 pub mod render;

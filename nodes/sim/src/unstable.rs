@@ -5,8 +5,8 @@
 //! scattered along edges, so their per-pixel state (rays, thresholds, reference levels, the
 //! previous step's intensity) is gathered into dense arrays at the start of the interval and
 //! the reference levels are scattered back at its end: every step then reads contiguous memory
-//! instead of a dozen image-sized arrays at scattered indices. The results are identical to
-//! stepping the pixels in place.
+//! instead of a dozen image-sized arrays at scattered indices. Each pixel is rendered every
+//! `stride` steps of the interval (see `local_speed`).
 
 use crate::camera::Rays;
 use crate::render::FrameGeom;
@@ -50,6 +50,13 @@ pub struct UnstableList {
     pub key: Vec<u16>,
     /// Object id of the current render step.
     pub id: Vec<u16>,
+    /// Render stride: the pixel is rendered at the steps that are multiples of it (and at the
+    /// closing key frame); see `local_speed`.
+    pub stride: Vec<u32>,
+    /// Step index of the pixel's previous render (0: the opening key frame).
+    pub s_prev: Vec<u32>,
+    /// List indices of the pixels rendered at the current step.
+    pub active: Vec<u32>,
     /// Image-sized map from pixel index to list index ([`NONE`] outside the list); all
     /// [`NONE`] between calls.
     index_of: Vec<u32>,
@@ -71,6 +78,8 @@ pub struct PixelState<'a> {
     pub l0: &'a [f32],
     /// Object ids of the interval's first key frame.
     pub id0: &'a [u16],
+    /// Surface keys of the interval's first key frame.
+    pub key0: &'a [u16],
 }
 
 impl UnstableList {
@@ -116,7 +125,11 @@ impl UnstableList {
         self.l.clear();
         self.l.resize(m, 0.0);
         self.key.clear();
-        self.key.resize(m, 0);
+        self.key.extend(pix.iter().map(|&p| src.key0[p as usize]));
+        self.stride.clear();
+        self.stride.resize(m, 1);
+        self.s_prev.clear();
+        self.s_prev.resize(m, 0);
         self.id.clear();
         self.id.resize(m, 0);
         if self.index_of.len() != n {
@@ -142,11 +155,25 @@ impl UnstableList {
         }
     }
 
-    /// Ray casts every listed pixel at `geom` into `l`, `key` and `id`; with `supersample`,
-    /// pixels whose surface differs from an (also listed) 4-neighbour's are 2x2 supersampled.
-    /// Returns the number of supersampled pixels.
+    /// Lists in `active` the pixels whose stride divides step `s`.
+    pub fn select(&mut self, s: usize) {
+        self.active.clear();
+        let s = s as u32;
+        self.active.extend(
+            self.stride
+                .iter()
+                .enumerate()
+                .filter(|(_, st)| s.is_multiple_of(**st))
+                .map(|(j, _)| j as u32),
+        );
+    }
+
+    /// Ray casts the `active` pixels at `geom` into `l`, `key` and `id`; with `supersample`,
+    /// those whose surface differs from a listed 4-neighbour's (as of the neighbour's latest
+    /// render) are edge sampled. Returns the number of edge-sampled pixels.
     pub fn render(&mut self, scene: &Scene, geom: &FrameGeom, w: usize, supersample: bool) -> u64 {
-        for j in 0..self.pixel.len() {
+        for &a in &self.active {
+            let j = a as usize;
             let i = self.pixel[j] as usize;
             let hit = geom.cast(scene, self.x[j], self.y[j], (i % w) as i32, (i / w) as i32, None);
             self.l[j] = hit.l;
@@ -157,7 +184,8 @@ impl UnstableList {
             return 0;
         }
         let mut count = 0;
-        for j in 0..self.pixel.len() {
+        for &a in &self.active {
+            let j = a as usize;
             let k = self.key[j];
             let edge = self.neighbours[j]
                 .iter()
