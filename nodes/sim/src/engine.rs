@@ -24,6 +24,7 @@ use crate::config::SceneConfig;
 use crate::esim::{self, NoiseSource, Thresholds};
 use crate::filters;
 use crate::local_speed::{self, LocalSpeed};
+use crate::math::{fmax, fmin};
 use crate::render::FrameGeom;
 use crate::scene::{self, Scene};
 use crate::unstable::{PixelState, UnstableList};
@@ -226,7 +227,7 @@ impl Engine {
                 }
             }
             let m = scene::RelativeMotion::new(&cam, Some(&bs));
-            s = s.max(m.speed_bound_ball(pose.center, math::norm(b.half), zmin.max(0.1), r_max));
+            s = s.max(object_speed(&m, &pose, &corners, b.half, r_max));
         }
         let c = &cfg.camera;
         s * c.fx.max(c.fy) * self.rays.max_jacobian
@@ -293,13 +294,8 @@ impl Engine {
                 }));
                 let bs = b.trajectory.state(g.t);
                 let pose = scene::BoxPose::new(&g.cam, &bs);
-                let zmin = pose
-                    .corners(b.half)
-                    .iter()
-                    .map(|c| c[2])
-                    .fold(f64::INFINITY, f64::min);
                 let m = scene::RelativeMotion::new(&g.cam, Some(&bs));
-                speed = speed.max(m.speed_bound_ball(pose.center, math::norm(b.half), zmin.max(0.1), r_max));
+                speed = speed.max(object_speed(&m, &pose, &pose.corners(b.half), b.half, r_max));
             }
             if let Some(bb) = bbox {
                 objects.push((bb, (speed * to_px) as f32));
@@ -562,7 +558,7 @@ impl Engine {
                     let l_start = kf0.l[i];
                     let (lo, hi) = path
                         .iter()
-                        .fold((l_start, l_start), |(lo, hi), &l| (lo.min(l), hi.max(l)));
+                        .fold((l_start, l_start), |(lo, hi), &l| (fmin(lo, l), fmax(hi, l)));
                     if hi < r + c_on && lo > r - c_off {
                         // Strictly inside both thresholds: no crossing, reference unchanged.
                         continue;
@@ -710,8 +706,8 @@ impl Engine {
         let (w, h) = (self.rays.width, self.rays.height);
         let (kf0, kf1) = (&self.kf0, &self.kf1);
         for i in 0..w * h {
-            self.lo[i] = kf0.l[i].min(kf1.l[i]);
-            self.hi[i] = kf0.l[i].max(kf1.l[i]);
+            self.lo[i] = fmin(kf0.l[i], kf1.l[i]);
+            self.hi[i] = fmax(kf0.l[i], kf1.l[i]);
         }
         filters::window_min_max_in_place(&mut self.lo, &mut self.hi, w, h, radius, &mut self.scratch);
         let margin = cfg.render.quiet_margin_log as f32;
@@ -737,6 +733,21 @@ impl Engine {
             };
         }
     }
+}
+
+/// Bound of the normalized image speed (1/s) of a moving box with motion `m` relative to the
+/// camera, camera-frame `pose` and `corners`, half extents `half` (m), at image radius
+/// `<= r_max`: the smaller of the corner bound and the bound of its circumscribed ball.
+fn object_speed(
+    m: &scene::RelativeMotion,
+    pose: &scene::BoxPose,
+    corners: &[math::V3; 8],
+    half: math::V3,
+    r_max: f64,
+) -> f64 {
+    let zmin = corners.iter().map(|c| c[2]).fold(f64::INFINITY, f64::min);
+    let ball = m.speed_bound_ball(pose.center, math::norm(half), zmin.max(0.1), r_max);
+    m.speed_bound_box(corners, r_max).map_or(ball, |b| b.min(ball))
 }
 
 /// Threshold crossings of pixel `i` from `l0` to `l1` over `span`, with the truth of

@@ -1,5 +1,7 @@
 //! Separable sliding-window image filters.
 
+use crate::math::{fmax, fmin};
+
 /// Minimum and maximum of `src` (row-major, `w` x `h`) over square windows of radius `r`
 /// clipped at the image border. `tmp_lo` and `tmp_hi` are unused scratch kept for API
 /// compatibility; see [`window_min_max_in_place`].
@@ -48,7 +50,8 @@ pub fn window_min_max_in_place(
 /// window runs over items, element-wise.
 fn sliding<const MAX: bool>(data: &mut [f32], n: usize, stride: usize, r: usize, pad: &mut Vec<f32>) {
     let fill = if MAX { f32::NEG_INFINITY } else { f32::INFINITY };
-    let pick = |a: f32, b: f32| if MAX { a.max(b) } else { a.min(b) };
+    // Log intensities are never NaN: plain comparisons vectorise to single min/max ops.
+    let pick = |a: f32, b: f32| if MAX { fmax(a, b) } else { fmin(a, b) };
     let np = n + 2 * r;
     pad.clear();
     pad.resize(np * stride, fill);

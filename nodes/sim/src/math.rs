@@ -138,6 +138,18 @@ pub fn quat_from_mat(m: &M3) -> [f64; 4] {
     [sign * q[0] / n, sign * q[1] / n, sign * q[2] / n, sign * q[3] / n]
 }
 
+/// Minimum of two floats that are not NaN (a single `minss`; `f32::min` adds NaN handling).
+#[inline(always)]
+pub fn fmin(a: f32, b: f32) -> f32 {
+    if a < b { a } else { b }
+}
+
+/// Maximum of two floats that are not NaN (a single `maxss`; `f32::max` adds NaN handling).
+#[inline(always)]
+pub fn fmax(a: f32, b: f32) -> f32 {
+    if a > b { a } else { b }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

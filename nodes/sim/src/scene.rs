@@ -266,6 +266,30 @@ impl RelativeMotion {
         (1.0 + r_max * r_max).sqrt() * v / z_min
     }
 
+    /// Upper bound of the normalized image speed (1/s) of the points of a box (this body) with
+    /// camera-frame `corners`, seen at image radius `<= r_max` (normalized); `None` unless
+    /// every corner is at depth > 0.1 m. The image speed of a point `P` is at most
+    /// `sqrt(1 + x^2 + y^2) |V(P)| / Z` (the largest singular value of the projection's
+    /// Jacobian); `|V|` is convex and `Z` affine in `P`, so their extremes over the box are at
+    /// corners, and so is the largest image radius of its projection (the convex hull of the
+    /// projected corners).
+    pub fn speed_bound_box(&self, corners: &[V3; 8], r_max: f64) -> Option<f64> {
+        let z_min = corners.iter().map(|c| c[2]).fold(f64::INFINITY, f64::min);
+        if z_min.is_nan() || z_min <= 0.1 {
+            return None;
+        }
+        let v_max = corners
+            .iter()
+            .map(|&c| math::norm(self.velocity(c)))
+            .fold(0.0, f64::max);
+        let r2 = corners
+            .iter()
+            .map(|c| (c[0] * c[0] + c[1] * c[1]) / (c[2] * c[2]))
+            .fold(0.0, f64::max)
+            .min(r_max * r_max);
+        Some((1.0 + r2).sqrt() * v_max / z_min)
+    }
+
     /// Rotational (depth-independent) and translational (times depth) parts of the normalized
     /// flow magnitude at normalized `(x, y)`: `|flow| <= rot + trans / Z`.
     pub fn flow_parts(&self, x: f64, y: f64) -> (f64, f64) {
@@ -399,5 +423,47 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn box_bound_covers_every_point_of_the_box_and_is_tighter_than_the_ball() {
+        let m = RelativeMotion {
+            linear: [0.8, -0.3, 0.2],
+            angular: [1.0, 0.5, -0.7],
+        };
+        let pose = BoxPose {
+            r_cb: math::rot_axis(1, 0.4),
+            center: [0.3, -0.1, 2.0],
+        };
+        let half = [0.25, 0.18, 0.2];
+        let corners = pose.corners(half);
+        let b = m.speed_bound_box(&corners, 10.0).unwrap();
+        let zmin = corners.iter().map(|c| c[2]).fold(f64::INFINITY, f64::min);
+        let ball = m.speed_bound_ball(pose.center, math::norm(half), zmin, 10.0);
+        let mut fastest = 0.0f64;
+        let n = 12;
+        for i in 0..=n {
+            for j in 0..=n {
+                for k in 0..=n {
+                    let f = |q: usize| 2.0 * q as f64 / n as f64 - 1.0;
+                    let local = [f(i) * half[0], f(j) * half[1], f(k) * half[2]];
+                    let p = math::add(pose.center, math::mul_mv(&pose.r_cb, local));
+                    let (fx, fy) = m.normalized_flow(p);
+                    fastest = fastest.max((fx * fx + fy * fy).sqrt());
+                }
+            }
+        }
+        assert!(
+            fastest <= b && b < ball,
+            "fastest {fastest}, box {b}, ball {ball}"
+        );
+        // Not far from the true maximum either (the corners and centre of the image).
+        assert!(b < 1.6 * fastest, "fastest {fastest}, box {b}");
+        // A corner behind the camera: no box bound.
+        let near = BoxPose {
+            r_cb: math::IDENTITY,
+            center: [0.0, 0.0, 0.1],
+        };
+        assert!(m.speed_bound_box(&near.corners(half), 1.0).is_none());
     }
 }

@@ -12,6 +12,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::SimError;
+use crate::math::{fmax, fmin};
 use crate::rng::Rng;
 
 /// The pattern of a texture, before the value-noise layer is mixed in.
@@ -485,8 +486,8 @@ impl Texture {
                 let row = (((y0 as u32).wrapping_add(dy) & mask) * m.size) as usize;
                 for dx in 0..nx {
                     let t = m.data[row + ((x0 as u32).wrapping_add(dx) & mask) as usize];
-                    lo = lo.min(t);
-                    hi = hi.max(t);
+                    lo = fmin(lo, t);
+                    hi = fmax(hi, t);
                 }
             }
         }
