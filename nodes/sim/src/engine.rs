@@ -95,8 +95,9 @@ struct DepthBlock {
     /// Normalized coordinates of the block centre.
     x: f64,
     y: f64,
-    /// Factor covering the change of rotational flow across the block.
-    rot_margin: f64,
+    /// Half extents of the block in normalized coordinates (farthest pixel from the centre).
+    hx: f64,
+    hy: f64,
     /// Smallest background depth in the block, m (infinite if none).
     zmin: f64,
     /// The same at the key frame before.
@@ -204,8 +205,7 @@ impl Engine {
             } else {
                 self.zmin_bg
             } * safety;
-            let (rot, trans) = bg.flow_parts(b.x, b.y);
-            s = s.max(rot * b.rot_margin + trans / z);
+            s = s.max(bg.static_speed_bound_near(b.x, b.y, b.hx, b.hy, z));
         }
         for b in self.scene.boxes.iter().filter(|b| b.id != 0) {
             let bs = b.trajectory.state(t);
@@ -273,8 +273,7 @@ impl Engine {
         for g in geoms {
             let bg = &g.motions[0];
             for (i, b) in self.blocks.iter().enumerate() {
-                let (rot, trans) = bg.flow_parts(b.x, b.y);
-                own[i] = own[i].max(rot * b.rot_margin + trans / z3[i]);
+                own[i] = own[i].max(bg.static_speed_bound_near(b.x, b.y, b.hx, b.hy, z3[i]));
             }
         }
         let background = (0..bw * bh)
@@ -361,7 +360,12 @@ impl Engine {
         let (w, h) = (self.rays.width, self.rays.height);
         let (bw, bh) = (w.div_ceil(BLOCK), h.div_ceil(BLOCK));
         if self.blocks.is_empty() {
-            let step = BLOCK as f64 * 0.5 / cfg.camera.fx.min(cfg.camera.fy);
+            // Largest change of the normalized ray per pixel along either image axis.
+            let (mut gx, mut gy) = (0.0f64, 0.0f64);
+            for (a, b) in self.rays.d_du.iter().zip(&self.rays.d_dv) {
+                gx = gx.max((a[0].abs() + b[0].abs()) as f64);
+                gy = gy.max((a[1].abs() + b[1].abs()) as f64);
+            }
             for by in 0..bh {
                 for bx in 0..bw {
                     let (cu, cv) = (
@@ -370,13 +374,17 @@ impl Engine {
                     );
                     let i = cv * w + cu;
                     let (x, y) = (self.rays.x[i] as f64, self.rays.y[i] as f64);
-                    // Rotational flow grows like 1 + r^2; half a block further out is covered.
-                    let r = x.hypot(y);
-                    let rot_margin = (1.0 + (r + step).powi(2)) / (1.0 + r * r) * 1.02;
+                    // Farthest pixel of the block from its centre, px, along either axis.
+                    let reach = |c: usize, b: usize, n: usize| {
+                        let (lo, hi) = (b * BLOCK, ((b + 1) * BLOCK).min(n) - 1);
+                        (c - lo).max(hi - c) as f64
+                    };
+                    let off = reach(cu, bx, w).max(reach(cv, by, h));
                     self.blocks.push(DepthBlock {
                         x,
                         y,
-                        rot_margin,
+                        hx: off * gx,
+                        hy: off * gy,
                         zmin: f64::INFINITY,
                         zmin_prev: f64::INFINITY,
                     });

@@ -290,6 +290,28 @@ impl RelativeMotion {
         Some((1.0 + r2).sqrt() * v_max / z_min)
     }
 
+    /// Upper bound of the normalized image speed (1/s) of static points (this motion is the
+    /// static world's) at depth `>= z_min` seen within `hx`, `hy` (normalized) of `(x, y)`.
+    ///
+    /// The flow is `R + T / z` with `R`, `T` the rotational and translational flow vectors; at
+    /// `(x, y)` its norm is convex in `1 / z`, so largest at `1 / z = 0` or `1 / z_min` (this
+    /// keeps partial cancellation of the two parts). Across the window `T` changes by at most
+    /// `|v_z| |(hx, hy)|` and each component of `R` by its gradient bound times `(hx, hy)`.
+    pub fn static_speed_bound_near(&self, x: f64, y: f64, hx: f64, hy: f64, z_min: f64) -> f64 {
+        let (w, v) = (self.angular, self.linear);
+        let c = math::cross(w, [x, y, 1.0]);
+        let r = (c[0] - x * c[2], c[1] - y * c[2]);
+        let t = (v[0] - x * v[2], v[1] - y * v[2]);
+        let inv_z = 1.0 / z_min;
+        let centre = r.0.hypot(r.1).max((r.0 + t.0 * inv_z).hypot(r.1 + t.1 * inv_z));
+        // R0 = wy (1 + x^2) - wz y - wx x y, R1 = -wx (1 + y^2) + wz x + wy x y.
+        let (xm, ym) = (x.abs() + hx, y.abs() + hy);
+        let (ax, ay, az) = (w[0].abs(), w[1].abs(), w[2].abs());
+        let d0 = hx * (2.0 * ay * xm + ax * ym) + hy * (az + ax * xm);
+        let d1 = hx * (az + ay * ym) + hy * (2.0 * ax * ym + ay * xm);
+        centre + d0.hypot(d1) + v[2].abs() * hx.hypot(hy) * inv_z
+    }
+
     /// Rotational (depth-independent) and translational (times depth) parts of the normalized
     /// flow magnitude at normalized `(x, y)`: `|flow| <= rot + trans / Z`.
     pub fn flow_parts(&self, x: f64, y: f64) -> (f64, f64) {
@@ -465,5 +487,34 @@ mod tests {
             center: [0.0, 0.0, 0.1],
         };
         assert!(m.speed_bound_box(&near.corners(half), 1.0).is_none());
+    }
+
+    #[test]
+    fn static_bound_near_covers_every_point_and_depth_of_the_window() {
+        let m = RelativeMotion {
+            linear: [0.4, -0.1, 0.5],
+            angular: [0.3, -0.35, 0.15],
+        };
+        for (x, y) in [(0.0, 0.0), (0.5, -0.4), (-0.55, 0.42), (0.3, 0.1)] {
+            let (hx, hy) = (0.02, 0.015);
+            let z_min = 1.3;
+            let b = m.static_speed_bound_near(x, y, hx, hy, z_min);
+            let mut fastest = 0.0f64;
+            for i in 0..=10 {
+                for j in 0..=10 {
+                    let px = x - hx + 2.0 * hx * i as f64 / 10.0;
+                    let py = y - hy + 2.0 * hy * j as f64 / 10.0;
+                    for z in [z_min, 1.7, 3.0, 10.0, 1e6] {
+                        let (fx, fy) = m.normalized_flow([px * z, py * z, z]);
+                        fastest = fastest.max(fx.hypot(fy));
+                    }
+                }
+            }
+            let (rot, trans) = m.flow_parts(x, y);
+            assert!(fastest <= b, "({x}, {y}): fastest {fastest} > bound {b}");
+            assert!(b < 1.3 * fastest, "({x}, {y}): bound {b} loose vs {fastest}");
+            // Never looser than the sum of the parts by more than the window terms.
+            assert!(b <= rot + trans / z_min + 0.02, "({x}, {y})");
+        }
     }
 }
