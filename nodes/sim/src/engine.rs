@@ -110,6 +110,9 @@ const SAMPLE_EPS_LOG: f32 = 1e-4;
 /// Largest texel span per axis of a stable path bounded by its texels before sampling (a
 /// cost choice: 16 texel reads cost less than the samples they usually save).
 const PATH_RANGE_TEXELS: u32 = 4;
+/// Factor on a stable pixel's displacement from its texture Jacobian: covers the change of
+/// the Jacobian along the path (perspective) and its finite-difference estimate.
+const DISPLACEMENT_SAFETY: f32 = 1.1;
 
 const QUIET: u8 = 0;
 const STABLE: u8 = 1;
@@ -499,11 +502,17 @@ impl Engine {
         let mut fired = 0u64;
         let mut path: Vec<f32> = Vec::new();
         let n = self.class.len();
+        let w_img = self.rays.width;
         for i in 0..n {
             let (kf0, kf1) = (&self.kf0, &self.kf1);
             let (c_on, c_off) = (self.thresholds.on[i], self.thresholds.off[i]);
             match self.class[i] {
                 QUIET => {
+                    let (r, l1) = (self.reference[i], kf1.l[i]);
+                    if l1 < r + c_on && l1 > r - c_off {
+                        // Strictly inside both thresholds at the end: no crossing.
+                        continue;
+                    }
                     let before = batch.len();
                     fire(
                         &ctx,
@@ -527,11 +536,6 @@ impl Engine {
                     let tex = &self.scene.textures[self.scene.key_texture[key]];
                     let (s0, s1) = (kf0.geom.shade_by_key[key], kf1.geom.shade_by_key[key]);
                     let (du, dv) = (kf1.u[i] - kf0.u[i], kf1.v[i] - kf0.v[i]);
-                    let size = kf0.px_size[i].min(kf1.px_size[i]).max(1e-9);
-                    let disp = (du * du + dv * dv).sqrt() / size;
-                    let m = ((disp / max_px).ceil() as usize).clamp(1, 4096);
-                    let id = kf0.id[i];
-                    let mf = m as f32;
                     // Log intensities at the grid points j/m, j = 1..m, of the interpolated
                     // path (the last is the key frame's). They do not depend on the pixel's
                     // reference level, so they are computed first, free of the serial chain of
@@ -560,6 +564,10 @@ impl Engine {
                     {
                         continue;
                     }
+                    let disp = stable_displacement(kf0, kf1, i, w_img, du, dv);
+                    let m = ((disp / max_px).ceil() as usize).clamp(1, 4096);
+                    let id = kf0.id[i];
+                    let mf = m as f32;
                     tex.sample_path([u0, v0, fp0, s0], [du, dv, dfp, s1 - s0], m, &mut path);
                     path.push(kf1.l[i]);
                     samples += (m - 1) as u64;
@@ -743,6 +751,41 @@ impl Engine {
     }
 }
 
+/// Image displacement (px) of the texture point seen by stable pixel `i` from key frame
+/// `kf0` to `kf1` (`du`, `dv`: its texture-coordinate change, m; `w`: image width): the change
+/// mapped back through the pixel-to-texture Jacobian from central differences of the
+/// neighbours' texture coordinates (a stable pixel's 4-neighbours see its surface), the
+/// larger of both key frames' with `DISPLACEMENT_SAFETY`, and never more than the change over
+/// the smaller pixel size across the ray (the bound for any direction on a surface seen at
+/// any angle). Image borders use that bound alone.
+#[inline]
+fn stable_displacement(kf0: &KeyFrame, kf1: &KeyFrame, i: usize, w: usize, du: f32, dv: f32) -> f32 {
+    let size = kf0.px_size[i].min(kf1.px_size[i]).max(1e-9);
+    let any_direction = (du * du + dv * dv).sqrt() / size;
+    let n = kf0.u.len();
+    let (x, y) = (i % w, i / w);
+    if x == 0 || x + 1 >= w || y == 0 || i + w >= n {
+        return any_direction;
+    }
+    let through = |kf: &KeyFrame| {
+        let (a, b) = (
+            0.5 * (kf.u[i + 1] - kf.u[i - 1]),
+            0.5 * (kf.u[i + w] - kf.u[i - w]),
+        );
+        let (c, d) = (
+            0.5 * (kf.v[i + 1] - kf.v[i - 1]),
+            0.5 * (kf.v[i + w] - kf.v[i - w]),
+        );
+        let det = a * d - b * c;
+        if det.is_nan() || det.abs() <= 1e-12 {
+            return f32::INFINITY;
+        }
+        let (px, py) = ((d * du - b * dv) / det, (a * dv - c * du) / det);
+        (px * px + py * py).sqrt()
+    };
+    (through(kf0).max(through(kf1)) * DISPLACEMENT_SAFETY).min(any_direction)
+}
+
 /// Bound of the normalized image speed (1/s) of a moving box with motion `m` relative to the
 /// camera, camera-frame `pose` and `corners`, half extents `half` (m), at image radius
 /// `<= r_max`: the smaller of the corner bound and the bound of its circumscribed ball.
@@ -891,4 +934,47 @@ fn event_truth(
         (None, None) => (0.0, 0.0),
     };
     (id, fx as f32, fy as f32)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::presets::preset;
+
+    /// Key frames of a 5 x 5 image whose texture coordinates are the affine map `(a, b, c, d)`
+    /// of the pixel position (u = a x + b y, v = c x + d y), shifted by `shift`.
+    fn affine(kf: &mut KeyFrame, w: usize, j: [f32; 4], shift: (f32, f32), px_size: f32) {
+        for i in 0..w * w {
+            let (x, y) = ((i % w) as f32, (i / w) as f32);
+            kf.u[i] = j[0] * x + j[1] * y + shift.0;
+            kf.v[i] = j[2] * x + j[3] * y + shift.1;
+            kf.px_size[i] = px_size;
+        }
+    }
+
+    #[test]
+    fn stable_displacement_follows_the_texture_jacobian() {
+        let cfg = preset("camera-only", 1).unwrap().with_resolution_scale(0.05);
+        let scene = Scene::new(&cfg.scene, cfg.camera_trajectory.clone(), 1, 0.01);
+        let geom = FrameGeom::new(&scene, &cfg.camera, 0.0);
+        let (mut kf0, mut kf1) = (KeyFrame::new(geom.clone(), 25), KeyFrame::new(geom, 25));
+        // A surface foreshortened 4x along x (4 mm per pixel) and 1 mm per pixel along y.
+        let j = [0.004, 0.0, 0.0, 0.001];
+        // The texture moves 3 px along x: 12 mm.
+        // The pixel size across the ray (0.5 mm) bounds any direction by 2x too much or more.
+        affine(&mut kf0, 5, j, (0.0, 0.0), 0.0005);
+        affine(&mut kf1, 5, j, (0.012, 0.0), 0.0005);
+        let d = stable_displacement(&kf0, &kf1, 12, 5, 0.012, 0.0);
+        assert!((d - 3.0 * DISPLACEMENT_SAFETY).abs() < 1e-3, "{d}");
+        // Along y, 3 px is 3 mm.
+        let d = stable_displacement(&kf0, &kf1, 12, 5, 0.0, 0.003);
+        assert!((d - 3.0 * DISPLACEMENT_SAFETY).abs() < 1e-3, "{d}");
+        // Border pixels get the any-direction bound (12 mm over 0.5 mm pixels).
+        let d = stable_displacement(&kf0, &kf1, 2, 5, 0.012, 0.0);
+        assert!((d - 24.0).abs() < 1e-3, "{d}");
+        // A degenerate Jacobian falls back to the any-direction bound.
+        affine(&mut kf0, 5, [0.0; 4], (0.0, 0.0), 0.0005);
+        let d = stable_displacement(&kf0, &kf1, 12, 5, 0.012, 0.0);
+        assert!((d - 24.0).abs() < 1e-3, "{d}");
+    }
 }

@@ -303,13 +303,14 @@ impl RelativeMotion {
         let r = (c[0] - x * c[2], c[1] - y * c[2]);
         let t = (v[0] - x * v[2], v[1] - y * v[2]);
         let inv_z = 1.0 / z_min;
-        let centre = r.0.hypot(r.1).max((r.0 + t.0 * inv_z).hypot(r.1 + t.1 * inv_z));
+        let norm = |a: f64, b: f64| (a * a + b * b).sqrt();
+        let centre = norm(r.0, r.1).max(norm(r.0 + t.0 * inv_z, r.1 + t.1 * inv_z));
         // R0 = wy (1 + x^2) - wz y - wx x y, R1 = -wx (1 + y^2) + wz x + wy x y.
         let (xm, ym) = (x.abs() + hx, y.abs() + hy);
         let (ax, ay, az) = (w[0].abs(), w[1].abs(), w[2].abs());
         let d0 = hx * (2.0 * ay * xm + ax * ym) + hy * (az + ax * xm);
         let d1 = hx * (az + ay * ym) + hy * (2.0 * ax * ym + ay * xm);
-        centre + d0.hypot(d1) + v[2].abs() * hx.hypot(hy) * inv_z
+        centre + norm(d0, d1) + v[2].abs() * norm(hx, hy) * inv_z
     }
 
     /// Rotational (depth-independent) and translational (times depth) parts of the normalized
