@@ -383,12 +383,13 @@ impl FrameGeom {
         (0.25 * acc).ln()
     }
 
-    /// Log intensity of an edge pixel `(px, py)` whose centre ray `(x, y)` hit `centre`: the
-    /// 2x2 sub-samples of [`FrameGeom::supersample`] when they do not all see the centre's
-    /// surface, else the centre's value. Sub-samples on one surface differ from the centre only
+    /// Log intensity of an edge pixel `(px, py)` whose centre ray `(x, y)` hit `centre` (log
+    /// intensity, surface key): the 2x2 sub-samples of [`FrameGeom::supersample`] averaged in
+    /// linear intensity, where sub-samples on the centre's surface take the centre's value (so
+    /// the centre's value when all do). Sub-samples on one surface differ from the centre only
     /// by texture detail finer than the pixel (which the mip-mapped texture already averages),
-    /// so only geometric edges inside the sub-sample square are anti-aliased, and their
-    /// sub-rays are located first and textured only then.
+    /// so only geometric edges inside the sub-sample square are anti-aliased; sub-rays are
+    /// located first and only those on other surfaces are textured.
     #[allow(clippy::too_many_arguments)]
     #[inline]
     pub fn edge_sample(
@@ -407,9 +408,15 @@ impl FrameGeom {
         if found.iter().all(|f| f.key == centre.1) {
             return centre.0;
         }
+        // Sub-rays on the centre's surface take its value (as above); the others are textured.
+        let centre_lin = centre.0.exp();
         let mut acc = 0.0f32;
         for ((sx, sy), f) in rays.iter().zip(&found) {
-            acc += self.shade(scene, *sx, *sy, f).l.exp();
+            acc += if f.key == centre.1 {
+                centre_lin
+            } else {
+                self.shade(scene, *sx, *sy, f).l.exp()
+            };
         }
         (0.25 * acc).ln()
     }
