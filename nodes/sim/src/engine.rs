@@ -132,6 +132,8 @@ pub struct Engine {
     class: Vec<u8>,
     /// Unstable pixels of the current interval.
     unstable: UnstableList,
+    /// Event buffer of the current interval.
+    batch: Vec<RawEvent>,
     // Filter buffers.
     lo: Vec<f32>,
     hi: Vec<f32>,
@@ -177,6 +179,7 @@ impl Engine {
             last_event: vec![f64::NEG_INFINITY; n],
             class: vec![QUIET; n],
             unstable: UnstableList::default(),
+            batch: Vec::new(),
             lo: vec![0.0; n],
             hi: vec![0.0; n],
             scratch: Vec::new(),
@@ -480,7 +483,9 @@ impl Engine {
         let shade = self.shade_change(t0, t1);
         self.classify(cfg, radius, shade);
 
-        let mut batch: Vec<RawEvent> = Vec::new();
+        // The interval's events (buffer reused across intervals).
+        let mut batch = std::mem::take(&mut self.batch);
+        batch.clear();
         let ctx = FireCtx {
             scene: &self.scene,
             cam: &cfg.camera,
@@ -713,6 +718,7 @@ impl Engine {
 
         batch.sort_by(|a, b| a.t.total_cmp(&b.t));
         out.extend_from_slice(&batch);
+        self.batch = batch;
         std::mem::swap(&mut self.kf0, &mut self.kf1);
         self.t = t1;
     }
