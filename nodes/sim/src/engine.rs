@@ -13,11 +13,15 @@
 //! - **stable**: the pixel sees the same surface at both key frames and is not on an edge in
 //!   either, so its texture coordinates move smoothly; they are interpolated linearly between
 //!   the key frames and the texture is sampled at steps of at most `max_px_per_step` of this
-//!   pixel's own image motion (no ray casting). All samples of a pixel are taken first (they
-//!   do not depend on its reference level, so they pipeline), and the threshold test runs only
-//!   when one of them reaches a threshold.
-//! - **unstable** (near a silhouette, crease or seam): ray cast at every render step with edge
-//!   supersampling.
+//!   pixel's own image motion (its texture-coordinate change mapped through the pixel-to-texture
+//!   Jacobian; no ray casting). When the texels under the whole path keep it strictly inside
+//!   its thresholds, no sample is taken (none could fire: exact). Otherwise all samples of the
+//!   pixel are taken first (they do not depend on its reference level, so they pipeline), and
+//!   the threshold test runs only when one of them reaches a threshold.
+//! - **unstable** (near a silhouette, crease or seam): ray cast every `stride` render steps,
+//!   the largest power of two that keeps its local image-speed bound within `max_px_per_step`
+//!   per render (see [`crate::local_speed`]), with edge anti-aliasing
+//!   ([`FrameGeom::edge_sample`]).
 
 use crate::camera::{CameraConfig, Rays};
 use crate::config::SceneConfig;

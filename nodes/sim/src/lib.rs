@@ -14,11 +14,11 @@
 //!
 //! Render schedule: see [`engine`]. Steps are chosen so that no scene point moves more than
 //! `render.max_px_per_step` pixels between renders; every pixel is ray cast at key frames, and in
-//! between only pixels near edges are; the others interpolate their texture coordinates or are
-//! skipped when they provably cannot fire. [`SimStats::skip_violations`] counts skipped pixels
+//! between only pixels near edges are (each at the pace of its local image speed); the others
+//! interpolate their texture coordinates or are skipped when they provably cannot fire. [`SimStats::skip_violations`] counts skipped pixels
 //! that fired anyway (their events are kept, with times spread over the interval).
 //!
-//! Speed: about 0.05 to 0.24 sensor-seconds per CPU-second on one core at 640x480 (0.4 to 1.9 M
+//! Speed: about 0.15 to 0.45 sensor-seconds per CPU-second on one core at 640x480 (0.4 to 1.9 M
 //! events per sensor second); real time is not reached yet. Figures, how to reproduce them and
 //! what remains are in the crate README.
 
