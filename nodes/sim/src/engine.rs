@@ -72,6 +72,8 @@ pub struct KeyFrame {
     pub px_size: Vec<f32>,
     /// True where a 4-neighbour sees another surface.
     pub edge: Vec<bool>,
+    /// True where the pixel's value mixes surfaces (edge sub-samples on another surface).
+    pub mixed: Vec<bool>,
 }
 
 impl KeyFrame {
@@ -86,6 +88,7 @@ impl KeyFrame {
             footprint: vec![0.0; n],
             px_size: vec![0.0; n],
             edge: vec![false; n],
+            mixed: vec![false; n],
         }
     }
 }
@@ -442,6 +445,7 @@ impl Engine {
             for x in 0..w {
                 let i = y * w + x;
                 let k = kf.key[i];
+                kf.mixed[i] = false;
                 kf.edge[i] = (x + 1 < w && kf.key[i + 1] != k)
                     || (x > 0 && kf.key[i - 1] != k)
                     || (y + 1 < h && kf.key[i + w] != k)
@@ -453,7 +457,7 @@ impl Engine {
                 if kf.edge[i] {
                     let r = &self.rays;
                     let (x, y) = ((i % w) as i32, (i / w) as i32);
-                    kf.l[i] = kf.geom.edge_sample(
+                    (kf.l[i], kf.mixed[i]) = kf.geom.edge_sample(
                         &self.scene,
                         r.x[i],
                         r.y[i],
@@ -747,9 +751,10 @@ impl Engine {
                 };
             let r = self.reference[i];
             let quiet = self.hi[i] + m < r + on[i] && self.lo[i] - m > r - off[i];
-            let same = kf0.key[i] == kf1.key[i] && !kf0.edge[i] && !kf1.edge[i] && kf0.key[i] != u16::MAX;
-            // Stable pixels are sampled along their whole path (see `advance`): a bound of the
-            // texture along the path would cost more than the samples it could save.
+            // The same surface at both key frames, without the other surface of a nearby edge
+            // inside the pixel: its texture coordinates move smoothly in between (edges move
+            // by under a pixel per render step and do not turn back within an interval).
+            let same = kf0.key[i] == kf1.key[i] && !kf0.mixed[i] && !kf1.mixed[i] && kf0.key[i] != u16::MAX;
             self.class[i] = if quiet {
                 QUIET
             } else if same {
@@ -764,7 +769,7 @@ impl Engine {
 /// Image displacement (px) of the texture point seen by stable pixel `i` from key frame
 /// `kf0` to `kf1` (`du`, `dv`: its texture-coordinate change, m; `w`: image width): the change
 /// mapped back through the pixel-to-texture Jacobian from central differences of the
-/// neighbours' texture coordinates (a stable pixel's 4-neighbours see its surface), the
+/// neighbours' texture coordinates (when all four see the pixel's surface), the
 /// larger of both key frames' with `DISPLACEMENT_SAFETY`, and never more than the change over
 /// the smaller pixel size across the ray (the bound for any direction on a surface seen at
 /// any angle). Image borders use that bound alone.
@@ -778,6 +783,11 @@ fn stable_displacement(kf0: &KeyFrame, kf1: &KeyFrame, i: usize, w: usize, du: f
         return any_direction;
     }
     let through = |kf: &KeyFrame| {
+        let k = kf.key[i];
+        if kf.key[i + 1] != k || kf.key[i - 1] != k || kf.key[i + w] != k || kf.key[i - w] != k {
+            // A neighbour on another surface (the pixel lies along an edge).
+            return f32::INFINITY;
+        }
         let (a, b) = (
             0.5 * (kf.u[i + 1] - kf.u[i - 1]),
             0.5 * (kf.u[i + w] - kf.u[i - w]),

@@ -389,7 +389,8 @@ impl FrameGeom {
     /// the centre's value when all do). Sub-samples on one surface differ from the centre only
     /// by texture detail finer than the pixel (which the mip-mapped texture already averages),
     /// so only geometric edges inside the sub-sample square are anti-aliased; sub-rays are
-    /// located first and only those on other surfaces are textured.
+    /// located first and only those on other surfaces are textured. The flag is true when the
+    /// value mixes surfaces.
     #[allow(clippy::too_many_arguments)]
     #[inline]
     pub fn edge_sample(
@@ -402,11 +403,11 @@ impl FrameGeom {
         px: i32,
         py: i32,
         centre: (f32, u16),
-    ) -> f32 {
+    ) -> (f32, bool) {
         let rays = SUBSAMPLES.map(|(ou, ov)| (x + ou * du[0] + ov * dv[0], y + ou * du[1] + ov * dv[1]));
         let found = rays.map(|(sx, sy)| self.locate(sx, sy, px, py, None));
         if found.iter().all(|f| f.key == centre.1) {
-            return centre.0;
+            return (centre.0, false);
         }
         // Sub-rays on the centre's surface take its value (as above); the others are textured.
         let centre_lin = centre.0.exp();
@@ -418,7 +419,7 @@ impl FrameGeom {
                 self.shade(scene, *sx, *sy, f).l.exp()
             };
         }
-        (0.25 * acc).ln()
+        ((0.25 * acc).ln(), true)
     }
 
     /// True optical flow (px/s) at pixel `(px, py)` with normalized ray `(x, y)` of the surface of

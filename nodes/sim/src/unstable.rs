@@ -192,16 +192,18 @@ impl UnstableList {
                 .any(|&nb| nb != NONE && self.key[nb as usize] != k);
             if edge {
                 let i = self.pixel[j] as usize;
-                self.l[j] = geom.edge_sample(
-                    scene,
-                    self.x[j],
-                    self.y[j],
-                    self.d_du[j],
-                    self.d_dv[j],
-                    (i % w) as i32,
-                    (i / w) as i32,
-                    (self.l[j], k),
-                );
+                self.l[j] = geom
+                    .edge_sample(
+                        scene,
+                        self.x[j],
+                        self.y[j],
+                        self.d_du[j],
+                        self.d_dv[j],
+                        (i % w) as i32,
+                        (i / w) as i32,
+                        (self.l[j], k),
+                    )
+                    .0;
                 count += 1;
             }
         }
