@@ -142,6 +142,8 @@ pub struct Engine {
     unstable: UnstableList,
     /// Event buffer of the current interval.
     batch: Vec<RawEvent>,
+    /// Quiet pixels that may cross at the closing key frame and stable pixels, in pixel order.
+    work: Vec<u32>,
     // Filter buffers.
     lo: Vec<f32>,
     hi: Vec<f32>,
@@ -188,6 +190,7 @@ impl Engine {
             class: vec![QUIET; n],
             unstable: UnstableList::default(),
             batch: Vec::new(),
+            work: Vec::new(),
             lo: vec![0.0; n],
             hi: vec![0.0; n],
             scratch: Vec::new(),
@@ -515,18 +518,14 @@ impl Engine {
         let mut samples = 0u64;
         let mut fired = 0u64;
         let mut path: Vec<f32> = Vec::new();
-        let n = self.class.len();
         let w_img = self.rays.width;
-        for i in 0..n {
+        let work = std::mem::take(&mut self.work);
+        for &p in &work {
+            let i = p as usize;
             let (kf0, kf1) = (&self.kf0, &self.kf1);
             let (c_on, c_off) = (self.thresholds.on[i], self.thresholds.off[i]);
             match self.class[i] {
                 QUIET => {
-                    let (r, l1) = (self.reference[i], kf1.l[i]);
-                    if l1 < r + c_on && l1 > r - c_off {
-                        // Strictly inside both thresholds at the end: no crossing.
-                        continue;
-                    }
                     let before = batch.len();
                     fire(
                         &ctx,
@@ -624,6 +623,7 @@ impl Engine {
                 _ => {}
             }
         }
+        self.work = work;
         self.stats.skip_violations += violations;
         self.stats.interpolated_samples += samples;
 
@@ -743,6 +743,7 @@ impl Engine {
         filters::window_min_max_in_place(&mut self.lo, &mut self.hi, w, h, radius, &mut self.scratch);
         let margin = cfg.render.quiet_margin_log as f32;
         let (on, off) = (&self.thresholds.on, &self.thresholds.off);
+        self.work.clear();
         for i in 0..w * h {
             let m = margin
                 + if kf0.id[i] != 0 || kf1.id[i] != 0 {
@@ -763,6 +764,13 @@ impl Engine {
             } else {
                 UNSTABLE
             };
+            // Quiet pixels whose key-frame value is strictly inside the thresholds cannot
+            // cross; the others (and stable pixels) are visited by `advance`, in pixel order.
+            let l1 = kf1.l[i];
+            let settled = quiet && l1 < r + on[i] && l1 > r - off[i];
+            if !settled && (quiet || same) {
+                self.work.push(i as u32);
+            }
         }
     }
 }
