@@ -296,26 +296,12 @@ impl TextDecoder {
 impl FormatDecoder for TextDecoder {
     fn fill(&mut self, out: &mut Chunk, target: usize) -> Result<bool, DecodeError> {
         while out.events.len() < target {
-            let fields = match self.events.next_fields::<4>() {
-                Ok(Some(f)) => f,
-                Ok(None) => {
-                    self.emit_imu(out, f64::INFINITY)?;
-                    return Ok(false);
-                }
-                Err(error) => {
-                    self.emit_imu(out, self.last_t)?;
-                    return Err(error);
-                }
+            let Some(fields) = self.events.next_fields::<4>()? else {
+                self.emit_imu(out, f64::INFINITY)?;
+                return Ok(false);
             };
-            let (t, x, y, p) = match event_from(&self.events, fields) {
-                Ok(event) => event,
-                Err(error) => {
-                    self.emit_imu(out, self.last_t)?;
-                    return Err(error);
-                }
-            };
+            let (t, x, y, p) = event_from(&self.events, fields)?;
             if t < self.last_t {
-                self.emit_imu(out, self.last_t)?;
                 return Err(self.events.error(format!(
                     "time {t} s is before the previous event's {} s",
                     self.last_t
@@ -323,7 +309,6 @@ impl FormatDecoder for TextDecoder {
             }
             if x >= self.width || y >= self.height {
                 if self.policy == OutOfRange::Error {
-                    self.emit_imu(out, self.last_t)?;
                     return Err(self.events.error(format!(
                         "event at x={x}, y={y} outside the {}x{} sensor",
                         self.width, self.height
@@ -334,9 +319,12 @@ impl FormatDecoder for TextDecoder {
             }
             self.last_t = t;
             let origin = *self.origin_s.get_or_insert(t);
+            // The IMU samples up to this event go first, read per event (not per chunk) so that
+            // a bad `imu.txt` line stops the events at the same event whatever the chunk size:
+            // the first event at or after the last good sample before it.
+            self.emit_imu(out, t)?;
             out.events.push(t - origin, x, y, p);
         }
-        self.emit_imu(out, self.last_t)?;
         Ok(true)
     }
 

@@ -1,43 +1,41 @@
-//! Feeds arbitrary bytes to every decoder (first byte picks the format) and decodes them whole:
-//! any panic is a bug. Coordinates returned must lie inside the sensor.
+//! Format detection and every decoder behind it: the first byte picks a magic or header to put
+//! in front of the rest (or none), and `open` detects the format from the bytes and the file
+//! name. Checks the invariants of `common::drain_checked`.
 #![no_main]
 
-use evseg_formats::{Format, OpenOptions, OutOfRange};
+mod common;
+
+use evseg_formats::{OpenOptions, OutOfRange};
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {
-    let Some((&selector, rest)) = data.split_first() else { return };
-    let (name, format, prefix): (&str, Format, &[u8]) = match selector % 6 {
-        0 => ("f.raw", Format::Evt3, b"% evt 3.0\n% geometry 64x48\n"),
-        1 => ("f.raw", Format::Evt2, b"% evt 2.0\n"),
-        2 => ("f.es", Format::EventStream, b""),
-        3 => ("f.aedat4", Format::Aedat4, b""),
-        4 => ("f.txt", Format::Text, b""),
-        _ => ("f.bin", Format::Evt3, b""),
+    let Some((&selector, rest)) = data.split_first() else {
+        return;
     };
-    let dir = std::env::temp_dir().join(format!("evseg-fuzz-{}", std::process::id()));
-    let _ = std::fs::create_dir_all(&dir);
-    let path = dir.join(name);
+    let (name, prefix): (&str, &[u8]) = match selector % 6 {
+        0 => ("f.raw", b"% evt 3.0\n% geometry 64x48\n"),
+        1 => ("f.raw", b"% evt 2.0\n"),
+        2 => ("f.es", b""),
+        3 => ("f.aedat4", b""),
+        4 => ("f.txt", b""),
+        _ => ("f.bin", b""),
+    };
     let mut bytes = prefix.to_vec();
     bytes.extend_from_slice(rest);
-    if std::fs::write(&path, &bytes).is_err() {
+    let Some(path) = common::write_input(name, &bytes) else {
         return;
-    }
-    let policy = if selector & 0x80 != 0 { OutOfRange::Drop } else { OutOfRange::Error };
+    };
     let options = OpenOptions {
-        format: (selector & 0x40 != 0).then_some(format),
         geometry: Some((64, 48)),
-        out_of_range: policy,
+        out_of_range: if selector & 0x80 != 0 {
+            OutOfRange::Drop
+        } else {
+            OutOfRange::Error
+        },
         read_block_bytes: 64 + (selector as usize & 0x3F),
         max_packet_bytes: 1 << 20,
+        text_sidecars: false,
         ..Default::default()
     };
-    if let Ok(mut decoder) = evseg_formats::open(&path, &options) {
-        let (w, h) = decoder.geometry();
-        while let Ok(Some(chunk)) = decoder.next_chunk(1 + selector as usize) {
-            assert!(chunk.events.is_consistent());
-            assert!(chunk.events.x.iter().all(|&x| x < w));
-            assert!(chunk.events.y.iter().all(|&y| y < h));
-        }
-    }
+    common::decode_checked(&path, &options, 1 + selector as usize);
 });
