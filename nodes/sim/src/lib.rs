@@ -18,7 +18,7 @@
 //! interpolate their texture coordinates or are skipped when they provably cannot fire. [`SimStats::skip_violations`] counts skipped pixels
 //! that fired anyway (their events are kept, with times spread over the interval).
 //!
-//! Speed: about 0.15 to 0.45 sensor-seconds per CPU-second on one core at 640x480 (0.4 to 1.9 M
+//! Speed: about 0.17 to 0.51 sensor-seconds per CPU-second on one core at 640x480 (0.4 to 1.9 M
 //! events per sensor second); real time is not reached yet. Figures, how to reproduce them and
 //! what remains are in the crate README.
 
