@@ -226,6 +226,7 @@ mod tests {
                     n0,
                     n,
                     n_derot: n,
+                    confidence: 1.0,
                 });
             }
             samples.push(members);

@@ -24,6 +24,8 @@ pub struct FlowSample {
     /// Derotated normal flow `n - n0 . (B(x) w)`, normalized units/s (equal to `n` without a
     /// rotation rate).
     pub n_derot: f64,
+    /// The estimator's confidence in this flow, 0..1 (`NormalFlow::confidence`).
+    pub confidence: f32,
 }
 
 impl FlowSample {
@@ -84,6 +86,7 @@ pub fn flow_samples(
             n0,
             n,
             n_derot,
+            confidence: c,
         });
     }
     Ok(out)

@@ -166,6 +166,7 @@ mod tests {
                     n0,
                     n: nf,
                     n_derot: nf,
+                    confidence: 1.0,
                 }
             })
             .collect()

@@ -60,6 +60,7 @@ mod tests {
                 n0,
                 n,
                 n_derot: n,
+                confidence: 1.0,
             });
         }
         let got = fit.solve(1e-6).unwrap();

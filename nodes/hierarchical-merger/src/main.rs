@@ -96,6 +96,11 @@ fn main() -> ExitCode {
     )
     .param("svm_c", d.egomotion.svm.c, "SVM cost C (squared hinge)")
     .param(
+        "egomotion_min_confidence",
+        f64::from(d.egomotion.min_confidence),
+        "only flow above this confidence takes part in the egomotion",
+    )
+    .param(
         "egomotion_min_samples",
         d.egomotion.min_samples,
         "fewest background events for an egomotion estimate",
@@ -139,6 +144,7 @@ fn main() -> ExitCode {
                     c: cfg.param("svm_c")?,
                     ..SvmParams::default()
                 },
+                min_confidence: cfg.param("egomotion_min_confidence")?,
                 min_samples: cfg.param("egomotion_min_samples")?,
                 refine_iterations: cfg.param("refine_iterations")?,
                 grid_cols: cfg.param("depth_grid_cols")?,
