@@ -4,9 +4,10 @@
 //! Variant A is the graph as written; variant B is the graph with `--swap node=binary` (the node
 //! runs another implementation; the edited graph is checked like any graph file, so the new
 //! binary must have compatible ports and parameters) and `--set-b node.param=value` applied.
-//! Each recording is replayed from `--from` into both variants (`evseg replay`), one after the
-//! other, with the instance names `<name>-a` and `<name>-b`; lock-step replay makes the inputs
-//! of both bit-identical. The figures come from each run's `report/report.json`.
+//! Each recording is replayed from `--from` into both variants (`evseg replay`) at the same
+//! time, as two graph instances (`ab-a` and `ab-b`, so no key is shared) on one Zenoh network:
+//! variant B's router connects to variant A's. Lock-step replay makes the inputs of both
+//! bit-identical. The figures come from each run's `report/report.json`.
 
 use std::path::{Path, PathBuf};
 
@@ -33,7 +34,8 @@ pub struct AbOptions {
     pub set_b: Vec<String>,
     /// Working folder (run folders, the edited graph, the reports).
     pub work: PathBuf,
-    /// Router listen endpoints replacing the graph's (both variants; they run one at a time).
+    /// Router listen endpoints of variant A replacing the graph's (default: a free loopback
+    /// port). Variant B's router listens on a free loopback port and connects to these.
     pub listen: Vec<String>,
 }
 
@@ -102,6 +104,12 @@ fn graph_b(o: &AbOptions) -> anyhow::Result<PathBuf> {
     Ok(path)
 }
 
+/// `tcp/127.0.0.1:<port>` with a port that was free a moment ago.
+fn loopback_endpoint() -> anyhow::Result<String> {
+    let l = std::net::TcpListener::bind("127.0.0.1:0").context("cannot bind a loopback port")?;
+    Ok(format!("tcp/127.0.0.1:{}", l.local_addr()?.port()))
+}
+
 /// Runs both variants on every recording; returns the figures per sequence and overall (mean
 /// over sequences).
 pub fn ab(o: &AbOptions) -> anyhow::Result<Vec<AbFigure>> {
@@ -116,31 +124,64 @@ pub fn ab(o: &AbOptions) -> anyhow::Result<Vec<AbFigure>> {
         let seq = rec
             .file_stem()
             .map_or_else(|| rec.display().to_string(), |s| s.to_string_lossy().into_owned());
-        let mut reports = Vec::new();
-        for (variant, graph, extra) in [("a", &o.graph, &[][..]), ("b", &b_graph, &o.set_b[..])] {
+        let a_listen = if o.listen.is_empty() {
+            vec![loopback_endpoint()?]
+        } else {
+            o.listen.clone()
+        };
+        let b_listen = vec![loopback_endpoint()?];
+        let b_connect: Vec<String> = a_listen.iter().map(|e| crate::run::local_endpoint(e)).collect();
+        let mut options = Vec::new();
+        for (variant, graph, extra, listen, connect) in [
+            ("a", &o.graph, &[][..], a_listen, Vec::new()),
+            ("b", &b_graph, &o.set_b[..], b_listen, b_connect),
+        ] {
             let out = o.work.join(&seq).join(variant);
             if out.exists() {
                 std::fs::remove_dir_all(&out).with_context(|| format!("cannot clear {}", out.display()))?;
             }
-            eprintln!("A/B: {seq}, variant {variant}");
             let mut set = o.set.clone();
             set.extend(extra.iter().cloned());
-            let outcome = run(&RunOptions {
-                graph: graph.clone(),
-                instance: Some(format!("ab-{variant}")),
-                out: Some(out),
-                set,
-                listen: o.listen.clone(),
-                quiet: true,
-                replay: Some(ReplaySpec {
-                    recording: rec.clone(),
-                    from: o.from.clone(),
-                    speed: None,
-                }),
-                ..RunOptions::default()
-            })
-            .with_context(|| format!("variant {variant} on {}", rec.display()))?;
-            reports.push(read_report(&outcome.dir)?);
+            options.push((
+                variant,
+                RunOptions {
+                    graph: graph.clone(),
+                    instance: Some(format!("ab-{variant}")),
+                    out: Some(out),
+                    set,
+                    listen,
+                    connect,
+                    quiet: true,
+                    replay: Some(ReplaySpec {
+                        recording: rec.clone(),
+                        from: o.from.clone(),
+                        speed: None,
+                    }),
+                    ..RunOptions::default()
+                },
+            ));
+        }
+        eprintln!("A/B: {seq}, variants a and b side by side on one Zenoh network");
+        let outcomes: Vec<anyhow::Result<_>> = std::thread::scope(|scope| {
+            let handles: Vec<_> = options
+                .iter()
+                .map(|(variant, opts)| {
+                    scope.spawn(move || {
+                        run(opts).with_context(|| format!("variant {variant} on {}", rec.display()))
+                    })
+                })
+                .collect();
+            handles
+                .into_iter()
+                .map(|h| {
+                    h.join()
+                        .unwrap_or_else(|_| Err(anyhow::anyhow!("a variant's launcher thread panicked")))
+                })
+                .collect()
+        });
+        let mut reports = Vec::new();
+        for outcome in outcomes {
+            reports.push(read_report(&outcome?.dir)?);
         }
         for &(label, pointer, scale) in FIGURES {
             let a = figure(&reports[0], pointer, scale);

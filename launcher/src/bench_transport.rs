@@ -172,7 +172,9 @@ pub fn bench(sizes: &[u64], work: &Path) -> anyhow::Result<Vec<Row>> {
         let (count_b, dt_b, startup) = over_zenoh(n, seconds, work, true)?;
         let (count_c, dt_c, _) = over_zenoh(n, seconds, work, false)?;
         if count_a != count_b || count_a != count_c {
-            bail!("in-process saw {count_a} events, the graph {count_b} (shared memory), {count_c} (sockets)");
+            bail!(
+                "in-process saw {count_a} events, the graph {count_b} (shared memory), {count_c} (sockets)"
+            );
         }
         let row = Row {
             slice_events: n,

@@ -8,7 +8,9 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
 use evseg_graph::{Graph, NodeSpec};
-use evseg_runtime::config::{ConsumerRef, InputBinding, NodeConfig, OutputBinding, ShmSettings, ZenohSettings};
+use evseg_runtime::config::{
+    ConsumerRef, InputBinding, NodeConfig, OutputBinding, ShmSettings, ZenohSettings,
+};
 use evseg_runtime::progress::Stats;
 use evseg_runtime::{Mode, signals};
 use evseg_schemas::keys;
@@ -95,7 +97,7 @@ fn apply_overrides(graph: &mut Graph, sets: &[String]) -> anyhow::Result<()> {
 }
 
 /// The endpoint a node on this machine uses to reach the router listening on `listen`.
-fn local_endpoint(listen: &str) -> String {
+pub fn local_endpoint(listen: &str) -> String {
     listen
         .replace("/0.0.0.0:", "/127.0.0.1:")
         .replace("/[::]:", "/[::1]:")
