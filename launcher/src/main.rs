@@ -12,6 +12,7 @@ mod resolve;
 mod run;
 mod rundir;
 mod supervise;
+mod view;
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -138,6 +139,23 @@ enum Command {
         #[arg(long)]
         out: PathBuf,
     },
+    /// Turn a recording into a Rerun recording (.rrd): events coloured by segment, normal-flow
+    /// direction and ground truth, track boxes with ids, egomotion and metrics as time series.
+    /// Open the file with `rerun FILE.rrd`.
+    View {
+        /// MCAP file written by `evseg run --record`.
+        recording: PathBuf,
+        /// Output .rrd file; default: the recording's path with the extension .rrd.
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Stream to a running viewer at this gRPC URL instead of writing a file, e.g.
+        /// rerun+http://127.0.0.1:9876/proxy.
+        #[arg(long)]
+        connect: Option<String>,
+        /// Most events drawn per slice and layer (default: the viewer's, 10000).
+        #[arg(long)]
+        max_points: Option<usize>,
+    },
     /// Check a graph without starting anything: every error with file, line and column.
     Check {
         /// Graph file.
@@ -255,6 +273,15 @@ fn main() -> ExitCode {
         Command::Check { graph } => check(&graph),
         Command::Info { recording } => info::info(&recording).map(|text| print!("{text}")),
         Command::Export { recording, out } => export::export(&recording, &out).map(|text| println!("{text}")),
+        Command::View {
+            recording,
+            out,
+            connect,
+            max_points,
+        } => {
+            let sink = view::sink(&recording, out, connect);
+            view::view(&recording, &sink, max_points).map(|text| println!("{text}"))
+        }
         Command::Sim {
             scene,
             out,
