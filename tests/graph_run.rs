@@ -463,20 +463,15 @@ fn the_aedat4_graph_runs_the_method_on_the_davis346_recording() {
     // (1589163149728813 - 1589163147368868) µs = 2.359945 s: slices 0..=78 of 30 ms.
     assert_eq!(slices, 79, "slices");
     assert_eq!(slice_events, 78_830, "events in the slices");
-    // Every IMU sample of the file is published. Known loss (nodes/source/src/file.rs): DV writes
-    // IMU packets after the event packets of the same time, and the file source publishes a batch
-    // as soon as its events pass the batch end, so an IMU sample can come one packet late; the
-    // slicer drops such a sample when its slice was already emitted (here 1 of 2,363, at
-    // t = 1.979998 s, which alters that slice's mean rotation rate by about 1/30).
+    // Every IMU sample of the file is published in the batch of its time and reaches a slice.
+    // DV writes IMU packets after the event packets of the same time; the file source reads
+    // ahead until the IMU has passed the batch end too (nodes/source/src/file.rs).
     assert_eq!(source_imu, 2_363, "IMU samples published by the source");
-    assert!(
-        late_imu <= 3,
-        "{late_imu} IMU samples published in a later packet than their time"
+    assert_eq!(
+        late_imu, 0,
+        "IMU samples published in a later packet than their time"
     );
-    assert!(
-        imu_samples + late_imu >= 2_363,
-        "IMU samples in the slices: {imu_samples}"
-    );
+    assert_eq!(imu_samples, 2_363, "IMU samples in the slices");
     assert_eq!(slices_with_omega, 79, "slices with an IMU rotation rate");
     assert_eq!(tracks, 79, "tracker outputs");
     assert_eq!(labelled, 78_830, "events labelled by the tracker");

@@ -114,6 +114,9 @@ impl Inputs<'_> {
 
 struct OutPort {
     publisher: zenoh::pubsub::Publisher<'static>,
+    /// Live mode only: a publisher on the same key that blocks instead of dropping under
+    /// congestion, for the end-of-stream frame (a dropped end would leave consumers waiting).
+    end_publisher: Option<zenoh::pubsub::Publisher<'static>>,
     /// (consumer node, consumer port, feedback)
     consumers: Vec<(String, String, bool)>,
     sent: u64,
@@ -285,7 +288,9 @@ impl Outputs {
                     port: name.clone(),
                     source,
                 })?;
-            p.publisher
+            p.end_publisher
+                .as_ref()
+                .unwrap_or(&p.publisher)
                 .put(bytes)
                 .wait()
                 .map_err(|e| RuntimeError::Zenoh(e.to_string()))?;
@@ -471,6 +476,17 @@ pub(crate) fn start(
             .express(true)
             .wait()
             .map_err(|e| RuntimeError::Zenoh(e.to_string()))?;
+        let end_publisher = match cfg.mode {
+            Mode::Lockstep => None,
+            Mode::Live => Some(
+                session
+                    .declare_publisher(o.key.clone())
+                    .congestion_control(CongestionControl::Block)
+                    .express(true)
+                    .wait()
+                    .map_err(|e| RuntimeError::Zenoh(e.to_string()))?,
+            ),
+        };
         let consumers = o
             .consumers
             .iter()
@@ -481,6 +497,7 @@ pub(crate) fn start(
             o.port.clone(),
             OutPort {
                 publisher,
+                end_publisher,
                 consumers,
                 sent: 0,
                 t_end: 0.0,

@@ -13,12 +13,20 @@ use crate::{Batch, EventSource, SourceError};
 /// Events decoded per read from the file.
 pub const READ_CHUNK: usize = 65_536;
 
+/// Most events held ahead of a batch's end while waiting for the IMU to pass it too. Vendors
+/// write IMU packets after the event packets of the same time (DV does), so a batch cut as soon
+/// as the events pass its end would miss IMU samples that follow; a recording whose IMU stops
+/// early stops the read-ahead at this bound (about 13 MB of events).
+pub const MAX_IMU_READ_AHEAD: usize = 1_000_000;
+
 /// A camera file recording as a source.
 pub struct FileSource {
     decoder: Box<dyn EventDecoder>,
     camera: CameraInfo,
     pending: Events,
     imu: Vec<ImuSample>,
+    /// Time of the newest IMU sample read so far (sensor clock, s), if any.
+    imu_last_t: Option<f64>,
     eof: bool,
     seconds: Option<f64>,
     /// Events out of order within a read (sorted, not dropped).
@@ -37,6 +45,7 @@ impl FileSource {
             camera,
             pending: Events::default(),
             imu: Vec::new(),
+            imu_last_t: None,
             eof: false,
             seconds,
             reordered: 0,
@@ -52,7 +61,16 @@ impl EventSource for FileSource {
     fn next_batch(&mut self, t_end: f64) -> Result<Option<Batch>, SourceError> {
         let limit = self.seconds.unwrap_or(f64::INFINITY);
         let t_end = t_end.min(limit);
-        while !self.eof && self.pending.t.last().is_none_or(|&t| t < t_end) {
+        let offset = self.camera.imu_time_offset_s;
+        // Read until the events have passed t_end and, when the file has an IMU, the IMU too
+        // (bounded read-ahead), so no IMU sample of this batch arrives with the next one.
+        let short = |s: &Self| {
+            let events_short = s.pending.t.last().is_none_or(|&t| t < t_end);
+            let imu_short =
+                s.imu_last_t.is_some_and(|t| t + offset < t_end) && s.pending.len() < MAX_IMU_READ_AHEAD;
+            events_short || imu_short
+        };
+        while !self.eof && short(self) {
             match self
                 .decoder
                 .next_chunk(READ_CHUNK)
@@ -63,6 +81,9 @@ impl EventSource for FileSource {
                     self.reordered += sort_by_time(&mut ev) as u64;
                     let n = ev.len();
                     self.pending.extend_from(&ev, 0..n);
+                    if let Some(last) = chunk.imu.last() {
+                        self.imu_last_t = Some(self.imu_last_t.map_or(last.t, |t| t.max(last.t)));
+                    }
                     self.imu.extend(chunk.imu);
                 }
                 None => self.eof = true,
@@ -72,7 +93,6 @@ impl EventSource for FileSource {
             return Ok(None);
         }
         let events = take_before(&mut self.pending, t_end);
-        let offset = self.camera.imu_time_offset_s;
         let cut = self.imu.partition_point(|s| s.t + offset < t_end);
         let imu: Vec<ImuSample> = self.imu.drain(..cut).collect();
         if t_end >= limit {
