@@ -143,6 +143,38 @@ fn a_recording_becomes_an_rrd() {
     assert_eq!(magic(&rrd), RRD_MAGIC);
     assert!(size(&rrd) > 2 * 10 * 4 * 1000, "{} bytes", size(&rrd));
 
+    // Read back by Rerun itself: one row per slice on every per-slice entity.
+    if let Some(cli) = common::rerun_cli() {
+        let rows = common::rrd_entities(&cli, &rrd);
+        for entity in [
+            "events/polarity",
+            "segments/tracker/events",
+            "segments/tracker/boxes",
+            "flow/flow/events",
+            "truth/events",
+            "metrics/evaluator/iou",
+        ] {
+            assert_eq!(rows.get(entity), Some(&10), "{entity}: {rows:?}");
+        }
+        // Plus one static row naming the x, y, z series.
+        for entity in [
+            "egomotion/tracker/direction",
+            "egomotion/tracker/omega",
+            "egomotion/truth/direction",
+        ] {
+            assert_eq!(rows.get(entity), Some(&11), "{entity}: {rows:?}");
+        }
+        // Slice 0 has no direction error (NaN).
+        assert_eq!(
+            rows.get("metrics/evaluator/direction_error_deg"),
+            Some(&9),
+            "{rows:?}"
+        );
+        // Static: the sensor outline of each 2-D view.
+        assert_eq!(rows.get("truth/frame"), Some(&1), "{rows:?}");
+        assert!(!rows.keys().any(|e| e.starts_with("segments/source")), "{rows:?}");
+    }
+
     // The first half of the file: the complete chunks are drawn, the rest is reported.
     let bytes = std::fs::read(&mcap).unwrap();
     let cut = dir.path().join("cut.mcap");

@@ -174,3 +174,72 @@ pub fn run(slices: u64, n: usize, labels_first: bool) -> Vec<(&'static str, Vec<
     }
     out
 }
+
+/// The official Rerun command-line tool (`pip install rerun-sdk==0.36.*`): `$EVSEG_RERUN`, else
+/// `rerun` next to `$EVSEG_PYTHON`, in the workspace's `.venv`, in /work/venv, or on PATH.
+/// `None` (the check is skipped, with a message) when none runs, except under CI=true where
+/// that is a failure.
+pub fn rerun_cli() -> Option<std::path::PathBuf> {
+    use std::path::PathBuf;
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let mut candidates: Vec<PathBuf> = Vec::new();
+    if let Ok(p) = std::env::var("EVSEG_RERUN") {
+        candidates.push(p.into());
+    }
+    if let Ok(py) = std::env::var("EVSEG_PYTHON")
+        && let Some(dir) = std::path::Path::new(&py).parent()
+    {
+        candidates.push(dir.join("rerun"));
+    }
+    candidates.push(root.join(".venv/bin/rerun"));
+    candidates.push("/work/venv/bin/rerun".into());
+    candidates.push("rerun".into());
+    for c in candidates {
+        let ok = std::process::Command::new(&c)
+            .arg("--version")
+            .output()
+            .is_ok_and(|o| o.status.success() && String::from_utf8_lossy(&o.stdout).contains("0.36"));
+        if ok {
+            return Some(c);
+        }
+    }
+    if std::env::var("CI").is_ok_and(|v| v == "true") {
+        panic!("the Rerun 0.36 CLI (pip install rerun-sdk==0.36.*) is not available and CI=true");
+    }
+    eprintln!("SKIPPED: no Rerun 0.36 CLI (pip install rerun-sdk==0.36.*); .rrd not read back with Rerun");
+    None
+}
+
+/// Entity paths (without the leading `/`) and their row counts (summed over chunks) in an .rrd
+/// file, as the official `rerun rrd print` lists them; panics when Rerun cannot read the file.
+pub fn rrd_entities(cli: &std::path::Path, rrd: &std::path::Path) -> std::collections::BTreeMap<String, u64> {
+    let o = std::process::Command::new(cli)
+        .args(["rrd", "print"])
+        .arg(rrd)
+        .output()
+        .expect("run rerun rrd print");
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        o.status.success(),
+        "rerun rrd print {} failed:\n{text}\n{}",
+        rrd.display(),
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let mut out = std::collections::BTreeMap::new();
+    for line in text.lines() {
+        // Chunk lines: `Chunk(...) with N rows (...) - /entity/path - columns: [...]`.
+        let mut parts = line.split(" - ");
+        let (Some(head), Some(path)) = (parts.next(), parts.next()) else {
+            continue;
+        };
+        let rows = head
+            .split(" with ")
+            .nth(1)
+            .and_then(|r| r.split(' ').next())
+            .and_then(|n| n.parse::<u64>().ok());
+        if let (Some(rows), Some(path)) = (rows, path.trim().strip_prefix('/')) {
+            *out.entry(path.to_string()).or_insert(0) += rows;
+        }
+    }
+    out
+}
