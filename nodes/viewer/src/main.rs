@@ -131,7 +131,13 @@ impl RawConsumer for Viewer {
         let Some(logger) = self.logger.take() else {
             return Ok(());
         };
-        let s = logger.finish()?;
+        let s = logger.finish().map_err(|e| match e {
+            evseg_viewer::ViewError::Flush { reason, .. } => evseg_viewer::ViewError::Flush {
+                sink: self.sink.to_string(),
+                reason,
+            },
+            other => other,
+        })?;
         tracing::info!(
             sink = %self.sink,
             slices = s.slices,

@@ -64,7 +64,13 @@ pub fn view_recording(mcap: &Path, sink: &Sink, params: &ViewerParams) -> Result
     if let Some(e) = failure {
         return Err(e);
     }
-    let stats = logger.finish()?;
+    let stats = logger.finish().map_err(|e| match e {
+        ViewError::Flush { reason, .. } => ViewError::Flush {
+            sink: sink.to_string(),
+            reason,
+        },
+        other => other,
+    })?;
     Ok(ViewSummary {
         recording,
         slices_from,
