@@ -120,7 +120,8 @@ enum Command {
         /// Working folder (run folders, variant B's graph, ab.md, ab.json).
         #[arg(long, default_value = "runs/ab")]
         work: PathBuf,
-        /// Router listen endpoint replacing the graph's (repeatable).
+        /// Variant A's router listen endpoint (repeatable; default a free loopback port); variant
+        /// B's router listens on a free loopback port and connects to it.
         #[arg(long)]
         listen: Vec<String>,
     },
