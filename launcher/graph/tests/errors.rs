@@ -420,7 +420,9 @@ fn bad_shared_memory_settings() {
     let unknown = unknown.unwrap_or_else(|| panic!("{found:?}"));
     assert!(unknown.message.contains("`pool_mib`"), "{}", unknown.message);
     assert_eq!((unknown.line, unknown.column), (3, 41));
-    let enabled = found.iter().find(|d| d.message.contains("`zenoh.shared_memory.enabled`"));
+    let enabled = found
+        .iter()
+        .find(|d| d.message.contains("`zenoh.shared_memory.enabled`"));
     let enabled = enabled.unwrap_or_else(|| panic!("{found:?}"));
     assert_eq!((enabled.line, enabled.column), (3, 29));
 
