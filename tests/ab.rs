@@ -5,33 +5,10 @@
 use std::path::Path;
 use std::time::Duration;
 
-use evseg_tests::{Launcher, free_port, read_json, write};
+use evseg_tests::{Launcher, free_port, read_json, sim_graph, write};
 
 fn graph(port: u16) -> String {
-    format!(
-        r#"name: ab{port}
-mode: lockstep
-window: 2
-zenoh:
-  machines:
-    local: {{ listen: ["tcp/127.0.0.1:{port}"] }}
-nodes:
-  - id: source
-    run: evseg-source
-    params: {{ kind: synthetic, scene: two-objects, seed: 7, seconds: 0.3 }}
-  - id: slicer
-    run: evseg-slicer
-    params: {{ window_ms: 30 }}
-    inputs: {{ events: source/events, truth: source/truth }}
-  - id: segmenter
-    run: evseg-baseline
-    inputs: {{ slices: slicer/slices }}
-  - id: evaluator
-    run: evseg-evaluator
-    params: {{ sequence: two-objects }}
-    inputs: {{ slices: slicer/slices, truth: slicer/truth, result: segmenter/tracks }}
-"#
-    )
+    sim_graph("ab", port, "")
 }
 
 fn evseg(dir: &Path, args: &[&str]) -> evseg_tests::Finished {

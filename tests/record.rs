@@ -12,37 +12,17 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::{Duration, Instant};
 
-use evseg_tests::{Launcher, bin, free_port, read_json, workspace_root, write};
+use evseg_tests::{
+    Launcher, SIM_GRAPH_SECONDS, SIM_GRAPH_WINDOW_MS, bin, free_port, read_json, sim_graph, workspace_root,
+    write,
+};
 
 /// Simulated seconds of the run and the slicer window: 10 slices.
-const SECONDS: f64 = 0.3;
-const WINDOW_MS: f64 = 30.0;
+const SECONDS: f64 = SIM_GRAPH_SECONDS;
+const WINDOW_MS: f64 = SIM_GRAPH_WINDOW_MS;
 
 fn graph(port: u16, record: &str) -> String {
-    format!(
-        r#"name: rec{port}
-mode: lockstep
-window: 2
-zenoh:
-  machines:
-    local: {{ listen: ["tcp/127.0.0.1:{port}"] }}
-nodes:
-  - id: source
-    run: evseg-source
-    params: {{ kind: synthetic, scene: two-objects, seed: 7, seconds: {SECONDS} }}
-  - id: slicer
-    run: evseg-slicer
-    params: {{ window_ms: {WINDOW_MS} }}
-    inputs: {{ events: source/events, truth: source/truth }}
-  - id: segmenter
-    run: evseg-baseline
-    inputs: {{ slices: slicer/slices }}
-  - id: evaluator
-    run: evseg-evaluator
-    params: {{ sequence: two-objects }}
-    inputs: {{ slices: slicer/slices, truth: slicer/truth, result: segmenter/tracks }}
-{record}"#
-    )
+    sim_graph("rec", port, record)
 }
 
 struct Run {

@@ -11,37 +11,10 @@ use std::time::{Duration, Instant};
 
 use evseg_recorder::write::{ChannelSpec, McapRecorder, WriterSettings};
 use evseg_schemas::{Envelope, codec};
-use evseg_tests::{Launcher, free_port, write};
-
-/// Simulated seconds of the run and the slicer window: 10 slices.
-const SECONDS: f64 = 0.3;
-const WINDOW_MS: f64 = 30.0;
+use evseg_tests::{Launcher, free_port, sim_graph, write};
 
 fn graph(port: u16) -> String {
-    format!(
-        r#"name: replay{port}
-mode: lockstep
-window: 2
-zenoh:
-  machines:
-    local: {{ listen: ["tcp/127.0.0.1:{port}"] }}
-nodes:
-  - id: source
-    run: evseg-source
-    params: {{ kind: synthetic, scene: two-objects, seed: 7, seconds: {SECONDS} }}
-  - id: slicer
-    run: evseg-slicer
-    params: {{ window_ms: {WINDOW_MS} }}
-    inputs: {{ events: source/events, truth: source/truth }}
-  - id: segmenter
-    run: evseg-baseline
-    inputs: {{ slices: slicer/slices }}
-  - id: evaluator
-    run: evseg-evaluator
-    params: {{ sequence: two-objects }}
-    inputs: {{ slices: slicer/slices, truth: slicer/truth, result: segmenter/tracks }}
-"#
-    )
+    sim_graph("replay", port, "")
 }
 
 struct Done {

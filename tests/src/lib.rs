@@ -188,3 +188,39 @@ pub fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
     std::fs::write(&p, text).expect("write file");
     p
 }
+
+/// Simulated seconds of [`sim_graph`]'s source.
+pub const SIM_GRAPH_SECONDS: f64 = 0.3;
+/// Slicer window of [`sim_graph`], milliseconds (10 full slices).
+pub const SIM_GRAPH_WINDOW_MS: f64 = 30.0;
+
+/// The small lock-step graph the whole-graph tests share: simulator (two-objects, seed 7,
+/// [`SIM_GRAPH_SECONDS`]) -> slicer ([`SIM_GRAPH_WINDOW_MS`]) -> baseline segmenter ->
+/// evaluator, window 2, instance `<name><port>`, router on loopback `port`. `extra` is appended
+/// as is (more nodes, or a `record:` section).
+pub fn sim_graph(name: &str, port: u16, extra: &str) -> String {
+    format!(
+        r#"name: {name}{port}
+mode: lockstep
+window: 2
+zenoh:
+  machines:
+    local: {{ listen: ["tcp/127.0.0.1:{port}"] }}
+nodes:
+  - id: source
+    run: evseg-source
+    params: {{ kind: synthetic, scene: two-objects, seed: 7, seconds: {SIM_GRAPH_SECONDS} }}
+  - id: slicer
+    run: evseg-slicer
+    params: {{ window_ms: {SIM_GRAPH_WINDOW_MS} }}
+    inputs: {{ events: source/events, truth: source/truth }}
+  - id: segmenter
+    run: evseg-baseline
+    inputs: {{ slices: slicer/slices }}
+  - id: evaluator
+    run: evseg-evaluator
+    params: {{ sequence: two-objects }}
+    inputs: {{ slices: slicer/slices, truth: slicer/truth, result: segmenter/tracks }}
+{extra}"#
+    )
+}

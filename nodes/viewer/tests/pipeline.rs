@@ -8,45 +8,24 @@ use std::path::Path;
 use std::process::Command;
 use std::time::Duration;
 
-use evseg_tests::{Launcher, bin, free_port, write};
+use evseg_tests::{Launcher, bin, free_port, sim_graph, write};
 
-/// Simulated seconds and slicer window: 10 or 11 slices.
-const SECONDS: f64 = 0.3;
-const WINDOW_MS: f64 = 30.0;
+/// The shared test graph makes 10 full slices (0.3 s of 30 ms windows).
 const SLICES: u64 = 10;
 
 fn graph(port: u16) -> String {
-    format!(
-        r#"name: view{port}
-mode: lockstep
-window: 2
-zenoh:
-  machines:
-    local: {{ listen: ["tcp/127.0.0.1:{port}"] }}
-nodes:
-  - id: source
-    run: evseg-source
-    params: {{ kind: synthetic, scene: two-objects, seed: 7, seconds: {SECONDS} }}
-  - id: slicer
-    run: evseg-slicer
-    params: {{ window_ms: {WINDOW_MS} }}
-    inputs: {{ events: source/events, truth: source/truth }}
-  - id: segmenter
-    run: evseg-baseline
-    inputs: {{ slices: slicer/slices }}
-  - id: evaluator
-    run: evseg-evaluator
-    params: {{ sequence: two-objects }}
-    inputs: {{ slices: slicer/slices, truth: slicer/truth, result: segmenter/tracks }}
-  - id: viewer
+    sim_graph(
+        "view",
+        port,
+        r#"  - id: viewer
     run: evseg-viewer
-    params: {{ max_points_per_slice: 2000 }}
+    params: { max_points_per_slice: 2000 }
     inputs:
       slices: slicer/slices
       tracks: segmenter/tracks
       truth: slicer/truth
       metrics: evaluator/metrics
-"#
+"#,
     )
 }
 
