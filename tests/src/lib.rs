@@ -25,13 +25,31 @@ pub fn bin_dir() -> &'static Path {
             .to_string();
         let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
         let mut cmd = Command::new(cargo);
-        cmd.args(["build", "--workspace", "--bins", "--quiet"])
+        // `--tests` too: the same feature resolution as `cargo test` (dev-dependencies unify
+        // features of shared dependencies), so the binaries are not built twice against two
+        // builds of zenoh and rerun.
+        cmd.args(["build", "--workspace", "--bins", "--tests", "--quiet"])
             .current_dir(workspace_root());
+        // `cargo test` gives the test process its package's variables; ring's build script
+        // watches CARGO_MANIFEST_DIR, so inheriting them made this build recompile ring, rustls
+        // and all of rerun once per test crate (the build in scripts/test has none of them).
+        for (key, _) in std::env::vars_os() {
+            let Some(key) = key.to_str() else { continue };
+            let per_package = key.starts_with("CARGO_PKG_")
+                || key.starts_with("CARGO_MANIFEST_")
+                || matches!(
+                    key,
+                    "CARGO_CRATE_NAME" | "CARGO_BIN_NAME" | "CARGO_PRIMARY_PACKAGE" | "CARGO_TARGET_TMPDIR"
+                );
+            if per_package {
+                cmd.env_remove(key);
+            }
+        }
         if profile == "release" {
             cmd.arg("--release");
         }
         let status = cmd.status().expect("run cargo build");
-        assert!(status.success(), "cargo build --workspace --bins failed");
+        assert!(status.success(), "cargo build --workspace --bins --tests failed");
         dir
     })
 }
