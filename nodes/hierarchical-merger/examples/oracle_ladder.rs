@@ -26,7 +26,10 @@
 //!   depth per cluster (`rho = a + b x + c y`);
 //! - R5: per cluster, the 2-D derotated flow `v` fitted to the normal flows (`r = n0 . v`); the
 //!   cluster is foreground when the angle between `v` and its mean `A(x) t` exceeds a threshold
-//!   (sweep), with the true and with the estimated normal flow.
+//!   (sweep), with the true and with the estimated normal flow;
+//! - R6: the egomotion estimate (`evseg_geometry::estimate_translation`, default settings) on
+//!   the true background events only: its direction error with the estimated normal flow and
+//!   with the true normal flow along the estimated n0.
 //!
 //! The IoU is per event over the events with a valid estimated flow (coverage printed), mean over
 //! the slices with a moving object.
@@ -268,6 +271,9 @@ fn main() -> anyhow::Result<()> {
         }
         let (mut omega_err, mut omega_norm, mut t_norm) = (Vec::new(), Vec::new(), Vec::new());
         let mut r1 = Iou::default();
+        let (mut ego_est, mut ego_true) = (Vec::new(), Vec::new());
+        let (mut ego_scaled, mut scales) = (Vec::new(), Vec::new());
+        let mut variants: [Vec<f64>; 4] = Default::default();
         let mut r1i = Iou::default();
         let (mut r3u, mut r3t, mut r3e) = (Iou::default(), Iou::default(), Iou::default());
         let (mut r4t, mut r4e) = (Iou::default(), Iou::default());
@@ -317,6 +323,110 @@ fn main() -> anyhow::Result<()> {
             let clusters = overseg.segment(&s.camera, &s.events, &flow)?;
             let k = usize::from(clusters.count);
             let has_object = truth.event_object.iter().any(|&o| o != 0);
+            // R6: the egomotion estimate on the true background only (slicer omega), with the
+            // estimated normal flow and with the true normal flow along the estimated n0.
+            {
+                let samples = evseg_geometry::flow_samples(&table, &s.events, &flow, s.omega, 0.0)?;
+                let bg: Vec<evseg_geometry::FlowSample> = samples
+                    .iter()
+                    .filter(|sm| truth.event_object[sm.index] == 0)
+                    .copied()
+                    .collect();
+                let bg_true: Vec<evseg_geometry::FlowSample> = bg
+                    .iter()
+                    .map(|sm| {
+                        let (u, v) = (s.events.x[sm.index], s.events.y[sm.index]);
+                        let j = jac[usize::from(v) * w + usize::from(u)];
+                        let (fu, fv) = (
+                            f64::from(truth.flow_x[sm.index]),
+                            f64::from(truth.flow_y[sm.index]),
+                        );
+                        let uf = [j[0] * fu + j[1] * fv, j[2] * fu + j[3] * fv];
+                        let n_t = dot2(uf, sm.n0);
+                        let mut out = *sm;
+                        out.n_derot = sm.n_derot + (n_t - sm.n);
+                        out.n = n_t;
+                        out
+                    })
+                    .collect();
+                // The estimate with its magnitude rescaled by the slice's median ratio to the
+                // truth (an oracle scale): does a common scale bias explain the error?
+                let mut ratios: Vec<f64> = bg
+                    .iter()
+                    .zip(&bg_true)
+                    .filter(|(_, t)| t.n > 0.0)
+                    .map(|(e, t)| e.n / t.n)
+                    .collect();
+                let k_scale = median(&mut ratios);
+                scales.push(k_scale);
+                let bg_scaled: Vec<evseg_geometry::FlowSample> = bg
+                    .iter()
+                    .map(|sm| {
+                        let mut out = *sm;
+                        out.n = sm.n / k_scale;
+                        out.n_derot = sm.n_derot + (out.n - sm.n);
+                        out
+                    })
+                    .collect();
+                let p = evseg_geometry::EgomotionParams::default();
+                // Variants on the estimated flow (confident samples, as estimate_translation):
+                // the SVM alone, the Huber refinement from the SVM, and both refinements
+                // started from the true direction.
+                {
+                    let conf: Vec<(&evseg_geometry::FlowSample, f64)> = bg
+                        .iter()
+                        .filter(|sm| sm.confidence > p.min_confidence)
+                        .map(|sm| (sm, 1.0))
+                        .collect();
+                    let err = |d: [f64; 3]| {
+                        let c = (d[0] * t_true[0] + d[1] * t_true[1] + d[2] * t_true[2])
+                            / (d[0].hypot(d[1]).hypot(d[2]) * t_true[0].hypot(t_true[1]).hypot(t_true[2]));
+                        c.clamp(-1.0, 1.0).acos().to_degrees()
+                    };
+                    if let Some(svm) = evseg_geometry::translation_direction(conf.iter().copied(), &p.svm) {
+                        let regions = evseg_geometry::grid_regions(
+                            conf.iter().copied(),
+                            &s.events.x,
+                            &s.events.y,
+                            camera.width,
+                            camera.height,
+                            p.grid_cols,
+                        );
+                        variants[0].push(err(svm.direction));
+                        let it = p.refine_iterations;
+                        let m = p.min_cell_samples;
+                        let rr = evseg_geometry::refine_direction_robust;
+                        if let Some(d) = rr(&regions, svm.direction, it, m, Some(1.5)) {
+                            variants[1].push(err(d));
+                        }
+                        if let Some(d) = rr(&regions, t_true, it, m, None) {
+                            variants[2].push(err(d));
+                        }
+                        if let Some(d) = rr(&regions, t_true, it, m, Some(1.5)) {
+                            variants[3].push(err(d));
+                        }
+                    }
+                }
+                for (set, out) in [
+                    (&bg, &mut ego_est),
+                    (&bg_true, &mut ego_true),
+                    (&bg_scaled, &mut ego_scaled),
+                ] {
+                    let refs: Vec<&evseg_geometry::FlowSample> = set.iter().collect();
+                    if let Some(d) = evseg_geometry::estimate_translation(
+                        &refs,
+                        &s.events.x,
+                        &s.events.y,
+                        camera.width,
+                        camera.height,
+                        &p,
+                    ) {
+                        let c = (d[0] * t_true[0] + d[1] * t_true[1] + d[2] * t_true[2])
+                            / (d[0].hypot(d[1]).hypot(d[2]) * t_true[0].hypot(t_true[1]).hypot(t_true[2]));
+                        out.push(c.clamp(-1.0, 1.0).acos().to_degrees());
+                    }
+                }
+            }
             // Per event: (index, cluster, q = n0.A t, r_true, r_est, rho_full, |d|, q_u = u0.A t, |d| along u0)
             let mut rows = Vec::new();
             let mut n0s = std::collections::HashMap::new();
@@ -518,6 +628,22 @@ fn main() -> anyhow::Result<()> {
                 sweep_vt[j], sweep_ve[j]
             );
         }
+        println!(
+            "  R6 egomotion on the true background, median direction error: est normal flow {:.1} deg, true normal flow along est n0 {:.1} deg, est rescaled by the slice's median est/true ratio (median {:.3}) {:.1} deg (slices {} / {})",
+            median(&mut ego_est.clone()),
+            median(&mut ego_true.clone()),
+            median(&mut scales),
+            median(&mut ego_scaled),
+            ego_est.len(),
+            ego_true.len()
+        );
+        println!(
+            "  R6 est flow variants: SVM alone {:.1} deg, Huber refine from SVM {:.1}, refine from the true t {:.1}, Huber from the true t {:.1}",
+            median(&mut variants[0]),
+            median(&mut variants[1]),
+            median(&mut variants[2]),
+            median(&mut variants[3])
+        );
         println!(
             "  R4 per-event oracle depth IoU: true normal flow {}, est normal flow {}",
             r4t, r4e
