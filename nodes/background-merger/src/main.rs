@@ -108,6 +108,11 @@ fn main() -> ExitCode {
         "Huber constant of the egomotion's depth refinement, in robust residual scales (0 = plain least squares)",
     )
     .param(
+        "egomotion_magnitude_weighting",
+        d.egomotion.magnitude_weighting,
+        "weight egomotion samples by 1 / (n^2 + median n^2) (normal-flow error grows with its length)",
+    )
+    .param(
         "hypotheses",
         d.hypotheses,
         "choose the background translation among hypotheses by the image area they explain",
@@ -204,6 +209,7 @@ fn main() -> ExitCode {
                 min_cell_samples: cfg.param("min_cell_samples")?,
                 density_cell_px: cfg.param("egomotion_density_cell_px")?,
                 huber_k: cfg.param("refine_huber_k")?,
+                magnitude_weighting: cfg.param("egomotion_magnitude_weighting")?,
             },
             hypotheses: cfg.param("hypotheses")?,
             prior_floor: cfg.param("prior_floor")?,

@@ -58,6 +58,10 @@ fn apply(
                 bg.egomotion.refine_iterations = f as usize;
                 hier.egomotion.refine_iterations = f as usize;
             }
+            "magnitude_weighting" => {
+                bg.egomotion.magnitude_weighting = f != 0.0;
+                hier.egomotion.magnitude_weighting = f != 0.0;
+            }
             "huber_k" => {
                 bg.egomotion.huber_k = f;
                 hier.egomotion.huber_k = f;

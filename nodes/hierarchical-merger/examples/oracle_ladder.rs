@@ -273,7 +273,7 @@ fn main() -> anyhow::Result<()> {
         let mut r1 = Iou::default();
         let (mut ego_est, mut ego_true) = (Vec::new(), Vec::new());
         let (mut ego_scaled, mut scales) = (Vec::new(), Vec::new());
-        let mut variants: [Vec<f64>; 4] = Default::default();
+        let mut variants: [Vec<f64>; 7] = Default::default();
         let mut r1i = Iou::default();
         let (mut r3u, mut r3t, mut r3e) = (Iou::default(), Iou::default(), Iou::default());
         let (mut r4t, mut r4e) = (Iou::default(), Iou::default());
@@ -404,6 +404,32 @@ fn main() -> anyhow::Result<()> {
                         }
                         if let Some(d) = rr(&regions, t_true, it, m, Some(1.5)) {
                             variants[3].push(err(d));
+                        }
+                        // Heteroscedastic weights: the estimator's error grows with |n|
+                        // (mostly rotational flow), so weight 1 / (n^2 + n_med^2).
+                        let mut ns: Vec<f64> = conf.iter().map(|(sm, _)| sm.n).collect();
+                        let n_med = median(&mut ns);
+                        let hw: Vec<(&evseg_geometry::FlowSample, f64)> = conf
+                            .iter()
+                            .map(|(sm, _)| (*sm, 1.0 / (sm.n * sm.n + n_med * n_med)))
+                            .collect();
+                        let regions_w = evseg_geometry::grid_regions(
+                            hw.iter().copied(),
+                            &s.events.x,
+                            &s.events.y,
+                            camera.width,
+                            camera.height,
+                            p.grid_cols,
+                        );
+                        if let Some(d) = rr(&regions_w, svm.direction, it, m, Some(1.5)) {
+                            variants[4].push(err(d));
+                        }
+                        if let Some(svm_w) = evseg_geometry::translation_direction(hw.iter().copied(), &p.svm)
+                        {
+                            variants[5].push(err(svm_w.direction));
+                            if let Some(d) = rr(&regions_w, svm_w.direction, it, m, Some(1.5)) {
+                                variants[6].push(err(d));
+                            }
                         }
                     }
                 }
@@ -638,11 +664,14 @@ fn main() -> anyhow::Result<()> {
             ego_true.len()
         );
         println!(
-            "  R6 est flow variants: SVM alone {:.1} deg, Huber refine from SVM {:.1}, refine from the true t {:.1}, Huber from the true t {:.1}",
+            "  R6 est flow variants: SVM alone {:.1} deg, Huber refine from SVM {:.1}, refine from the true t {:.1}, Huber from the true t {:.1}; weights 1/(n^2+n_med^2): Huber refine from SVM {:.1}, weighted SVM {:.1}, Huber from weighted SVM {:.1}",
             median(&mut variants[0]),
             median(&mut variants[1]),
             median(&mut variants[2]),
-            median(&mut variants[3])
+            median(&mut variants[3]),
+            median(&mut variants[4]),
+            median(&mut variants[5]),
+            median(&mut variants[6])
         );
         println!(
             "  R4 per-event oracle depth IoU: true normal flow {}, est normal flow {}",

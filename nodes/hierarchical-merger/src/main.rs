@@ -130,6 +130,11 @@ fn main() -> ExitCode {
         d.egomotion.huber_k,
         "Huber constant of the egomotion's depth refinement, in robust residual scales (0 = plain least squares)",
     )
+    .param(
+        "egomotion_magnitude_weighting",
+        d.egomotion.magnitude_weighting,
+        "weight egomotion samples by 1 / (n^2 + median n^2) (normal-flow error grows with its length)",
+    )
     .build();
     run_stage(description, |cfg: &NodeConfig| {
         let params = HierParams {
@@ -156,6 +161,7 @@ fn main() -> ExitCode {
                 min_cell_samples: cfg.param("min_cell_samples")?,
                 density_cell_px: cfg.param("egomotion_density_cell_px")?,
                 huber_k: cfg.param("refine_huber_k")?,
+                magnitude_weighting: cfg.param("egomotion_magnitude_weighting")?,
             },
         };
         Ok(Node(HierarchicalMerger::new(params)?))
