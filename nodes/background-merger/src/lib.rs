@@ -406,7 +406,12 @@ fn is_consistent(members: &[&FlowSample], t: [f64; 3], sum_r: f64, sum_n: f64, p
         return true;
     }
     if p.max_flow_angle_deg > 0.0
-        && let Some(d) = flow_direction(members, t, p.flow_direction_min_spread)
+        && let Some(d) = flow_direction(
+            members,
+            t,
+            p.flow_direction_min_spread,
+            p.flow_direction_magnitude_weighting,
+        )
     {
         return d.angle_deg <= p.max_flow_angle_deg;
     }

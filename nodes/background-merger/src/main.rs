@@ -173,6 +173,11 @@ fn main() -> ExitCode {
         "smallest eigenvalue of sum n0 n0^T per sample for the direction test to apply",
     )
     .param(
+        "flow_direction_magnitude_weighting",
+        d.flow_direction_magnitude_weighting,
+        "weight the direction test's flow fit by 1 / (n^2 + median n^2)",
+    )
+    .param(
         "map_cell_px",
         d.map_cell_px,
         "cell of the persistent background map, pixels",
@@ -223,6 +228,7 @@ fn main() -> ExitCode {
             consistency_floor: cfg.param("consistency_floor")?,
             max_flow_angle_deg: cfg.param("max_flow_angle_deg")?,
             flow_direction_min_spread: cfg.param("flow_direction_min_spread")?,
+            flow_direction_magnitude_weighting: cfg.param("flow_direction_magnitude_weighting")?,
             map_cell_px: cfg.param("map_cell_px")?,
             alpha_min: cfg.param("alpha_min")?,
             alpha_max: cfg.param("alpha_max")?,

@@ -32,19 +32,40 @@ pub struct FlowDirection {
 /// `min_spread` times the sample count, the aperture problem of a region of parallel edges); or
 /// translational directions too varied across the region (the length of the mean `A(x) t` below
 /// half the mean length, e.g. a region around the focus of expansion).
-pub fn flow_direction(samples: &[&FlowSample], t: [f64; 3], min_spread: f64) -> Option<FlowDirection> {
+///
+/// With `magnitude_weighting` each sample's equation is weighted by `1 / (n^2 + n_med^2)` (`n`
+/// its normal-flow length, `n_med` the region's median), as in the egomotion: an estimator's
+/// magnitude error grows with the length (see `EgomotionParams::magnitude_weighting`).
+/// `min_spread` then applies to the weighted `sum w n0 n0^T` against the summed weight.
+pub fn flow_direction(
+    samples: &[&FlowSample],
+    t: [f64; 3],
+    min_spread: f64,
+    magnitude_weighting: bool,
+) -> Option<FlowDirection> {
     if samples.len() < 3 {
         return None;
     }
+    let med2 = if magnitude_weighting {
+        let mut ns: Vec<f64> = samples.iter().map(|s| s.n.abs()).collect();
+        let mid = ns.len() / 2;
+        let (_, med, _) = ns.select_nth_unstable_by(mid, f64::total_cmp);
+        Some((*med * *med).max(f64::MIN_POSITIVE))
+    } else {
+        None
+    };
+    let mut wsum = 0.0;
     let (mut sxx, mut sxy, mut syy, mut bx, mut by) = (0.0, 0.0, 0.0, 0.0, 0.0);
     let (mut ex, mut ey, mut elen) = (0.0, 0.0, 0.0);
     for s in samples {
         let [nx, ny] = s.n0;
-        sxx += nx * nx;
-        sxy += nx * ny;
-        syy += ny * ny;
-        bx += nx * s.n_derot;
-        by += ny * s.n_derot;
+        let w = med2.map_or(1.0, |m2| 1.0 / (s.n * s.n + m2));
+        wsum += w;
+        sxx += w * nx * nx;
+        sxy += w * nx * ny;
+        syy += w * ny * ny;
+        bx += w * nx * s.n_derot;
+        by += w * ny * s.n_derot;
         let e = translational_flow(s.x, s.y, t, 1.0);
         ex += e[0];
         ey += e[1];
@@ -54,7 +75,7 @@ pub fn flow_direction(samples: &[&FlowSample], t: [f64; 3], min_spread: f64) -> 
     let tr = sxx + syy;
     let det = sxx * syy - sxy * sxy;
     let lambda_min = 0.5 * (tr - ((sxx - syy).powi(2) + 4.0 * sxy * sxy).sqrt());
-    if !(lambda_min >= min_spread * m && det > 0.0) {
+    if !(lambda_min >= min_spread * wsum && det > 0.0) {
         return None;
     }
     let v = [(syy * bx - sxy * by) / det, (sxx * by - sxy * bx) / det];
@@ -114,10 +135,10 @@ mod tests {
             translational_flow(x, y, t, 0.45 + 2.0 * x - y)
         });
         let r: Vec<&FlowSample> = s.iter().collect();
-        let d = flow_direction(&r, t, 0.1).unwrap();
+        let d = flow_direction(&r, t, 0.1, false).unwrap();
         assert!(d.angle_deg < 5.0, "{d:?}");
         // The same flow against the opposite translation: no positive depth explains it.
-        let d = flow_direction(&r, [-0.3, 0.1, -0.2], 0.1).unwrap();
+        let d = flow_direction(&r, [-0.3, 0.1, -0.2], 0.1, true).unwrap();
         assert!(d.angle_deg > 175.0, "{d:?}");
     }
 
@@ -127,7 +148,7 @@ mod tests {
         let t = [0.0, 0.0, 1.0];
         let s = patch(0.3, -0.0225, true, |_, _| [0.0, 0.4]);
         let r: Vec<&FlowSample> = s.iter().collect();
-        let d = flow_direction(&r, t, 0.1).unwrap();
+        let d = flow_direction(&r, t, 0.1, false).unwrap();
         assert!((d.angle_deg - 90.0).abs() < 1.0, "{d:?}");
         assert!((d.flow[1] - 0.4).abs() < 1e-9 && d.flow[0].abs() < 1e-9);
     }
@@ -137,14 +158,14 @@ mod tests {
         let t = [1.0, 0.0, 0.0];
         let s = patch(0.0, 0.0, false, |_, _| [0.0, 0.4]);
         let r: Vec<&FlowSample> = s.iter().collect();
-        assert!(flow_direction(&r, t, 0.1).is_none());
+        assert!(flow_direction(&r, t, 0.1, false).is_none());
         let s = patch(0.0, 0.0, true, |_, _| [0.0, 0.4]);
         let r: Vec<&FlowSample> = s.iter().take(2).collect();
-        assert!(flow_direction(&r, t, 0.1).is_none());
+        assert!(flow_direction(&r, t, 0.1, false).is_none());
         // Around the focus of expansion (forward motion, patch centred on the image centre)
         // the translational directions cancel.
         let s = patch(-0.0475, -0.0225, true, |_, _| [0.0, 0.4]);
         let r: Vec<&FlowSample> = s.iter().collect();
-        assert!(flow_direction(&r, [0.0, 0.0, 1.0], 0.1).is_none());
+        assert!(flow_direction(&r, [0.0, 0.0, 1.0], 0.1, true).is_none());
     }
 }

@@ -48,6 +48,7 @@ fn apply(
             "consistency_floor" => bg.consistency_floor = f,
             "max_flow_angle" => bg.max_flow_angle_deg = f,
             "flow_min_spread" => bg.flow_direction_min_spread = f,
+            "flow_weighting" => bg.flow_direction_magnitude_weighting = f != 0.0,
             "refine_rounds" => bg.refine_rounds = f as usize,
             "hypotheses" => bg.hypotheses = f != 0.0,
             "ego_density" => {

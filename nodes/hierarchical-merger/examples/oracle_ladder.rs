@@ -199,10 +199,16 @@ fn cluster_relative_plane(k: usize, items: &[(usize, f64, f64, f64, f64)]) -> Ve
 /// Per cluster: the 2-D derotated flow `v` fitted to `r = n0 . v` and the angle (deg) between
 /// `v` and the cluster's mean translational direction `A(x) t`. items = (cluster, r, n0, A t).
 fn cluster_flow_angle(k: usize, items: &[(usize, f64, [f64; 2], [f64; 2])]) -> Vec<f64> {
+    let weighted: Vec<WeightedItem> = items.iter().map(|&(c, r, n0, tr)| (c, r, n0, tr, 1.0)).collect();
+    cluster_flow_angle_weighted(k, &weighted)
+}
+
+/// [`cluster_flow_angle`] with a weight per sample (last field).
+fn cluster_flow_angle_weighted(k: usize, items: &[WeightedItem]) -> Vec<f64> {
     let mut ne = vec![evseg_geometry::lsq::NormalEquations::<2>::default(); k];
     let mut at = vec![[0.0; 2]; k];
-    for &(c, r, n0, tr) in items {
-        ne[c].add(&n0, r, 1.0);
+    for &(c, r, n0, tr, wt) in items {
+        ne[c].add(&n0, r, wt);
         at[c][0] += tr[0];
         at[c][1] += tr[1];
     }
@@ -223,6 +229,9 @@ fn cluster_flow_angle(k: usize, items: &[(usize, f64, [f64; 2], [f64; 2])]) -> V
 
 /// Angles (deg) of the R5 sweep.
 const ANGLES: [f64; 5] = [10.0, 15.0, 20.0, 30.0, 45.0];
+
+/// (cluster, derotated normal flow r, n0, A t, weight) of the weighted R5 fit.
+type WeightedItem = (usize, f64, [f64; 2], [f64; 2], f64);
 
 /// Ratios of the R3 sweep.
 const RATIOS: [f64; 5] = [0.1, 0.2, 0.3, 0.5, 0.7];
@@ -283,6 +292,7 @@ fn main() -> anyhow::Result<()> {
         let mut sweep_pe: Vec<Iou> = RATIOS.iter().map(|_| Iou::default()).collect();
         let mut sweep_vt: Vec<Iou> = ANGLES.iter().map(|_| Iou::default()).collect();
         let mut sweep_ve: Vec<Iou> = ANGLES.iter().map(|_| Iou::default()).collect();
+        let mut sweep_vw: Vec<Iou> = ANGLES.iter().map(|_| Iou::default()).collect();
         let (mut ang_bg, mut ang_obj) = (Vec::new(), Vec::new());
         let (mut sign_ok, mut sign_n, mut mag_err) = (0usize, 0usize, Vec::new());
         let (mut mag_signed, mut trans_share) = (Vec::new(), Vec::new());
@@ -456,6 +466,7 @@ fn main() -> anyhow::Result<()> {
             // Per event: (index, cluster, q = n0.A t, r_true, r_est, rho_full, |d|, q_u = u0.A t, |d| along u0)
             let mut rows = Vec::new();
             let mut n0s = std::collections::HashMap::new();
+            let mut ns = std::collections::HashMap::new();
             for i in 0..n_ev {
                 let (u, v) = (s.events.x[i], s.events.y[i]);
                 let Some([x, y]) = table.get(u, v) else {
@@ -520,6 +531,7 @@ fn main() -> anyhow::Result<()> {
                 let r_est = n - dot2(n0, rot);
                 let cid = clusters.id[i];
                 n0s.insert(i, n0);
+                ns.insert(i, n);
                 rows.push((i, cid, q, r_true, r_est, rho, d, is_obj));
             }
             if !has_object {
@@ -535,6 +547,7 @@ fn main() -> anyhow::Result<()> {
             let mut items_e = Vec::new();
             let (mut items_pt, mut items_pe) = (Vec::new(), Vec::new());
             let (mut items_vt, mut items_ve) = (Vec::new(), Vec::new());
+            let mut items_vw: Vec<WeightedItem> = Vec::new();
             for &(i, cid, q, r_true, r_est, _, d, _) in &rows {
                 if cid == u16::MAX {
                     continue;
@@ -552,6 +565,7 @@ fn main() -> anyhow::Result<()> {
                 let tr = mul2x3(&a_matrix(f64::from(x), f64::from(y)), t_true);
                 items_vt.push((c, r_true, n0, tr));
                 items_ve.push((c, r_est, n0, tr));
+                items_vw.push((c, r_est, n0, tr, ns[&i]));
                 let dn = dot2(d, d).sqrt();
                 if dn > 0.0 {
                     // d is derotated already: r = |d|, q = (d/|d|) . A t.
@@ -579,6 +593,12 @@ fn main() -> anyhow::Result<()> {
                 }
             }
             let (ang_t, ang_e) = (cluster_flow_angle(k, &items_vt), cluster_flow_angle(k, &items_ve));
+            let mut all_n: Vec<f64> = items_vw.iter().map(|it| it.4).collect();
+            let n_med = median(&mut all_n);
+            for it in &mut items_vw {
+                it.4 = 1.0 / (it.4 * it.4 + n_med * n_med);
+            }
+            let ang_w = cluster_flow_angle_weighted(k, &items_vw);
             for &(_, cid, _, _, _, _, _, is_obj) in &rows {
                 if cid == u16::MAX {
                     continue;
@@ -587,9 +607,14 @@ fn main() -> anyhow::Result<()> {
                 for (j, &a) in ANGLES.iter().enumerate() {
                     sweep_vt[j].add(ang_t[c] > a, is_obj);
                     sweep_ve[j].add(ang_e[c] > a, is_obj);
+                    sweep_vw[j].add(ang_w[c] > a, is_obj);
                 }
             }
-            for iou in sweep_vt.iter_mut().chain(sweep_ve.iter_mut()) {
+            for iou in sweep_vt
+                .iter_mut()
+                .chain(sweep_ve.iter_mut())
+                .chain(sweep_vw.iter_mut())
+            {
                 iou.end_slice();
             }
             for iou in sweep_t
@@ -650,8 +675,8 @@ fn main() -> anyhow::Result<()> {
         }
         for (j, a) in ANGLES.iter().enumerate() {
             println!(
-                "  R5 cluster flow angle to A t > {a} deg: true normal flow {}, est {}",
-                sweep_vt[j], sweep_ve[j]
+                "  R5 cluster flow angle to A t > {a} deg: true normal flow {}, est {}, est weighted 1/(n^2+n_med^2) {}",
+                sweep_vt[j], sweep_ve[j], sweep_vw[j]
             );
         }
         println!(
