@@ -19,10 +19,13 @@
 //!    `r_new = n - n(x, t_new, w)` without saying which depth; a per-cluster depth makes the
 //!    residual small for the background at *any* depth (a room is not one plane) and large for a
 //!    cluster whose flow no positive depth explains.
-//! 4. **Merging.** Candidates consistent with `t` (mean `|r_new|` at most
-//!    [`BackgroundParams::consistency_ratio`] of their mean `|n_derot|`, or below
-//!    [`BackgroundParams::consistency_floor`]) form group 0, the coarse background; every other
-//!    cluster stays a group of its own for the hierarchical merger.
+//! 4. **Merging.** Candidates consistent with `t` form group 0, the coarse background; every
+//!    other cluster stays a group of its own for the hierarchical merger. Consistent: mean
+//!    `|r_new|` below [`BackgroundParams::consistency_floor`]; or else the cluster's 2-D flow
+//!    fitted to its normal flows points within [`BackgroundParams::max_flow_angle_deg`] of the
+//!    translational flow `A(x) t` (`evseg_geometry::direction`: no depth absorbs a wrong
+//!    direction); or, where that flow is undetermined, mean `|r_new|` at most
+//!    [`BackgroundParams::consistency_ratio`] of the mean `|n_derot|`.
 //! 5. **Persistent background map** ([`map`]): an EMA over image cells of the background
 //!    fraction, with a weight growing with the similarity of the current background to the map.
 //!    Each group's mean map value (before this slice's update) is published for the hierarchical
@@ -33,7 +36,7 @@ pub mod map;
 pub mod params;
 pub mod warp;
 
-use evseg_geometry::{FlowSample, TableCache, estimate_translation, flow_samples};
+use evseg_geometry::{FlowSample, TableCache, estimate_translation, flow_direction, flow_samples};
 use evseg_schemas::align::AlignError;
 use evseg_schemas::{CameraInfo, Clusters, CoarseSegmentation, Egomotion, Events, NormalFlow, Residuals};
 
@@ -389,9 +392,30 @@ fn cluster_fit(
     (sum_r, sum_n)
 }
 
-/// True when a cluster with residual sums `(sum_r, sum_n)` over `m` samples is explained.
-fn is_consistent(sum_r: f64, sum_n: f64, m: usize, p: &BackgroundParams) -> bool {
-    m > 0 && (sum_r / m as f64 <= p.consistency_floor || sum_r <= p.consistency_ratio * sum_n)
+/// True when a cluster `members` with residual sums `(sum_r, sum_n)` under translation `t` is
+/// explained: its mean residual is below the floor; or else, when the direction test applies
+/// ([`BackgroundParams::max_flow_angle_deg`] > 0 and the cluster's 2-D flow is determined), its
+/// fitted flow is within that angle of the translation's flow direction; or else its residual
+/// is at most [`BackgroundParams::consistency_ratio`] of its derotated flow.
+fn is_consistent(members: &[&FlowSample], t: [f64; 3], sum_r: f64, sum_n: f64, p: &BackgroundParams) -> bool {
+    let m = members.len();
+    if m == 0 {
+        return false;
+    }
+    if sum_r / m as f64 <= p.consistency_floor {
+        return true;
+    }
+    if p.max_flow_angle_deg > 0.0
+        && let Some(d) = flow_direction(
+            members,
+            t,
+            p.flow_direction_min_spread,
+            p.flow_direction_magnitude_weighting,
+        )
+    {
+        return d.angle_deg <= p.max_flow_angle_deg;
+    }
+    sum_r <= p.consistency_ratio * sum_n
 }
 
 /// Step 2a: background translation hypotheses and the one that explains the most image area.
@@ -471,7 +495,7 @@ fn select_hypothesis(
             .iter()
             .map(|m| {
                 let (r, nsum) = cluster_fit(m, Some(t), |_, _| {});
-                is_consistent(r, nsum, m.len(), p)
+                is_consistent(m, t, r, nsum, p)
             })
             .collect();
         let score: f64 = consistent
@@ -508,7 +532,7 @@ fn explain(
     } else {
         f64::NAN
     };
-    direction.is_none() || is_consistent(sum_r, sum_n, members.len(), p)
+    direction.is_none_or(|t| is_consistent(members, t, sum_r, sum_n, p))
 }
 
 /// Least-squares inverse depth of `members` under translation `t`, clamped at 0 (cheirality).

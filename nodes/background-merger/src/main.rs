@@ -103,6 +103,16 @@ fn main() -> ExitCode {
         "cells over which the egomotion samples are density-normalized, pixels (0 = off)",
     )
     .param(
+        "refine_huber_k",
+        d.egomotion.huber_k,
+        "Huber constant of the egomotion's depth refinement, in robust residual scales (0 = plain least squares)",
+    )
+    .param(
+        "egomotion_magnitude_weighting",
+        d.egomotion.magnitude_weighting,
+        "weight egomotion samples by 1 / (n^2 + median n^2) (normal-flow error grows with its length)",
+    )
+    .param(
         "hypotheses",
         d.hypotheses,
         "choose the background translation among hypotheses by the image area they explain",
@@ -153,6 +163,21 @@ fn main() -> ExitCode {
         "mean |residual| at most this (normalized units/s) = consistent",
     )
     .param(
+        "max_flow_angle_deg",
+        d.max_flow_angle_deg,
+        "cluster flow within this angle (deg) of the translation's flow direction = consistent; 0 = off",
+    )
+    .param(
+        "flow_direction_min_spread",
+        d.flow_direction_min_spread,
+        "smallest eigenvalue of sum n0 n0^T per sample for the direction test to apply",
+    )
+    .param(
+        "flow_direction_magnitude_weighting",
+        d.flow_direction_magnitude_weighting,
+        "weight the direction test's flow fit by 1 / (n^2 + median n^2)",
+    )
+    .param(
         "map_cell_px",
         d.map_cell_px,
         "cell of the persistent background map, pixels",
@@ -188,6 +213,8 @@ fn main() -> ExitCode {
                 grid_cols: cfg.param("depth_grid_cols")?,
                 min_cell_samples: cfg.param("min_cell_samples")?,
                 density_cell_px: cfg.param("egomotion_density_cell_px")?,
+                huber_k: cfg.param("refine_huber_k")?,
+                magnitude_weighting: cfg.param("egomotion_magnitude_weighting")?,
             },
             hypotheses: cfg.param("hypotheses")?,
             prior_floor: cfg.param("prior_floor")?,
@@ -199,6 +226,9 @@ fn main() -> ExitCode {
             candidate_threshold: cfg.param("candidate_threshold")?,
             consistency_ratio: cfg.param("consistency_ratio")?,
             consistency_floor: cfg.param("consistency_floor")?,
+            max_flow_angle_deg: cfg.param("max_flow_angle_deg")?,
+            flow_direction_min_spread: cfg.param("flow_direction_min_spread")?,
+            flow_direction_magnitude_weighting: cfg.param("flow_direction_magnitude_weighting")?,
             map_cell_px: cfg.param("map_cell_px")?,
             alpha_min: cfg.param("alpha_min")?,
             alpha_max: cfg.param("alpha_max")?,

@@ -217,3 +217,28 @@ fn malformed_input_is_an_error() {
     };
     assert!(BackgroundMerger::new(p).is_err());
 }
+
+/// An object whose flow is 25 deg off the background's translational flow direction: one
+/// inverse depth leaves about sin(25 deg) = 0.42 of its flow unexplained, under the residual
+/// ratio 0.5, so the depth-residual test alone (`max_flow_angle_deg` 0) calls it background;
+/// the direction test does not (oracle_ladder R5: the direction separates where no depth can
+/// absorb it).
+#[test]
+fn an_object_slightly_off_the_translation_direction_is_caught_by_the_direction_test() {
+    let t = [0.4, 0.0, 0.1];
+    let mut c = construct(t, Some([0.4, -0.19, 0.0]), 0.0);
+    c.residuals.background.iter_mut().for_each(|b| *b = true);
+    let mut m = BackgroundMerger::new(BackgroundParams::default()).unwrap();
+    let r = run(&mut m, &c, (0.0, 0.03), None);
+    assert!(!r.clusters[12].background, "{:?}", r.clusters[12]);
+    for (i, &g) in r.coarse.group.iter().enumerate() {
+        assert_eq!(g == 0, !c.object[i], "event {i}");
+    }
+    let old = BackgroundParams {
+        max_flow_angle_deg: 0.0,
+        ..BackgroundParams::default()
+    };
+    let mut m = BackgroundMerger::new(old).unwrap();
+    let r = run(&mut m, &c, (0.0, 0.03), None);
+    assert!(r.clusters[12].background, "{:?}", r.clusters[12]);
+}

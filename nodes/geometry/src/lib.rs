@@ -15,6 +15,7 @@
 pub mod assignment;
 pub mod camera;
 pub mod density;
+pub mod direction;
 pub mod egomotion;
 pub mod lsq;
 pub mod motion;
@@ -25,6 +26,7 @@ pub mod translation;
 
 pub use camera::{Camera, TableCache, UndistortTable};
 pub use density::density_weights;
+pub use direction::{FlowDirection, flow_direction};
 pub use egomotion::{EgomotionParams, estimate_translation};
 pub use motion::{a_matrix, b_matrix, c_matrix, planar_flow, rotational_flow, translational_flow};
 pub use refine::{grid_regions, refine_direction, refine_direction_robust};

@@ -46,6 +46,9 @@ fn apply(
             "candidate_threshold" => bg.candidate_threshold = f,
             "consistency_ratio" => bg.consistency_ratio = f,
             "consistency_floor" => bg.consistency_floor = f,
+            "max_flow_angle" => bg.max_flow_angle_deg = f,
+            "flow_min_spread" => bg.flow_direction_min_spread = f,
+            "flow_weighting" => bg.flow_direction_magnitude_weighting = f != 0.0,
             "refine_rounds" => bg.refine_rounds = f as usize,
             "hypotheses" => bg.hypotheses = f != 0.0,
             "ego_density" => {
@@ -55,6 +58,14 @@ fn apply(
             "refine_iterations" => {
                 bg.egomotion.refine_iterations = f as usize;
                 hier.egomotion.refine_iterations = f as usize;
+            }
+            "magnitude_weighting" => {
+                bg.egomotion.magnitude_weighting = f != 0.0;
+                hier.egomotion.magnitude_weighting = f != 0.0;
+            }
+            "huber_k" => {
+                bg.egomotion.huber_k = f;
+                hier.egomotion.huber_k = f;
             }
             "grid_cols" => {
                 bg.egomotion.grid_cols = f as usize;

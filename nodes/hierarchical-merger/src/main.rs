@@ -125,6 +125,16 @@ fn main() -> ExitCode {
         d.egomotion.density_cell_px,
         "cells over which the egomotion samples are density-normalized, pixels (0 = off)",
     )
+    .param(
+        "refine_huber_k",
+        d.egomotion.huber_k,
+        "Huber constant of the egomotion's depth refinement, in robust residual scales (0 = plain least squares)",
+    )
+    .param(
+        "egomotion_magnitude_weighting",
+        d.egomotion.magnitude_weighting,
+        "weight egomotion samples by 1 / (n^2 + median n^2) (normal-flow error grows with its length)",
+    )
     .build();
     run_stage(description, |cfg: &NodeConfig| {
         let params = HierParams {
@@ -150,6 +160,8 @@ fn main() -> ExitCode {
                 grid_cols: cfg.param("depth_grid_cols")?,
                 min_cell_samples: cfg.param("min_cell_samples")?,
                 density_cell_px: cfg.param("egomotion_density_cell_px")?,
+                huber_k: cfg.param("refine_huber_k")?,
+                magnitude_weighting: cfg.param("egomotion_magnitude_weighting")?,
             },
         };
         Ok(Node(HierarchicalMerger::new(params)?))

@@ -108,6 +108,12 @@ impl HierParams {
             "must be finite and >= 0",
         )?;
         check("merge_threshold", self.merge_threshold, true, "must be finite")?;
+        check(
+            "refine_huber_k",
+            self.egomotion.huber_k,
+            self.egomotion.huber_k >= 0.0,
+            "must be finite and >= 0",
+        )?;
         check("touch_px", f64::from(self.touch_px), true, "must be finite")?;
         check(
             "min_segment_fraction",
