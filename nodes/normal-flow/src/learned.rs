@@ -297,7 +297,7 @@ impl LearnedEstimator {
             start = if lo.is_finite() { lo } else { 0.0 };
             span = if hi > lo { (hi - lo) * (1.0 + 1e-9) } else { 1e-3 };
         }
-        let scale = (TAU_BINS / 2) as f64 / span;
+        let scale = TAU_BINS as f64 / span;
         let mut counts: Vec<u32> = Vec::new();
         for i in 0..n {
             let (x, y, t) = (events.x[i] as usize, events.y[i] as usize, events.t[i]);
@@ -422,6 +422,25 @@ impl LearnedEstimator {
     /// events of the compact pixels `k0..k1`, for rotation `r`, skipping events with fewer than
     /// `min_neighbours` neighbours; `positions` index `ev_idx`.
     fn encode_range(&self, r: usize, k0: usize, k1: usize, sink: &mut Sink<'_>) {
+        #[cfg(target_arch = "x86_64")]
+        {
+            if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma") {
+                // SAFETY: the CPU supports the features the function is compiled for.
+                unsafe { self.encode_range_avx2(r, k0, k1, sink) };
+                return;
+            }
+        }
+        self.encode_range_generic(r, k0, k1, sink);
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    fn encode_range_avx2(&self, r: usize, k0: usize, k1: usize, sink: &mut Sink<'_>) {
+        self.encode_range_generic(r, k0, k1, sink);
+    }
+
+    #[inline(always)]
+    fn encode_range_generic(&self, r: usize, k0: usize, k1: usize, sink: &mut Sink<'_>) {
         let d = self.d;
         let g = &self.groups;
         let rt = &self.rot[r];
@@ -434,31 +453,50 @@ impl LearnedEstimator {
         let mut feats = vec![0.0f32; BATCH * 2 * d];
         let mut pos: Vec<u32> = Vec::with_capacity(BATCH);
         let min_n = self.params.min_neighbours.max(1) as u32;
+        let mut cur_y = usize::MAX;
+        let mut lo_c = vec![0usize; 2 * rad + 1];
+        let mut hi_c = vec![0usize; 2 * rad + 1];
         for k in k0..k1 {
             let key = g.keys[k] as usize;
             let (y, x) = (key / self.width, key % self.width);
             let (xl, xh) = (x.saturating_sub(rad) as u16, (x + rad).min(self.width - 1) as u16);
-            let (yl, yh) = (y.saturating_sub(rad), (y + rad).min(self.height - 1));
+            // Per window row, cursors [lo, hi) into the row's pixels with x in [xl, xh]; the
+            // pixels come in (y, x) order, so within a centre row both only move forward.
+            if y != cur_y {
+                cur_y = y;
+                for (j, (lo, hi)) in lo_c.iter_mut().zip(hi_c.iter_mut()).enumerate() {
+                    let yy = (y + j).checked_sub(rad).filter(|&v| v < self.height);
+                    let start = yy.map_or(0, |v| g.row_start[v] as usize);
+                    *lo = start;
+                    *hi = start;
+                }
+            }
             wsum.fill(0.0);
             let mut n = 0u32;
-            for yy in yl..=yh {
+            for (j, (lo, hi)) in lo_c.iter_mut().zip(hi_c.iter_mut()).enumerate() {
+                let Some(yy) = (y + j).checked_sub(rad).filter(|&v| v < self.height) else {
+                    continue;
+                };
                 let (rs, re) = (g.row_start[yy] as usize, g.row_start[yy + 1] as usize);
-                if rs == re {
+                while *lo < re && g.px[*lo] < xl {
+                    *lo += 1;
+                }
+                if *hi < *lo {
+                    *hi = *lo;
+                }
+                while *hi < re && g.px[*hi] <= xh {
+                    *hi += 1;
+                }
+                if *hi <= *lo {
                     continue;
                 }
-                let cols = &g.px[rs..re];
-                let lo = cols.partition_point(|&c| c < xl);
-                let hi = cols.partition_point(|&c| c <= xh);
-                if hi <= lo {
-                    continue;
-                }
-                let top = rs + hi - 1;
+                let top = *hi - 1;
                 n += g.cnt_prefix[top];
                 for (a, b) in wsum.iter_mut().zip(&self.acc[top * 2 * d..(top + 1) * 2 * d]) {
                     *a += b;
                 }
-                if lo > 0 {
-                    let bot = rs + lo - 1;
+                if *lo > rs {
+                    let bot = *lo - 1;
                     n -= g.cnt_prefix[bot];
                     for (a, b) in wsum.iter_mut().zip(&self.acc[bot * 2 * d..(bot + 1) * 2 * d]) {
                         *a -= b;

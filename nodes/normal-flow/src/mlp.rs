@@ -50,37 +50,65 @@ fn layer_generic<const FMA: bool>(
         let nr = (rows - r0).min(BLOCK_ROWS);
         let mut o0 = 0;
         if nr == BLOCK_ROWS {
+            let x0 = &x[r0 * n_in..(r0 + 1) * n_in];
+            let x1 = &x[(r0 + 1) * n_in..(r0 + 2) * n_in];
+            let x2 = &x[(r0 + 2) * n_in..(r0 + 3) * n_in];
+            let x3 = &x[(r0 + 3) * n_in..(r0 + 4) * n_in];
             while o0 + BLOCK_COLS <= n_out {
                 let mut acc = [[0.0f32; BLOCK_COLS]; BLOCK_ROWS];
-                for i in 0..n_in {
-                    let wr: &[f32; BLOCK_COLS] = (&w[i * n_out + o0..i * n_out + o0 + BLOCK_COLS])
-                        .try_into()
-                        .unwrap_or(&[0.0; BLOCK_COLS]);
-                    for (r, a) in acc.iter_mut().enumerate() {
-                        let xv = x[(r0 + r) * n_in + i];
-                        for k in 0..BLOCK_COLS {
-                            a[k] = madd::<FMA>(xv, wr[k], a[k]);
-                        }
+                for ((((wrow, &a0), &a1), &a2), &a3) in w.chunks_exact(n_out).zip(x0).zip(x1).zip(x2).zip(x3)
+                {
+                    let Some(wr) = wrow.get(o0..o0 + BLOCK_COLS) else {
+                        break;
+                    };
+                    for (k, &wv) in wr.iter().enumerate() {
+                        acc[0][k] = madd::<FMA>(a0, wv, acc[0][k]);
+                        acc[1][k] = madd::<FMA>(a1, wv, acc[1][k]);
+                        acc[2][k] = madd::<FMA>(a2, wv, acc[2][k]);
+                        acc[3][k] = madd::<FMA>(a3, wv, acc[3][k]);
                     }
                 }
                 for (r, a) in acc.iter().enumerate() {
                     let dst = &mut y[(r0 + r) * n_out + o0..(r0 + r) * n_out + o0 + BLOCK_COLS];
-                    for k in 0..BLOCK_COLS {
-                        dst[k] = if relu { a[k].max(0.0) } else { a[k] };
+                    for (d, &v) in dst.iter_mut().zip(a) {
+                        *d = if relu { v.max(0.0) } else { v };
                     }
                 }
                 o0 += BLOCK_COLS;
             }
         }
-        // Remaining columns (and partial row blocks): row by row.
-        for r in r0..r0 + nr {
-            let xr = &x[r * n_in..(r + 1) * n_in];
-            for o in o0..n_out {
-                let mut a = 0.0f32;
-                for (i, &xv) in xr.iter().enumerate() {
-                    a = madd::<FMA>(xv, w[i * n_out + o], a);
+        if o0 < n_out {
+            if n_out == 2 && o0 == 0 && n_in.is_multiple_of(8) {
+                // The output layer: per row, 8 lanes of (input, output) pairs, summed at the end.
+                for r in r0..r0 + nr {
+                    let xr = &x[r * n_in..(r + 1) * n_in];
+                    let mut acc = [0.0f32; 16];
+                    for (xc, wc) in xr.chunks_exact(8).zip(w.chunks_exact(16)) {
+                        for j in 0..8 {
+                            acc[2 * j] = madd::<FMA>(xc[j], wc[2 * j], acc[2 * j]);
+                            acc[2 * j + 1] = madd::<FMA>(xc[j], wc[2 * j + 1], acc[2 * j + 1]);
+                        }
+                    }
+                    let (mut s0, mut s1) = (0.0f32, 0.0f32);
+                    for j in 0..8 {
+                        s0 += acc[2 * j];
+                        s1 += acc[2 * j + 1];
+                    }
+                    y[2 * r] = if relu { s0.max(0.0) } else { s0 };
+                    y[2 * r + 1] = if relu { s1.max(0.0) } else { s1 };
                 }
-                y[r * n_out + o] = if relu { a.max(0.0) } else { a };
+            } else {
+                // Remaining columns (and partial row blocks): row by row.
+                for r in r0..r0 + nr {
+                    let xr = &x[r * n_in..(r + 1) * n_in];
+                    for o in o0..n_out {
+                        let mut a = 0.0f32;
+                        for (&xv, wrow) in xr.iter().zip(w.chunks_exact(n_out)) {
+                            a = madd::<FMA>(xv, wrow[o], a);
+                        }
+                        y[r * n_out + o] = if relu { a.max(0.0) } else { a };
+                    }
+                }
             }
         }
         r0 += nr;
@@ -242,7 +270,12 @@ mod tests {
 
     #[test]
     fn layer_matches_naive() {
-        let (rows, n_in, n_out) = (7, 5, 19);
+        for (rows, n_in, n_out) in [(7, 5, 19), (9, 16, 2), (4, 24, 33)] {
+            check_layer(rows, n_in, n_out);
+        }
+    }
+
+    fn check_layer(rows: usize, n_in: usize, n_out: usize) {
         let x: Vec<f32> = (0..rows * n_in)
             .map(|i| ((i * 37 % 11) as f32 - 5.0) * 0.1)
             .collect();

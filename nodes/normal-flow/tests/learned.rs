@@ -237,3 +237,66 @@ fn trained_on_edges_gives_the_normal_direction_of_unseen_edges() {
     assert!(sign > 0.95, "sign-correct {sign}");
     assert!(median < 10.0, "median direction error {median} deg");
 }
+
+#[test]
+fn encoding_matches_its_definition() {
+    // Random events on a small sensor; times at the centres of the 1/2048 tau bins.
+    let w = init_weights(&small_config(9));
+    let (width, height) = (40u16, 30u16);
+    let cam = CameraInfo::pinhole(width, height, 50.0, "synthetic");
+    let mut est = LearnedEstimator::new(&cam, w.clone(), LearnedParams::default()).expect("estimator");
+    let (t0, t1) = (0.5, 0.53);
+    let mut rng = SplitMix64(99);
+    let mut list: Vec<(f64, u16, u16)> = (0..600)
+        .map(|_| {
+            let q = (rng.next_u64() % 4096) as f64;
+            let t = t0 + (q + 0.5) * (t1 - t0) / 4096.0;
+            let x = (rng.next_u64() % u64::from(width)) as u16;
+            let y = (rng.next_u64() % u64::from(height)) as u16;
+            (t, x, y)
+        })
+        .collect();
+    list.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let mut ev = Events::with_capacity(list.len());
+    for &(t, x, y) in &list {
+        ev.push(t, x, y, 1);
+    }
+    let (idx, feats) = est.features(&ev, t0, t1, 0, &|_| true).expect("features");
+    let d = w.d();
+    let r = f64::from(w.radius_px);
+    let rad = w.radius_px as i32;
+    // tau = 2 (t - t0) / T in [0, 2), quantised to 1/2048: bin q = floor(2048 tau / ... ) = floor(4096 (t - t0) / T).
+    let tau = |t: f64| ((t - t0) / (t1 - t0) * 4096.0).floor() / 2048.0;
+    let mut checked = 0;
+    let mut worst = 0.0f64;
+    for (row, &i) in idx.iter().enumerate() {
+        let i = i as usize;
+        let mut sum = vec![(0.0f64, 0.0f64); d];
+        let mut n = 0;
+        for j in 0..ev.len() {
+            let (dx, dy) = (
+                i32::from(ev.x[j]) - i32::from(ev.x[i]),
+                i32::from(ev.y[j]) - i32::from(ev.y[i]),
+            );
+            if dx.abs() > rad || dy.abs() > rad {
+                continue;
+            }
+            n += 1;
+            for (k, s) in sum.iter_mut().enumerate() {
+                let ph = (tau(ev.t[j]) - tau(ev.t[i])) * f64::from(w.at[k])
+                    + f64::from(dx) / r * f64::from(w.ax[k])
+                    + f64::from(dy) / r * f64::from(w.ay[k]);
+                s.0 += ph.cos();
+                s.1 += ph.sin();
+            }
+        }
+        let scale = (d as f64).sqrt() / f64::from(n);
+        for (k, s) in sum.iter().enumerate() {
+            worst = worst.max((s.0 * scale - f64::from(feats[row * 2 * d + k])).abs());
+            worst = worst.max((s.1 * scale - f64::from(feats[row * 2 * d + d + k])).abs());
+        }
+        checked += 1;
+    }
+    assert!(checked > 300, "{checked}");
+    assert!(worst < 1e-3, "largest difference from the definition {worst}");
+}
