@@ -424,12 +424,23 @@ impl LearnedEstimator {
     fn encode_range(&self, r: usize, k0: usize, k1: usize, sink: &mut Sink<'_>) {
         #[cfg(target_arch = "x86_64")]
         {
+            if std::is_x86_feature_detected!("avx512f") && std::is_x86_feature_detected!("fma") {
+                // SAFETY: the CPU supports the features the function is compiled for.
+                unsafe { self.encode_range_avx512(r, k0, k1, sink) };
+                return;
+            }
             if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma") {
                 // SAFETY: the CPU supports the features the function is compiled for.
                 unsafe { self.encode_range_avx2(r, k0, k1, sink) };
                 return;
             }
         }
+        self.encode_range_generic(r, k0, k1, sink);
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f,avx2,fma")]
+    fn encode_range_avx512(&self, r: usize, k0: usize, k1: usize, sink: &mut Sink<'_>) {
         self.encode_range_generic(r, k0, k1, sink);
     }
 
