@@ -9,6 +9,10 @@
 //!   (pointing along the motion), converted to normalized units per second with the camera
 //!   Jacobian at the event's pixel ([`evseg_geometry::Camera::pixel_flow_to_normalized`]).
 //!   Invalid fits have confidence 0 and flow 0.
+//! - [`LearnedEstimator`]: the learned alternative (VecKM_flow style, METHOD_NOTES §2): a
+//!   random-Fourier-feature encoding of each event's spatio-temporal neighbourhood within the
+//!   slice and a bias-free ReLU MLP, weights from a file ([`weights`]) trained by [`train`] on
+//!   simulator ground truth with the circle loss. Same output units as the plane fit.
 //! - [`score`]: sign-correct rate, magnitude error, circle angle error and coverage, at object
 //!   boundaries and elsewhere.
 
@@ -16,10 +20,16 @@
 
 pub mod estimator;
 pub mod fit;
+pub mod learned;
+pub mod mlp;
 pub mod params;
 pub mod score;
+pub mod train;
+pub mod weights;
 
 pub use estimator::{EstimatorError, EstimatorStats, PixelEstimate, PlaneFitEstimator, jacobian_table};
 pub use fit::{Neighbourhood, PlaneFit, fit_plane};
+pub use learned::{LearnedError, LearnedEstimator, LearnedParams};
 pub use params::{MAX_RADIUS, ParamsError, PlaneFitParams};
 pub use score::{Score, ScoreParams, Scorer};
+pub use weights::{LearnedWeights, WeightsError};

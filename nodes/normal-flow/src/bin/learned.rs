@@ -1,0 +1,234 @@
+//! `evseg-normal-flow-learned`: per-event normal flow of each slice by the learned estimator
+//! (random-Fourier-feature encoding + MLP, weights loaded at start-up); the same ports and
+//! messages as `evseg-normal-flow`. With the optional `truth` input wired, also scores it (per
+//! slice in the log, for the run in `normal-flow-score-<node>.json` in the run folder).
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use anyhow::Context;
+use evseg_normal_flow::{LearnedEstimator, LearnedParams, LearnedWeights, Score, ScoreParams, Scorer};
+use evseg_runtime::describe::Describe;
+use evseg_runtime::{BoxError, Inputs, NodeConfig, Outputs, Stage, run_stage};
+use evseg_schemas::{NormalFlow, Slice, Truth};
+use serde::Serialize;
+
+/// The default weights file, relative to the working folder (the repository root).
+const DEFAULT_WEIGHTS: &str = "nodes/normal-flow/weights/learned.bin";
+
+struct LearnedNode {
+    node: String,
+    run_dir: PathBuf,
+    weights_path: PathBuf,
+    weights: LearnedWeights,
+    params: LearnedParams,
+    estimator: Option<LearnedEstimator>,
+    scorer: Option<Scorer>,
+    slices: u64,
+    events: u64,
+    valid: u64,
+}
+
+/// What the node writes at the end of a run with truth.
+#[derive(Serialize)]
+struct RunReport<'a> {
+    node: &'a str,
+    estimator: &'static str,
+    weights: String,
+    weights_seed: u64,
+    d: usize,
+    layer_sizes: &'a [usize],
+    radius: usize,
+    ensemble: usize,
+    min_neighbours: usize,
+    min_confidence: f32,
+    slices: u64,
+    events: u64,
+    valid: u64,
+    score: Score,
+}
+
+impl Stage for LearnedNode {
+    fn process(&mut self, input: &Inputs, out: &mut Outputs) -> Result<(), BoxError> {
+        let slice: Slice = input.get("slices")?;
+        let (t_start, t_end) = input.span_of("slices").unwrap_or(input.span());
+        let rebuild = match &self.estimator {
+            Some(e) => e.camera() != &slice.camera,
+            None => true,
+        };
+        if rebuild {
+            if self.estimator.is_some() {
+                tracing::warn!(seq = input.seq(), "camera changed: estimator tables rebuilt");
+            }
+            self.estimator = Some(LearnedEstimator::new(
+                &slice.camera,
+                self.weights.clone(),
+                self.params,
+            )?);
+        }
+        let Some(estimator) = self.estimator.as_mut() else {
+            return Ok(());
+        };
+        let flow: NormalFlow = estimator.process(&slice.events, t_start, t_end)?;
+        self.events += flow.confidence.len() as u64;
+        self.valid += flow.confidence.iter().filter(|&&c| c > 0.0).count() as u64;
+        out.send("flow", input.seq(), t_start, t_end, &flow)?;
+        self.slices += 1;
+        if let Some(truth) = input.get_opt::<Truth>("truth")? {
+            if self.scorer.is_none() || rebuild {
+                self.scorer = Some(Scorer::new(&slice.camera, ScoreParams::default()));
+            }
+            if let Some(scorer) = self.scorer.as_mut() {
+                let s = scorer.add_slice(&slice.events, &flow, &truth)?;
+                tracing::info!(
+                    seq = input.seq(),
+                    events = s.all.events,
+                    coverage = s.all.coverage,
+                    sign_correct = s.all.sign_correct_rate,
+                    sign_correct_boundary = s.boundary.sign_correct_rate,
+                    circle_angle_deg_median = s.all.circle_angle_error_deg_median,
+                    "normal-flow score"
+                );
+            }
+        }
+        Ok(())
+    }
+
+    fn finish(&mut self, _out: &mut Outputs) -> Result<(), BoxError> {
+        let Some(scorer) = &self.scorer else {
+            return Ok(());
+        };
+        let p = &self.params;
+        let report = RunReport {
+            node: &self.node,
+            estimator: "learned",
+            weights: self.weights_path.display().to_string(),
+            weights_seed: self.weights.seed,
+            d: self.weights.d(),
+            layer_sizes: &self.weights.sizes,
+            radius: self.estimator.as_ref().map(|e| e.radius()).unwrap_or(p.radius),
+            ensemble: p.ensemble,
+            min_neighbours: p.min_neighbours,
+            min_confidence: p.min_confidence,
+            slices: self.slices,
+            events: self.events,
+            valid: self.valid,
+            score: scorer.summary(),
+        };
+        let path = self.run_dir.join(format!("normal-flow-score-{}.json", self.node));
+        let json = serde_json::to_string_pretty(&report)?;
+        std::fs::write(&path, json).map_err(|e| format!("cannot write {}: {e}", path.display()))?;
+        let s = &report.score.all;
+        tracing::info!(
+            path = %path.display(),
+            coverage = s.coverage,
+            sign_correct = s.sign_correct_rate,
+            circle_angle_deg_median = s.circle_angle_error_deg_median,
+            "normal-flow run score written"
+        );
+        Ok(())
+    }
+}
+
+/// The weights file: `param` as given when it exists (relative paths from the working folder);
+/// for the default path, the crate's own `weights/learned.bin` when run from elsewhere.
+fn weights_path(param: &str) -> PathBuf {
+    let given = PathBuf::from(param);
+    if given.exists() || param != DEFAULT_WEIGHTS {
+        return given;
+    }
+    let built_in = Path::new(env!("CARGO_MANIFEST_DIR")).join("weights/learned.bin");
+    if built_in.exists() { built_in } else { given }
+}
+
+fn main() -> ExitCode {
+    let d = LearnedParams::default();
+    let description = Describe::new(
+        "evseg-normal-flow-learned",
+        "Per-event normal flow by a learned estimator (random-Fourier-feature encoding of each event's \
+         neighbourhood in the slice + bias-free MLP, VecKM_flow style; weights trained on simulator truth)",
+    )
+    .input::<Slice>("slices", "slices of events (each slice is encoded on its own)")
+    .optional_input::<Truth>(
+        "truth",
+        "ground truth of the slices; when wired, the flow is scored per slice and for the run",
+    )
+    .output::<NormalFlow>(
+        "flow",
+        "normal flow per event, normalized units/s, aligned with the slice",
+    )
+    .param(
+        "weights",
+        DEFAULT_WEIGHTS,
+        "weights file (format in nodes/normal-flow/src/weights.rs), relative to the working folder",
+    )
+    .param(
+        "radius",
+        d.radius as u64,
+        "neighbourhood half-width, pixels; 0 = the radius the weights were trained with (8)",
+    )
+    .param(
+        "d",
+        0u64,
+        "expected number of frequency vectors D of the weights file; 0 = any (the file's)",
+    )
+    .param(
+        "ensemble",
+        d.ensemble as u64,
+        "rotated copies averaged (circular mean), 1..=16; 1 = no ensemble (fastest)",
+    )
+    .param(
+        "min_neighbours",
+        d.min_neighbours as u64,
+        "fewest events in the window (the event included) for an estimate",
+    )
+    .param(
+        "min_confidence",
+        f64::from(d.min_confidence),
+        "estimates with confidence (1 - circular spread of the ensemble; 1 without ensemble) at or below this are invalid, [0, 1)",
+    )
+    .param("threads", d.threads as u64, "worker threads per slice")
+    .build();
+    run_stage(description, |cfg: &NodeConfig| {
+        let path = weights_path(&cfg.param::<String>("weights")?);
+        let weights = LearnedWeights::load(&path)?;
+        let expected_d = cfg.param::<usize>("d")?;
+        if expected_d != 0 && expected_d != weights.d() {
+            return Err(format!(
+                "weights file {} has D = {}, the graph asks for d = {expected_d}",
+                path.display(),
+                weights.d()
+            )
+            .into());
+        }
+        let params = LearnedParams {
+            radius: cfg.param::<usize>("radius")?,
+            ensemble: cfg.param::<usize>("ensemble")?,
+            min_neighbours: cfg.param::<usize>("min_neighbours")?,
+            min_confidence: cfg.param::<f32>("min_confidence")?,
+            threads: cfg.param::<usize>("threads")?,
+        };
+        // Checks the settings once at start-up (any camera will do).
+        let probe = evseg_schemas::CameraInfo::pinhole(1, 1, 1.0, "probe");
+        LearnedEstimator::new(&probe, weights.clone(), params)
+            .with_context(|| format!("weights file {}", path.display()))?;
+        tracing::info!(
+            weights = %path.display(),
+            d = weights.d(),
+            seed = weights.seed,
+            "learned normal-flow weights loaded"
+        );
+        Ok(LearnedNode {
+            node: cfg.node.clone(),
+            run_dir: cfg.run_dir.clone(),
+            weights_path: path,
+            weights,
+            params,
+            estimator: None,
+            scorer: None,
+            slices: 0,
+            events: 0,
+            valid: 0,
+        })
+    })
+}
