@@ -89,16 +89,35 @@ fn live_mode_drops_oldest_and_counts_the_drops() {
         "a 40 ms stage cannot keep up with 20 ms slices sent as fast as possible"
     );
     assert!(seen["digest"]["count"].as_u64().unwrap() < sent["count"].as_u64().unwrap());
-    // The inspector notices the gaps in slice numbers, and the summary counts drops.
-    assert!(seen["problem_count"].as_u64().unwrap() > 0);
+    // The loss is counted, not silent: the summary's `dropped` column (processed, published,
+    // dropped, refused, busy) is non-zero for the stage(s) that fell behind. Which stage drops
+    // depends on scheduling: usually the slow inspector (it then sees gaps in slice numbers),
+    // on a loaded machine sometimes the slicer, whose input the source floods (its slices
+    // then stay numbered without gaps).
     let dropped: u64 = run
         .stdout
         .lines()
-        .find(|l| l.starts_with("inspect "))
-        .and_then(|l| l.split_whitespace().nth(3))
-        .and_then(|s| s.parse().ok())
-        .unwrap_or_else(|| panic!("no inspect row in summary:\n{}", run.stdout));
+        .filter(|l| {
+            ["source ", "slicer ", "inspect "]
+                .iter()
+                .any(|n| l.starts_with(n))
+        })
+        .filter_map(|l| l.split_whitespace().nth(3)?.parse::<u64>().ok())
+        .sum();
     assert!(dropped > 0, "drops not counted:\n{}", run.stdout);
+    let inspector_dropped = run
+        .stdout
+        .lines()
+        .find(|l| l.starts_with("inspect "))
+        .and_then(|l| l.split_whitespace().nth(3)?.parse::<u64>().ok())
+        .unwrap_or_else(|| panic!("no inspect row in summary:\n{}", run.stdout));
+    if inspector_dropped > 0 && seen["slices"].as_u64().unwrap_or(0) > 1 {
+        assert!(
+            seen["problem_count"].as_u64().unwrap() > 0,
+            "the inspector dropped slices but saw no gap: {seen}\nsummary:\n{}",
+            run.stdout
+        );
+    }
 }
 
 #[test]

@@ -22,6 +22,9 @@ use crate::supervise::{Fleet, NodeProcess, describe_status, stop_all};
 /// Lines of a crashed node's log shown in the report.
 pub const CRASH_LOG_LINES: usize = 20;
 
+/// How long a finished run waits for nodes' final stats still on their way through the router.
+const FINAL_STATS_WAIT: Duration = Duration::from_secs(2);
+
 /// What `evseg run` was asked to do.
 #[derive(Debug, Clone, Default)]
 pub struct RunOptions {
@@ -421,7 +424,19 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
         std::thread::sleep(Duration::from_millis(50));
     }
     let seconds = start.elapsed().as_secs_f64();
-    let final_stats = stats.lock().map(|m| m.clone()).unwrap_or_default();
+    // A node's last stats travel through the router and may arrive after its process has
+    // exited (seen under load: a summary without the inspector's row); wait a little for every
+    // node's `finished` stats. A node that never sends them (a foreign binary) costs the wait.
+    let deadline = Instant::now() + FINAL_STATS_WAIT;
+    let mut final_stats = stats.lock().map(|m| m.clone()).unwrap_or_default();
+    while !order
+        .iter()
+        .all(|id| final_stats.get(id).is_some_and(|s| s.finished))
+        && Instant::now() < deadline
+    {
+        std::thread::sleep(Duration::from_millis(10));
+        final_stats = stats.lock().map(|m| m.clone()).unwrap_or_default();
+    }
     let _ = session.close().wait();
     Ok(RunOutcome {
         dir,

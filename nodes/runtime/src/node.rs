@@ -358,6 +358,10 @@ fn init_tracing() {
         .try_init();
 }
 
+/// How long a finishing node waits for the launcher's stats subscriber to be known before its
+/// last stats are sent anyway (only a node run without a launcher waits this long).
+const FINAL_STATS_MATCH_WAIT: Duration = Duration::from_secs(2);
+
 /// Shared counters published on the stats key.
 #[derive(Default)]
 pub(crate) struct Counters {
@@ -399,8 +403,41 @@ impl Running {
 
     fn publish_stats(&self, finished: bool) {
         if let Ok(json) = serde_json::to_vec(&self.stats(finished)) {
-            let _ = self.session.put(self.cfg.stats_key.clone(), json).wait();
+            // Express: the final stats go out before the session closes, not in a batch.
+            let _ = self
+                .session
+                .put(self.cfg.stats_key.clone(), json)
+                .express(true)
+                .wait();
         }
+    }
+
+    /// The last stats, once the launcher's subscriber is known to this session (at most
+    /// [`FINAL_STATS_MATCH_WAIT`]): a node that runs for a few milliseconds can otherwise finish
+    /// before the subscriber's declaration reaches it, and Zenoh drops a put that matches no
+    /// known subscriber (seen under load: a run summary without the node's row).
+    fn publish_final_stats(&self) {
+        let Ok(json) = serde_json::to_vec(&self.stats(true)) else {
+            return;
+        };
+        let Ok(publisher) = self
+            .session
+            .declare_publisher(self.cfg.stats_key.clone())
+            .congestion_control(CongestionControl::Block)
+            .express(true)
+            .wait()
+        else {
+            self.publish_stats(true);
+            return;
+        };
+        let deadline = Instant::now() + FINAL_STATS_MATCH_WAIT;
+        while Instant::now() < deadline {
+            match publisher.matching_status().wait() {
+                Ok(m) if !m.matching() => std::thread::sleep(Duration::from_millis(5)),
+                _ => break,
+            }
+        }
+        let _ = publisher.put(json).wait();
     }
 
     pub(crate) fn publish_progress(&self, consumed: Vec<(String, u64)>) -> Result<(), RuntimeError> {
@@ -423,7 +460,7 @@ impl Running {
         self.publish_progress(done)?;
         self.publish_stats(true);
         self.outputs.wait_consumers_done()?;
-        self.publish_stats(true);
+        self.publish_final_stats();
         let _ = self.session.close().wait();
         Ok(())
     }
