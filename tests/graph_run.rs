@@ -511,3 +511,58 @@ fn the_aedat4_graph_runs_the_method_on_the_davis346_recording() {
         started.elapsed().as_secs_f64()
     );
 }
+
+/// graphs/normal-flow-compare.yaml runs both estimators on the same slices and the run prints
+/// their scores side by side. Run from a temporary folder: the learned node's default weights
+/// path does not exist there, so it starts with the copy built into its binary.
+#[test]
+fn the_normal_flow_compare_graph_scores_both_estimators_on_the_same_slices() {
+    let root = evseg_tests::workspace_root();
+    let dir = tempfile::tempdir().unwrap();
+    let port = free_port();
+    let graph = std::fs::read_to_string(root.join("graphs/normal-flow-compare.yaml"))
+        .unwrap()
+        .replace(
+            "mode: lockstep",
+            &format!(
+                "mode: lockstep\nzenoh:\n  machines:\n    local: {{ listen: [\"tcp/127.0.0.1:{port}\"] }}"
+            ),
+        );
+    let (g, out) = graph_file(dir.path(), &graph);
+    let run = Launcher::start(
+        dir.path(),
+        &[
+            "run",
+            g.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--set",
+            "source.seconds=0.2",
+            "-q",
+        ],
+        "a",
+    )
+    .wait(Duration::from_secs(240));
+    assert!(run.status.success(), "run failed:\n{}", run.stderr);
+    let plane = read_json(&out.join("normal-flow-score-plane_fit.json"));
+    let learned = read_json(&out.join("normal-flow-score-learned.json"));
+    assert_eq!(learned["weights"], "<built-in weights/learned.bin>");
+    // The same slices and events reached both estimators.
+    assert_eq!(plane["events"], learned["events"]);
+    assert!(plane["events"].as_u64().unwrap() > 10_000);
+    let rate = |v: &serde_json::Value| v["score"]["all"]["sign_correct_rate"].as_f64().unwrap();
+    let coverage = |v: &serde_json::Value| v["score"]["all"]["coverage"].as_f64().unwrap();
+    assert!(rate(&plane) > 0.9, "plane fit sign-correct {}", rate(&plane));
+    assert!(rate(&learned) > 0.85, "learned sign-correct {}", rate(&learned));
+    assert!(
+        coverage(&learned) > coverage(&plane),
+        "the learned estimator covers more events"
+    );
+    let table: Vec<&str> = run.stdout.lines().filter(|l| l.starts_with("| ")).collect();
+    assert!(
+        table.iter().any(|l| l.starts_with("| learned | learned |"))
+            && table.iter().any(|l| l.starts_with("| plane_fit | plane-fit |")),
+        "no side-by-side table:\n{}",
+        run.stdout
+    );
+}

@@ -443,6 +443,9 @@ fn print_outcome(outcome: &run::RunOutcome) {
             println!("{}:\n{text}", report.display());
         }
     }
+    if let Some(table) = run::flow_comparison(&outcome.dir) {
+        println!("{table}");
+    }
     if let Some(path) = &outcome.recording {
         println!("recorded to {}", path.display());
     }

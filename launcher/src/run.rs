@@ -479,6 +479,58 @@ pub fn reports(dir: &Path) -> Vec<PathBuf> {
     found
 }
 
+/// The normal-flow nodes' scores of a run (`normal-flow-score-<node>.json`, written by every
+/// normal-flow estimator given the truth) side by side as a Markdown table, one row per node;
+/// `None` when the run has none. A file that does not parse is a row saying so.
+pub fn flow_comparison(dir: &Path) -> Option<String> {
+    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
+        .into_iter()
+        .flatten()
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| {
+            p.file_name()
+                .and_then(|n| n.to_str())
+                .is_some_and(|n| n.starts_with("normal-flow-score-") && n.ends_with(".json"))
+        })
+        .collect();
+    if files.is_empty() {
+        return None;
+    }
+    files.sort();
+    let mut s = String::from(
+        "normal flow against the truth (all events; boundary = within 2 px of an object edge):\n\
+         | node | estimator | coverage | sign-correct | median circle angle (deg) | median relative magnitude error | boundary sign-correct |\n\
+         |---|---|---:|---:|---:|---:|---:|\n",
+    );
+    for path in files {
+        let parsed = std::fs::read(&path)
+            .ok()
+            .and_then(|b| serde_json::from_slice::<serde_json::Value>(&b).ok());
+        let Some(v) = parsed else {
+            s.push_str(&format!("| {} | unreadable | | | | | |\n", path.display()));
+            continue;
+        };
+        let text = |p: &str| v.pointer(p).and_then(|x| x.as_str()).unwrap_or("?").to_string();
+        let num = |p: &str| {
+            v.pointer(p)
+                .and_then(serde_json::Value::as_f64)
+                .map_or_else(|| "n/a".to_string(), |x| format!("{x:.3}"))
+        };
+        s.push_str(&format!(
+            "| {} | {} | {} | {} | {} | {} | {} |\n",
+            text("/node"),
+            text("/estimator"),
+            num("/score/all/coverage"),
+            num("/score/all/sign_correct_rate"),
+            num("/score/all/circle_angle_error_deg_median"),
+            num("/score/all/relative_magnitude_error_median"),
+            num("/score/boundary/sign_correct_rate"),
+        ));
+    }
+    Some(s)
+}
+
 fn indent(text: &str) -> String {
     text.lines()
         .map(|l| format!("    {l}"))

@@ -24,6 +24,8 @@ struct NormalFlowNode {
 #[derive(Serialize)]
 struct RunReport<'a> {
     node: &'a str,
+    /// Which estimator wrote the file (the learned node writes "learned").
+    estimator: &'static str,
     slices: u64,
     radius: usize,
     dt_min_ms: f64,
@@ -101,6 +103,7 @@ impl Stage for NormalFlowNode {
         let p = &self.params;
         let report = RunReport {
             node: &self.node,
+            estimator: "plane-fit",
             slices: self.slices,
             radius: p.radius,
             dt_min_ms: p.dt_min_s * 1e3,

@@ -3,11 +3,13 @@
 //! messages as `evseg-normal-flow`. With the optional `truth` input wired, also scores it (per
 //! slice in the log, for the run in `normal-flow-score-<node>.json` in the run folder).
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::ExitCode;
 
 use anyhow::Context;
-use evseg_normal_flow::{LearnedEstimator, LearnedParams, LearnedWeights, Score, ScoreParams, Scorer};
+use evseg_normal_flow::{
+    LearnedEstimator, LearnedParams, LearnedWeights, Score, ScoreParams, Scorer, WeightsError,
+};
 use evseg_runtime::describe::Describe;
 use evseg_runtime::{BoxError, Inputs, NodeConfig, Outputs, Stage, run_stage};
 use evseg_schemas::{NormalFlow, Slice, Truth};
@@ -132,13 +134,23 @@ impl Stage for LearnedNode {
 
 /// The weights file: `param` as given when it exists (relative paths from the working folder);
 /// for the default path, the crate's own `weights/learned.bin` when run from elsewhere.
-fn weights_path(param: &str) -> PathBuf {
+/// The weights the project trained (`weights/learned.bin`), built into the binary so that a node
+/// deployed without the source tree (a robot) still starts with the default weights.
+const BUILT_IN_WEIGHTS: &[u8] = include_bytes!("../../weights/learned.bin");
+
+/// Where the built-in weights are said to come from in logs and reports.
+const BUILT_IN_NAME: &str = "<built-in weights/learned.bin>";
+
+/// The weights named by the `weights` parameter: that file when it exists or when another path
+/// was given (a missing file is then an error naming it); for the default path that does not
+/// exist from the working folder, the built-in copy.
+fn load_weights(param: &str) -> Result<(LearnedWeights, PathBuf), WeightsError> {
     let given = PathBuf::from(param);
     if given.exists() || param != DEFAULT_WEIGHTS {
-        return given;
+        return Ok((LearnedWeights::load(&given)?, given));
     }
-    let built_in = Path::new(env!("CARGO_MANIFEST_DIR")).join("weights/learned.bin");
-    if built_in.exists() { built_in } else { given }
+    let name = PathBuf::from(BUILT_IN_NAME);
+    Ok((LearnedWeights::from_bytes(BUILT_IN_WEIGHTS, &name)?, name))
 }
 
 fn main() -> ExitCode {
@@ -160,7 +172,7 @@ fn main() -> ExitCode {
     .param(
         "weights",
         DEFAULT_WEIGHTS,
-        "weights file (format in nodes/normal-flow/src/weights.rs), relative to the working folder",
+        "weights file (format in nodes/normal-flow/src/weights.rs), relative to the working folder; the default falls back to the copy built into the binary",
     )
     .param(
         "radius",
@@ -190,8 +202,7 @@ fn main() -> ExitCode {
     .param("threads", d.threads as u64, "worker threads per slice")
     .build();
     run_stage(description, |cfg: &NodeConfig| {
-        let path = weights_path(&cfg.param::<String>("weights")?);
-        let weights = LearnedWeights::load(&path)?;
+        let (weights, path) = load_weights(&cfg.param::<String>("weights")?)?;
         let expected_d = cfg.param::<usize>("d")?;
         if expected_d != 0 && expected_d != weights.d() {
             return Err(format!(
