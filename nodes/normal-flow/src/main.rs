@@ -5,7 +5,7 @@
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use evseg_normal_flow::{PlaneFitEstimator, PlaneFitParams, Score, ScoreParams, Scorer};
+use evseg_normal_flow::{NodeScore, PlaneFitEstimator, PlaneFitParams, Score, write_run_score};
 use evseg_runtime::describe::Describe;
 use evseg_runtime::{BoxError, Inputs, NodeConfig, Outputs, Stage, run_stage};
 use evseg_schemas::{NormalFlow, Slice, Truth};
@@ -16,7 +16,7 @@ struct NormalFlowNode {
     run_dir: PathBuf,
     params: PlaneFitParams,
     estimator: Option<PlaneFitEstimator>,
-    scorer: Option<Scorer>,
+    score: NodeScore,
     slices: u64,
 }
 
@@ -76,27 +76,14 @@ impl Stage for NormalFlowNode {
         out.send("flow", input.seq(), t_start, t_end, &flow)?;
         self.slices += 1;
         if let Some(truth) = input.get_opt::<Truth>("truth")? {
-            if self.scorer.is_none() || rebuild {
-                self.scorer = Some(Scorer::new(&slice.camera, ScoreParams::default()));
-            }
-            if let Some(scorer) = self.scorer.as_mut() {
-                let s = scorer.add_slice(&slice.events, &flow, &truth)?;
-                tracing::info!(
-                    seq = input.seq(),
-                    events = s.all.events,
-                    coverage = s.all.coverage,
-                    sign_correct = s.all.sign_correct_rate,
-                    sign_correct_boundary = s.boundary.sign_correct_rate,
-                    circle_angle_deg_median = s.all.circle_angle_error_deg_median,
-                    "normal-flow score"
-                );
-            }
+            self.score
+                .add_slice(&slice.camera, rebuild, input.seq(), &slice.events, &flow, &truth)?;
         }
         Ok(())
     }
 
     fn finish(&mut self, _out: &mut Outputs) -> Result<(), BoxError> {
-        let Some(scorer) = &self.scorer else {
+        let Some(score) = self.score.summary() else {
             return Ok(());
         };
         let stats = self.estimator.as_ref().map(|e| e.stats()).unwrap_or_default();
@@ -117,19 +104,9 @@ impl Stage for NormalFlowNode {
             out_of_sensor: stats.out_of_sensor,
             bad_time: stats.bad_time,
             out_of_order: stats.out_of_order,
-            score: scorer.summary(),
+            score,
         };
-        let path = self.run_dir.join(format!("normal-flow-score-{}.json", self.node));
-        let json = serde_json::to_string_pretty(&report)?;
-        std::fs::write(&path, json).map_err(|e| format!("cannot write {}: {e}", path.display()))?;
-        let s = &report.score.all;
-        tracing::info!(
-            path = %path.display(),
-            coverage = s.coverage,
-            sign_correct = s.sign_correct_rate,
-            circle_angle_deg_median = s.circle_angle_error_deg_median,
-            "normal-flow run score written"
-        );
+        write_run_score(&self.run_dir, &self.node, &report, &report.score)?;
         Ok(())
     }
 }
@@ -206,7 +183,7 @@ fn main() -> ExitCode {
             run_dir: cfg.run_dir.clone(),
             params,
             estimator: None,
-            scorer: None,
+            score: NodeScore::default(),
             slices: 0,
         })
     })

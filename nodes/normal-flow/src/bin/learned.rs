@@ -8,7 +8,7 @@ use std::process::ExitCode;
 
 use anyhow::Context;
 use evseg_normal_flow::{
-    LearnedEstimator, LearnedParams, LearnedWeights, Score, ScoreParams, Scorer, WeightsError,
+    LearnedEstimator, LearnedParams, LearnedWeights, NodeScore, Score, WeightsError, write_run_score,
 };
 use evseg_runtime::describe::Describe;
 use evseg_runtime::{BoxError, Inputs, NodeConfig, Outputs, Stage, run_stage};
@@ -25,7 +25,7 @@ struct LearnedNode {
     weights: LearnedWeights,
     params: LearnedParams,
     estimator: Option<LearnedEstimator>,
-    scorer: Option<Scorer>,
+    score: NodeScore,
     slices: u64,
     events: u64,
     valid: u64,
@@ -77,27 +77,14 @@ impl Stage for LearnedNode {
         out.send("flow", input.seq(), t_start, t_end, &flow)?;
         self.slices += 1;
         if let Some(truth) = input.get_opt::<Truth>("truth")? {
-            if self.scorer.is_none() || rebuild {
-                self.scorer = Some(Scorer::new(&slice.camera, ScoreParams::default()));
-            }
-            if let Some(scorer) = self.scorer.as_mut() {
-                let s = scorer.add_slice(&slice.events, &flow, &truth)?;
-                tracing::info!(
-                    seq = input.seq(),
-                    events = s.all.events,
-                    coverage = s.all.coverage,
-                    sign_correct = s.all.sign_correct_rate,
-                    sign_correct_boundary = s.boundary.sign_correct_rate,
-                    circle_angle_deg_median = s.all.circle_angle_error_deg_median,
-                    "normal-flow score"
-                );
-            }
+            self.score
+                .add_slice(&slice.camera, rebuild, input.seq(), &slice.events, &flow, &truth)?;
         }
         Ok(())
     }
 
     fn finish(&mut self, _out: &mut Outputs) -> Result<(), BoxError> {
-        let Some(scorer) = &self.scorer else {
+        let Some(score) = self.score.summary() else {
             return Ok(());
         };
         let p = &self.params;
@@ -115,19 +102,9 @@ impl Stage for LearnedNode {
             slices: self.slices,
             events: self.events,
             valid: self.valid,
-            score: scorer.summary(),
+            score,
         };
-        let path = self.run_dir.join(format!("normal-flow-score-{}.json", self.node));
-        let json = serde_json::to_string_pretty(&report)?;
-        std::fs::write(&path, json).map_err(|e| format!("cannot write {}: {e}", path.display()))?;
-        let s = &report.score.all;
-        tracing::info!(
-            path = %path.display(),
-            coverage = s.coverage,
-            sign_correct = s.sign_correct_rate,
-            circle_angle_deg_median = s.circle_angle_error_deg_median,
-            "normal-flow run score written"
-        );
+        write_run_score(&self.run_dir, &self.node, &report, &report.score)?;
         Ok(())
     }
 }
@@ -236,7 +213,7 @@ fn main() -> ExitCode {
             weights,
             params,
             estimator: None,
-            scorer: None,
+            score: NodeScore::default(),
             slices: 0,
             events: 0,
             valid: 0,
