@@ -11,6 +11,19 @@ fn graph_file(dir: &Path, text: &str) -> (PathBuf, PathBuf) {
     (write(dir, "graph.yaml", text), dir.join("run"))
 }
 
+/// The repository's graph file `name` (a lock-step graph), with its Zenoh router listening on
+/// loopback `port` only.
+fn repo_graph_on_loopback(name: &str, port: u16) -> String {
+    std::fs::read_to_string(evseg_tests::workspace_root().join(name))
+        .unwrap()
+        .replace(
+            "mode: lockstep",
+            &format!(
+                "mode: lockstep\nzenoh:\n  machines:\n    local: {{ listen: [\"tcp/127.0.0.1:{port}\"] }}"
+            ),
+        )
+}
+
 /// Starts `evseg run graph --out run -q` in `dir`.
 fn launch(dir: &Path, graph: &Path, out: &Path) -> Launcher {
     Launcher::start(
@@ -241,14 +254,7 @@ fn an_evimo2_folder_runs_through_the_graph_into_the_evaluator() {
         .parse()
         .unwrap();
     let port = free_port();
-    let graph = std::fs::read_to_string(evseg_tests::workspace_root().join("graphs/evimo2.yaml"))
-        .unwrap()
-        .replace(
-            "mode: lockstep",
-            &format!(
-                "mode: lockstep\nzenoh:\n  machines:\n    local: {{ listen: [\"tcp/127.0.0.1:{port}\"] }}"
-            ),
-        );
+    let graph = repo_graph_on_loopback("graphs/evimo2.yaml", port);
     let (g, out) = graph_file(dir.path(), &graph);
     let path = format!("source.path={}", seq.display());
     let run = Launcher::start(
@@ -288,14 +294,7 @@ fn an_evimo2_folder_runs_through_the_graph_into_the_evaluator() {
 fn the_default_graph_runs_the_method_end_to_end() {
     let dir = tempfile::tempdir().unwrap();
     let port = free_port();
-    let graph = std::fs::read_to_string(evseg_tests::workspace_root().join("graph.yaml"))
-        .unwrap()
-        .replace(
-            "mode: lockstep",
-            &format!(
-                "mode: lockstep\nzenoh:\n  machines:\n    local: {{ listen: [\"tcp/127.0.0.1:{port}\"] }}"
-            ),
-        );
+    let graph = repo_graph_on_loopback("graph.yaml", port);
     let (g, out) = graph_file(dir.path(), &graph);
     let run = Launcher::start(
         dir.path(),
@@ -361,14 +360,7 @@ fn the_aedat4_graph_runs_the_method_on_the_davis346_recording() {
     let root = evseg_tests::workspace_root();
     let dir = tempfile::tempdir().unwrap();
     let port = free_port();
-    let graph = std::fs::read_to_string(root.join("graphs/aedat4.yaml"))
-        .unwrap()
-        .replace(
-            "mode: lockstep",
-            &format!(
-                "mode: lockstep\nzenoh:\n  machines:\n    local: {{ listen: [\"tcp/127.0.0.1:{port}\"] }}"
-            ),
-        );
+    let graph = repo_graph_on_loopback("graphs/aedat4.yaml", port);
     let (g, out) = graph_file(dir.path(), &graph);
     let mcap = dir.path().join("aedat4.mcap");
     let mut args = vec![
@@ -517,17 +509,9 @@ fn the_aedat4_graph_runs_the_method_on_the_davis346_recording() {
 /// path does not exist there, so it starts with the copy built into its binary.
 #[test]
 fn the_normal_flow_compare_graph_scores_both_estimators_on_the_same_slices() {
-    let root = evseg_tests::workspace_root();
     let dir = tempfile::tempdir().unwrap();
     let port = free_port();
-    let graph = std::fs::read_to_string(root.join("graphs/normal-flow-compare.yaml"))
-        .unwrap()
-        .replace(
-            "mode: lockstep",
-            &format!(
-                "mode: lockstep\nzenoh:\n  machines:\n    local: {{ listen: [\"tcp/127.0.0.1:{port}\"] }}"
-            ),
-        );
+    let graph = repo_graph_on_loopback("graphs/normal-flow-compare.yaml", port);
     let (g, out) = graph_file(dir.path(), &graph);
     let run = Launcher::start(
         dir.path(),
