@@ -557,6 +557,24 @@ mod tests {
     use super::*;
 
     #[test]
+    fn flow_comparison_has_a_row_per_score_file_and_names_an_unreadable_one() {
+        let dir = tempfile::tempdir().unwrap();
+        assert!(flow_comparison(dir.path()).is_none());
+        std::fs::write(
+            dir.path().join("normal-flow-score-a.json"),
+            r#"{"node":"a","estimator":"plane-fit","score":{"all":{"coverage":0.5,"sign_correct_rate":0.97},"boundary":{}}}"#,
+        )
+        .unwrap();
+        std::fs::write(dir.path().join("normal-flow-score-b.json"), "{ not json").unwrap();
+        let table = flow_comparison(dir.path()).unwrap();
+        assert!(
+            table.contains("| a | plane-fit | 0.500 | 0.970 | n/a | n/a | n/a |"),
+            "{table}"
+        );
+        assert!(table.contains("normal-flow-score-b.json | unreadable"), "{table}");
+    }
+
+    #[test]
     fn wildcard_listen_becomes_loopback_for_local_nodes() {
         assert_eq!(local_endpoint("tcp/0.0.0.0:7447"), "tcp/127.0.0.1:7447");
         assert_eq!(local_endpoint("tcp/[::]:7447"), "tcp/[::1]:7447");
