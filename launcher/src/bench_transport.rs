@@ -24,7 +24,7 @@ use crate::run::{RunOptions, run};
 /// Sensor event rate of the pattern, events per second (a fast sensor's peak rate).
 pub const RATE: f64 = 10.0e6;
 /// Events pushed through per slice size (at least this many; at least 20 slices).
-pub const MIN_EVENTS: u64 = 10_000_000;
+pub const MIN_EVENTS: u64 = 30_000_000;
 
 /// One row of the benchmark.
 #[derive(Debug, Clone, serde::Serialize)]

@@ -46,9 +46,19 @@ macro_rules! column {
                             $n
                         )));
                     }
-                    Ok(b.chunks_exact($n)
-                        .map(|c| <$t>::from_le_bytes(c.try_into().unwrap_or([0; $n])))
-                        .collect())
+                    #[cfg(target_endian = "little")]
+                    {
+                        // The wire format is the values' memory: one copy.
+                        let mut v: Vec<$t> = vec![<$t>::default(); b.len() / $n];
+                        bytemuck::cast_slice_mut::<$t, u8>(&mut v).copy_from_slice(b);
+                        Ok(v)
+                    }
+                    #[cfg(not(target_endian = "little"))]
+                    {
+                        Ok(b.chunks_exact($n)
+                            .map(|c| <$t>::from_le_bytes(c.try_into().unwrap_or([0; $n])))
+                            .collect())
+                    }
                 }
 
                 fn visit_borrowed_bytes<E: Error>(self, b: &'de [u8]) -> Result<Self::Value, E> {

@@ -13,6 +13,7 @@ use std::time::{Duration, Instant};
 use evseg_schemas::describe::NodeDescription;
 use evseg_schemas::{Message, codec};
 use zenoh::Wait;
+use zenoh::bytes::ZBytes;
 use zenoh::qos::CongestionControl;
 
 use crate::config::{Mode, NodeConfig};
@@ -20,7 +21,9 @@ use crate::error::{BoxError, RuntimeError};
 use crate::join::{JoinState, Joined, Joiner, RawFrame};
 use crate::progress::{DONE, Progress, Stats};
 use crate::signals;
-use crate::transport::{CreditBook, Inbox, POLL, open_session, subscribe_inputs};
+use crate::transport::{
+    CreditBook, Inbox, POLL, ShmPool, encode_payload, open_session, shm_pool, subscribe_inputs,
+};
 
 /// How long a producer waits at start-up for its consumers to appear before failing.
 pub const STARTUP_TIMEOUT: Duration = Duration::from_secs(60);
@@ -135,6 +138,8 @@ pub struct Outputs {
     /// Nanoseconds spent waiting for consumers (credits, liveliness) since the last
     /// [`Outputs::take_waited_ns`]: not the node's own work, so not counted as busy.
     waited_ns: u64,
+    /// The session's shared-memory pool, large frames are encoded straight into it.
+    shm: Option<ShmPool>,
 }
 
 impl Outputs {
@@ -204,12 +209,14 @@ impl Outputs {
         if !self.has(port) {
             return Ok(());
         }
-        let bytes = codec::encode(seq, t_start, t_end, msg).map_err(|source| RuntimeError::Encode {
-            node: self.node.clone(),
-            port: port.to_string(),
-            source,
-        })?;
-        self.send_bytes(port, seq, t_end, bytes)
+        let envelope = codec::data_envelope::<T>(seq, t_start, t_end);
+        let payload =
+            encode_payload(self.shm.as_ref(), &envelope, msg).map_err(|source| RuntimeError::Encode {
+                node: self.node.clone(),
+                port: port.to_string(),
+                source,
+            })?;
+        self.publish(port, seq, t_end, payload)
     }
 
     /// Publishes an already encoded frame (replay): `bytes` is a whole frame (envelope and
@@ -223,6 +230,10 @@ impl Outputs {
         t_end: f64,
         bytes: Vec<u8>,
     ) -> Result<(), RuntimeError> {
+        self.publish(port, seq, t_end, bytes.into())
+    }
+
+    fn publish(&mut self, port: &str, seq: u64, t_end: f64, payload: ZBytes) -> Result<(), RuntimeError> {
         let waiting = Instant::now();
         self.wait_consumers_alive()?;
         let (mode, window, node) = (self.mode, self.window, self.node.clone());
@@ -237,7 +248,7 @@ impl Outputs {
         }
         let waited = waiting.elapsed().as_nanos() as u64;
         p.publisher
-            .put(bytes)
+            .put(payload)
             .wait()
             .map_err(|e| RuntimeError::Zenoh(e.to_string()))?;
         p.sent = p.sent.max(seq + 1);
@@ -550,6 +561,7 @@ pub(crate) fn start(
         consumers_ready: false,
         published: Arc::new(AtomicU64::new(0)),
         waited_ns: 0,
+        shm: shm_pool(&session, cfg.zenoh.shared_memory.enabled),
     };
     let counters = Arc::new(Counters {
         last_seq: AtomicU64::new(u64::MAX),
