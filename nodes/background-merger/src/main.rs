@@ -6,7 +6,7 @@
 use std::process::ExitCode;
 
 use evseg_background_merger::{BackgroundMerger, BackgroundParams, SliceInput};
-use evseg_geometry::{EgomotionParams, SvmParams};
+use evseg_geometry::egomotion_node::{describe_egomotion, egomotion_from_config};
 use evseg_runtime::describe::Describe;
 use evseg_runtime::{BoxError, Inputs, NodeConfig, Outputs, Stage, run_stage};
 use evseg_schemas::{Clusters, CoarseSegmentation, NormalFlow, Residuals, Slice, Tracks};
@@ -71,47 +71,6 @@ fn main() -> ExitCode {
         "flow at or below this confidence is invalid",
     )
     .param("derotate", d.derotate, "subtract the IMU rotational flow")
-    .param("svm_c", d.egomotion.svm.c, "SVM cost C (squared hinge)")
-    .param(
-        "egomotion_min_confidence",
-        f64::from(d.egomotion.min_confidence),
-        "only flow above this confidence takes part in the egomotion",
-    )
-    .param(
-        "egomotion_min_samples",
-        d.egomotion.min_samples,
-        "fewest background events for an egomotion estimate",
-    )
-    .param(
-        "refine_iterations",
-        d.egomotion.refine_iterations,
-        "rounds of depth refinement after the SVM (0 = the SVM alone, as in the paper)",
-    )
-    .param(
-        "depth_grid_cols",
-        d.egomotion.grid_cols,
-        "columns of the grid of constant-depth cells of the refinement",
-    )
-    .param(
-        "min_cell_samples",
-        d.egomotion.min_cell_samples,
-        "cells with fewer samples are left out of the refinement",
-    )
-    .param(
-        "egomotion_density_cell_px",
-        d.egomotion.density_cell_px,
-        "cells over which the egomotion samples are density-normalized, pixels (0 = off)",
-    )
-    .param(
-        "refine_huber_k",
-        d.egomotion.huber_k,
-        "Huber constant of the egomotion's depth refinement, in robust residual scales (0 = plain least squares)",
-    )
-    .param(
-        "egomotion_magnitude_weighting",
-        d.egomotion.magnitude_weighting,
-        "weight egomotion samples by 1 / (n^2 + median n^2) (normal-flow error grows with its length)",
-    )
     .param(
         "hypotheses",
         d.hypotheses,
@@ -196,26 +155,13 @@ fn main() -> ExitCode {
         "map_threshold",
         f64::from(d.map_threshold),
         "map value meaning background",
-    )
-    .build();
+    );
+    let description = describe_egomotion(description, &d.egomotion).build();
     run_stage(description, |cfg: &NodeConfig| {
         let params = BackgroundParams {
             min_confidence: cfg.param("min_confidence")?,
             derotate: cfg.param("derotate")?,
-            egomotion: EgomotionParams {
-                svm: SvmParams {
-                    c: cfg.param("svm_c")?,
-                    ..SvmParams::default()
-                },
-                min_confidence: cfg.param("egomotion_min_confidence")?,
-                min_samples: cfg.param("egomotion_min_samples")?,
-                refine_iterations: cfg.param("refine_iterations")?,
-                grid_cols: cfg.param("depth_grid_cols")?,
-                min_cell_samples: cfg.param("min_cell_samples")?,
-                density_cell_px: cfg.param("egomotion_density_cell_px")?,
-                huber_k: cfg.param("refine_huber_k")?,
-                magnitude_weighting: cfg.param("egomotion_magnitude_weighting")?,
-            },
+            egomotion: egomotion_from_config(cfg)?,
             hypotheses: cfg.param("hypotheses")?,
             prior_floor: cfg.param("prior_floor")?,
             hypothesis_max_samples: cfg.param("hypothesis_max_samples")?,

@@ -17,6 +17,8 @@ pub mod camera;
 pub mod density;
 pub mod direction;
 pub mod egomotion;
+#[cfg(feature = "node")]
+pub mod egomotion_node;
 pub mod lsq;
 pub mod motion;
 pub mod refine;
