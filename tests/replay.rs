@@ -103,6 +103,16 @@ fn a_replay_from_the_slicer_is_bit_identical_to_the_recorded_run_at_any_speed() 
             !logs.iter().any(|l| l == "source.log" || l == "slicer.log"),
             "{logs:?}"
         );
+        // The run folder says what was started: the replay source in place of source and slicer.
+        let started: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(run_dir.join("graph.started.json")).unwrap()).unwrap();
+        let ids: Vec<&str> = started["nodes"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter_map(|n| n["id"].as_str())
+            .collect();
+        assert!(ids.contains(&"replay") && !ids.contains(&"slicer"), "{ids:?}");
         let (got, _) = frames(&dir.join(&file));
         assert_eq!(counts(&got), counts(&want), "replay {tag}: messages per channel");
         for (topic, frames) in &want {

@@ -322,6 +322,14 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
     if let Some(plan) = &replay {
         graph = plan.apply(&graph, &machine.name)?;
     }
+    if recording.is_some() || replay.is_some() {
+        // graph.resolved.json stays the graph as the user wrote it (its hash identifies the run
+        // in recordings); what was started, with the recorder or the replay source, is here.
+        std::fs::write(
+            dir.join("graph.started.json"),
+            serde_json::to_string_pretty(&graph)?,
+        )?;
+    }
     let nodes: Vec<NodeSpec> = match &opts.machine {
         Some(m) => graph.nodes_on(m).into_iter().cloned().collect(),
         None => graph.nodes.clone(),

@@ -1,5 +1,6 @@
 //! The run's output folder: `runs/<instance>-<UTC date-time>[-<machine>]/` with `logs/`,
-//! `config/`, the graph as written and as resolved, and whatever the nodes write.
+//! `config/`, the graph as written, as resolved and (recording or replaying) as started, and
+//! whatever the nodes write.
 
 use std::path::{Path, PathBuf};
 
