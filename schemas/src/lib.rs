@@ -23,6 +23,7 @@ pub mod describe;
 pub mod digest;
 pub mod keys;
 pub mod messages;
+pub mod params;
 
 pub use codec::{CodecError, Envelope, Frame, FrameKind, Message, decode, decode_header, encode, encode_end};
 pub use messages::*;

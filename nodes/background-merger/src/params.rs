@@ -116,48 +116,17 @@ impl Default for BackgroundParams {
     }
 }
 
-/// A parameter out of range.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[error("parameter {name} = {value} is invalid: {why}")]
-pub struct ParamError {
-    /// Parameter name.
-    pub name: &'static str,
-    /// Its value, printed.
-    pub value: String,
-    /// What is allowed.
-    pub why: &'static str,
-}
+pub use evseg_schemas::params::ParamError;
 
 impl BackgroundParams {
     /// Checks every range.
     pub fn validate(&self) -> Result<(), ParamError> {
-        let unit = |name, v: f64| {
-            if (0.0..=1.0).contains(&v) {
-                Ok(())
-            } else {
-                Err(ParamError {
-                    name,
-                    value: v.to_string(),
-                    why: "must be in [0, 1]",
-                })
-            }
-        };
+        use evseg_schemas::params::{finite_non_negative as nonneg, unit};
         unit("warp_weight", self.warp_weight)?;
         unit("candidate_threshold", self.candidate_threshold)?;
         unit("alpha_min", self.alpha_min)?;
         unit("alpha_max", self.alpha_max)?;
         unit("map_threshold", f64::from(self.map_threshold))?;
-        let nonneg = |name, v: f64| {
-            if v.is_finite() && v >= 0.0 {
-                Ok(())
-            } else {
-                Err(ParamError {
-                    name,
-                    value: v.to_string(),
-                    why: "must be finite and >= 0",
-                })
-            }
-        };
         nonneg("consistency_ratio", self.consistency_ratio)?;
         nonneg("consistency_floor", self.consistency_floor)?;
         nonneg("prior_floor", self.prior_floor)?;
@@ -167,18 +136,14 @@ impl BackgroundParams {
         nonneg("refine_huber_k", self.egomotion.huber_k)?;
         nonneg("min_confidence", f64::from(self.min_confidence))?;
         if self.warp_cell_px == 0 || self.map_cell_px == 0 {
-            return Err(ParamError {
-                name: "warp_cell_px/map_cell_px",
-                value: "0".into(),
-                why: "must be >= 1",
-            });
+            return Err(ParamError::new("warp_cell_px/map_cell_px", 0, "must be >= 1"));
         }
         if self.alpha_min > self.alpha_max {
-            return Err(ParamError {
-                name: "alpha_min",
-                value: self.alpha_min.to_string(),
-                why: "must not exceed alpha_max",
-            });
+            return Err(ParamError::new(
+                "alpha_min",
+                self.alpha_min,
+                "must not exceed alpha_max",
+            ));
         }
         Ok(())
     }

@@ -63,17 +63,7 @@ impl Default for HierParams {
     }
 }
 
-/// A parameter out of range.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[error("parameter {name} = {value} is invalid: {why}")]
-pub struct ParamError {
-    /// Parameter name.
-    pub name: &'static str,
-    /// Its value, printed.
-    pub value: String,
-    /// What is allowed.
-    pub why: &'static str,
-}
+pub use evseg_schemas::params::ParamError;
 
 impl HierParams {
     /// Checks every range.
@@ -82,11 +72,7 @@ impl HierParams {
             if ok && v.is_finite() {
                 Ok(())
             } else {
-                Err(ParamError {
-                    name,
-                    value: v.to_string(),
-                    why,
-                })
+                Err(ParamError::new(name, v, why))
             }
         };
         check(
@@ -140,11 +126,7 @@ impl HierParams {
             "must be a number",
         )?;
         if self.fill_cell_px == 0 {
-            return Err(ParamError {
-                name: "fill_cell_px",
-                value: "0".into(),
-                why: "must be >= 1",
-            });
+            return Err(ParamError::new("fill_cell_px", 0, "must be >= 1"));
         }
         Ok(())
     }

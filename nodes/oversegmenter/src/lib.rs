@@ -67,15 +67,8 @@ impl Default for OversegParams {
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum OversegError {
     /// A parameter is out of range.
-    #[error("parameter {name} = {value} is invalid: {why}")]
-    Param {
-        /// Parameter name.
-        name: &'static str,
-        /// Its value, printed.
-        value: String,
-        /// What is allowed.
-        why: &'static str,
-    },
+    #[error(transparent)]
+    Param(#[from] evseg_schemas::params::ParamError),
     /// A per-event input does not fit its slice.
     #[error(transparent)]
     Input(#[from] AlignError),
@@ -91,7 +84,13 @@ pub struct Oversegmenter {
 impl Oversegmenter {
     /// A stage with `params`, checked.
     pub fn new(params: OversegParams) -> Result<Self, OversegError> {
-        let bad = |name, value: String, why| Err(OversegError::Param { name, value, why });
+        let bad = |name, value: String, why| {
+            Err(OversegError::Param(evseg_schemas::params::ParamError {
+                name,
+                value,
+                why,
+            }))
+        };
         if params.k == 0 || params.k >= UNASSIGNED as usize {
             return bad("k", params.k.to_string(), "must be in 1..65535");
         }

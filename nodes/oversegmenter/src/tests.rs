@@ -150,6 +150,6 @@ fn malformed_input_is_an_error() {
             ..Default::default()
         },
     ] {
-        assert!(matches!(Oversegmenter::new(p), Err(OversegError::Param { .. })));
+        assert!(matches!(Oversegmenter::new(p), Err(OversegError::Param(_))));
     }
 }

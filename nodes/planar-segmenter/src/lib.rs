@@ -105,15 +105,8 @@ impl Default for PlanarParams {
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum PlanarError {
     /// A parameter is out of range.
-    #[error("parameter {name} = {value} is invalid: {why}")]
-    Param {
-        /// Parameter name.
-        name: &'static str,
-        /// Its value, printed.
-        value: String,
-        /// What is allowed.
-        why: &'static str,
-    },
+    #[error(transparent)]
+    Param(#[from] evseg_schemas::params::ParamError),
     /// A per-event input does not fit its slice.
     #[error(transparent)]
     Input(#[from] AlignError),
@@ -151,7 +144,13 @@ pub struct PlanarSegmenter {
 impl PlanarSegmenter {
     /// A segmenter with `params`, checked.
     pub fn new(params: PlanarParams) -> Result<Self, PlanarError> {
-        let bad = |name, value: String, why| Err(PlanarError::Param { name, value, why });
+        let bad = |name, value: String, why| {
+            Err(PlanarError::Param(evseg_schemas::params::ParamError {
+                name,
+                value,
+                why,
+            }))
+        };
         if params.cell_px == 0 {
             return bad("cell_px", "0".into(), "must be >= 1");
         }

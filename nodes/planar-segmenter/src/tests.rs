@@ -315,6 +315,6 @@ fn malformed_input_is_an_error() {
             ..Default::default()
         },
     ] {
-        assert!(matches!(PlanarSegmenter::new(p), Err(PlanarError::Param { .. })));
+        assert!(matches!(PlanarSegmenter::new(p), Err(PlanarError::Param(_))));
     }
 }

@@ -1,0 +1,60 @@
+//! The one error for a stage parameter out of its range, shared by every stage library's
+//! parameter checks (the node binaries turn it into a clear message naming the parameter).
+
+/// A parameter out of range: its name, its value and what is allowed.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("parameter {name} = {value} is invalid: {why}")]
+pub struct ParamError {
+    /// Parameter name, as in graph.yaml.
+    pub name: &'static str,
+    /// Its value, printed.
+    pub value: String,
+    /// What is allowed.
+    pub why: &'static str,
+}
+
+impl ParamError {
+    /// The error for `name` with `value` and the rule `why`.
+    pub fn new(name: &'static str, value: impl ToString, why: &'static str) -> Self {
+        Self {
+            name,
+            value: value.to_string(),
+            why,
+        }
+    }
+}
+
+/// `Ok` when `v` is in [0, 1].
+pub fn unit(name: &'static str, v: f64) -> Result<(), ParamError> {
+    if (0.0..=1.0).contains(&v) {
+        Ok(())
+    } else {
+        Err(ParamError::new(name, v, "must be in [0, 1]"))
+    }
+}
+
+/// `Ok` when `v` is finite and not negative.
+pub fn finite_non_negative(name: &'static str, v: f64) -> Result<(), ParamError> {
+    if v.is_finite() && v >= 0.0 {
+        Ok(())
+    } else {
+        Err(ParamError::new(name, v, "must be finite and >= 0"))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ranges_and_message() {
+        assert!(unit("a", 0.0).is_ok() && unit("a", 1.0).is_ok());
+        assert!(unit("a", 1.5).is_err() && unit("a", f64::NAN).is_err());
+        assert!(finite_non_negative("b", 0.0).is_ok());
+        assert!(finite_non_negative("b", -1.0).is_err() && finite_non_negative("b", f64::INFINITY).is_err());
+        assert_eq!(
+            unit("warp_weight", 2.0).unwrap_err().to_string(),
+            "parameter warp_weight = 2 is invalid: must be in [0, 1]"
+        );
+    }
+}
