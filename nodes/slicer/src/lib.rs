@@ -75,6 +75,8 @@ pub struct Slicer {
     last_rate: Option<(f64, [f64; 3])>,
     /// Events older than the current window (out of order input), dropped and counted.
     late: u64,
+    /// Slices emitted without a camera rotation rate (no IMU sample in or shortly before them).
+    without_rate: u64,
 }
 
 fn rotate(r: &[f64; 9], v: [f64; 3]) -> [f64; 3] {
@@ -100,12 +102,20 @@ impl Slicer {
             imu: Vec::new(),
             last_rate: None,
             late: 0,
+            without_rate: 0,
         })
     }
 
     /// Events that arrived after their window was emitted (dropped).
     pub fn late_events(&self) -> u64 {
         self.late
+    }
+
+    /// Slices emitted so far without a camera rotation rate (`Slice::omega` `None`: no IMU
+    /// sample in the window nor within `imu_hold_s` before it); the stages then cannot remove
+    /// the rotational flow.
+    pub fn slices_without_rate(&self) -> u64 {
+        self.without_rate
     }
 
     fn bounds(&self, k: u64) -> (f64, f64) {
@@ -207,6 +217,9 @@ impl Slicer {
             self.last_rate = Some((t_end, w));
             Some(w)
         };
+        if omega.is_none() {
+            self.without_rate += 1;
+        }
         SliceOut {
             seq,
             t_start,
@@ -326,6 +339,27 @@ mod tests {
         // mean imu rate (2, 2, 2) -> camera (2, -2, 2)
         assert_eq!(w, [2.0, -2.0, 2.0]);
         assert_eq!(out[0].slice.imu.len(), 2);
+    }
+
+    #[test]
+    fn slices_without_imu_are_counted() {
+        let mut s = Slicer::new(SlicerParams {
+            window_s: 0.1,
+            imu_hold_s: 0.05,
+        })
+        .unwrap();
+        // Window 0 has IMU (its rate dates from its end, 0.1 s); window 1 starts within imu_hold_s
+        // of it and holds the rate; windows 2 and 3 have none.
+        let out = s
+            .push(
+                packet(&[0.01, 0.15, 0.25, 0.35], &[(0.05, [0.0, 0.0, 1.0])]),
+                None,
+                0.4,
+            )
+            .unwrap();
+        let has_rate: Vec<bool> = out.iter().map(|o| o.slice.omega.is_some()).collect();
+        assert_eq!(has_rate, [true, true, false, false]);
+        assert_eq!(s.slices_without_rate(), 2);
     }
 
     #[test]

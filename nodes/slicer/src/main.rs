@@ -25,7 +25,16 @@ impl Stage for SlicerNode {
         let truth: Option<Truth> = input.get_opt("truth")?;
         let (_, t_end) = input.span();
         let late_before = self.0.late_events();
+        let no_rate_before = self.0.slices_without_rate();
         let slices = self.0.push(packet, truth, t_end)?;
+        if no_rate_before == 0 && self.0.slices_without_rate() > 0 {
+            tracing::warn!(
+                packet = input.seq(),
+                "a slice without IMU samples (none in the window or within imu_hold_ms before it): \
+                 no camera rotation rate, the stages cannot remove the rotational flow; counted, \
+                 the total is logged at the end"
+            );
+        }
         let late = self.0.late_events() - late_before;
         if late > 0 {
             tracing::warn!(
@@ -40,7 +49,12 @@ impl Stage for SlicerNode {
 
     fn finish(&mut self, out: &mut Outputs) -> Result<(), BoxError> {
         let slices = self.0.finish();
-        publish(out, slices)
+        publish(out, slices)?;
+        let without = self.0.slices_without_rate();
+        if without > 0 {
+            tracing::warn!(slices = without, "slices without a camera rotation rate (no IMU)");
+        }
+        Ok(())
     }
 }
 
