@@ -122,6 +122,10 @@ const PATH_RANGE_TEXELS: u32 = 8;
 /// the Jacobian along the path (perspective) and its finite-difference estimate.
 const DISPLACEMENT_SAFETY: f32 = 1.1;
 
+/// Rays located together in a key frame (a multiple of the SIMD width; see
+/// `FrameGeom::locate_lanes`).
+const KEY_LANES: usize = 8;
+
 const QUIET: u8 = 0;
 const STABLE: u8 = 1;
 const UNSTABLE: u8 = 2;
@@ -413,16 +417,29 @@ impl Engine {
         let inv_f = (2.0 / (cfg.camera.fx + cfg.camera.fy)) as f32;
         for v in 0..h {
             let brow = (v / BLOCK) * bw;
+            let row = v * w;
+            // Rays are located a group of `KEY_LANES` at a time along the row (see
+            // `FrameGeom::locate_lanes`), then shaded one by one.
+            let mut found = [None; KEY_LANES];
             for u in 0..w {
-                let i = v * w + u;
-                let hit = kf.geom.cast(
-                    &self.scene,
-                    self.rays.x[i],
-                    self.rays.y[i],
-                    u as i32,
-                    v as i32,
-                    None,
-                );
+                let i = row + u;
+                let lane = u % KEY_LANES;
+                if lane == 0 {
+                    found = [None; KEY_LANES];
+                    if u + KEY_LANES <= w {
+                        let x: &[f32; KEY_LANES] =
+                            self.rays.x[i..i + KEY_LANES].try_into().expect("lane slice");
+                        let y: &[f32; KEY_LANES] =
+                            self.rays.y[i..i + KEY_LANES].try_into().expect("lane slice");
+                        let px = std::array::from_fn(|l| (u + l) as i32);
+                        found = kf.geom.locate_lanes(x, y, &px, &[v as i32; KEY_LANES]).map(Some);
+                    }
+                }
+                let (x, y) = (self.rays.x[i], self.rays.y[i]);
+                let hit = match &found[lane] {
+                    Some(loc) => kf.geom.shade(&self.scene, x, y, loc),
+                    None => kf.geom.cast(&self.scene, x, y, u as i32, v as i32, None),
+                };
                 kf.l[i] = hit.l;
                 kf.key[i] = hit.key;
                 kf.id[i] = hit.id;
