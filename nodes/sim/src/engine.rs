@@ -759,22 +759,30 @@ impl Engine {
         }
         filters::window_min_max_in_place(&mut self.lo, &mut self.hi, w, h, radius, &mut self.scratch);
         let margin = cfg.render.quiet_margin_log as f32;
-        let (on, off) = (&self.thresholds.on, &self.thresholds.off);
+        let n = w * h;
+        let (on, off, reference) = (
+            &self.thresholds.on[..n],
+            &self.thresholds.off[..n],
+            &self.reference[..n],
+        );
+        let (lo, hi, class) = (&self.lo[..n], &self.hi[..n], &mut self.class[..n]);
+        let (id0, id1, key0, key1) = (&kf0.id[..n], &kf1.id[..n], &kf0.key[..n], &kf1.key[..n]);
+        let (mixed0, mixed1, l1s) = (&kf0.mixed[..n], &kf1.mixed[..n], &kf1.l[..n]);
+        // Every index is written and the cursor advances only for listed pixels (no branch
+        // per pixel); non-short-circuit `&` and `|` keep the tests branch-free too.
         self.work.clear();
-        for i in 0..w * h {
-            let m = margin
-                + if kf0.id[i] != 0 || kf1.id[i] != 0 {
-                    shade_margin
-                } else {
-                    0.0
-                };
-            let r = self.reference[i];
-            let quiet = self.hi[i] + m < r + on[i] && self.lo[i] - m > r - off[i];
+        self.work.resize(n, 0);
+        let work = &mut self.work[..];
+        let mut listed = 0usize;
+        for i in 0..n {
+            let m = margin + if (id0[i] | id1[i]) != 0 { shade_margin } else { 0.0 };
+            let r = reference[i];
+            let quiet = (hi[i] + m < r + on[i]) & (lo[i] - m > r - off[i]);
             // The same surface at both key frames, without the other surface of a nearby edge
             // inside the pixel: its texture coordinates move smoothly in between (edges move
             // by under a pixel per render step and do not turn back within an interval).
-            let same = kf0.key[i] == kf1.key[i] && !kf0.mixed[i] && !kf1.mixed[i] && kf0.key[i] != u16::MAX;
-            self.class[i] = if quiet {
+            let same = (key0[i] == key1[i]) & !mixed0[i] & !mixed1[i] & (key0[i] != u16::MAX);
+            class[i] = if quiet {
                 QUIET
             } else if same {
                 STABLE
@@ -783,12 +791,12 @@ impl Engine {
             };
             // Quiet pixels whose key-frame value is strictly inside the thresholds cannot
             // cross; the others (and stable pixels) are visited by `advance`, in pixel order.
-            let l1 = kf1.l[i];
-            let settled = quiet && l1 < r + on[i] && l1 > r - off[i];
-            if !settled && (quiet || same) {
-                self.work.push(i as u32);
-            }
+            let l1 = l1s[i];
+            let settled = quiet & (l1 < r + on[i]) & (l1 > r - off[i]);
+            work[listed] = i as u32;
+            listed += usize::from(!settled & (quiet | same));
         }
+        self.work.truncate(listed);
     }
 }
 
