@@ -412,7 +412,7 @@ impl FrameGeom {
 
     /// Texture coordinates, footprint and log intensity of the surface `loc` found by
     /// [`FrameGeom::locate`] on the ray `(x, y)`.
-    #[inline]
+    #[inline(always)]
     pub fn shade(&self, scene: &Scene, x: f32, y: f32, loc: &Located) -> Hit {
         let dn = (x * x + y * y + 1.0).sqrt();
         let s = loc.z;
