@@ -462,15 +462,22 @@ impl Engine {
         if zmin.is_finite() && zmin > 0.0 {
             self.zmin_bg = zmin as f64;
         }
+        // Edges row by row without branches: outside the image a pixel is compared with
+        // itself (never different).
+        kf.mixed.fill(false);
         for y in 0..h {
+            let row = &kf.key[y * w..(y + 1) * w];
+            let up = if y > 0 { &kf.key[(y - 1) * w..y * w] } else { row };
+            let down = if y + 1 < h {
+                &kf.key[(y + 1) * w..(y + 2) * w]
+            } else {
+                row
+            };
+            let edge = &mut kf.edge[y * w..(y + 1) * w];
             for x in 0..w {
-                let i = y * w + x;
-                let k = kf.key[i];
-                kf.mixed[i] = false;
-                kf.edge[i] = (x + 1 < w && kf.key[i + 1] != k)
-                    || (x > 0 && kf.key[i - 1] != k)
-                    || (y + 1 < h && kf.key[i + w] != k)
-                    || (y > 0 && kf.key[i - w] != k);
+                let k = row[x];
+                let (left, right) = (row[x.saturating_sub(1)], row[(x + 1).min(w - 1)]);
+                edge[x] = (left != k) | (right != k) | (up[x] != k) | (down[x] != k);
             }
         }
         if cfg.render.edge_supersampling {
