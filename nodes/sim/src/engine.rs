@@ -122,6 +122,10 @@ const PATH_RANGE_TEXELS: u32 = 8;
 /// the Jacobian along the path (perspective) and its finite-difference estimate.
 const DISPLACEMENT_SAFETY: f32 = 1.1;
 
+/// Rays located together in a key frame (a multiple of the SIMD width; see
+/// `FrameGeom::locate_lanes`).
+const KEY_LANES: usize = 8;
+
 const QUIET: u8 = 0;
 const STABLE: u8 = 1;
 const UNSTABLE: u8 = 2;
@@ -413,16 +417,29 @@ impl Engine {
         let inv_f = (2.0 / (cfg.camera.fx + cfg.camera.fy)) as f32;
         for v in 0..h {
             let brow = (v / BLOCK) * bw;
+            let row = v * w;
+            // Rays are located a group of `KEY_LANES` at a time along the row (see
+            // `FrameGeom::locate_lanes`), then shaded one by one.
+            let mut found = [None; KEY_LANES];
             for u in 0..w {
-                let i = v * w + u;
-                let hit = kf.geom.cast(
-                    &self.scene,
-                    self.rays.x[i],
-                    self.rays.y[i],
-                    u as i32,
-                    v as i32,
-                    None,
-                );
+                let i = row + u;
+                let lane = u % KEY_LANES;
+                if lane == 0 {
+                    found = [None; KEY_LANES];
+                    if u + KEY_LANES <= w {
+                        let x: &[f32; KEY_LANES] =
+                            self.rays.x[i..i + KEY_LANES].try_into().expect("lane slice");
+                        let y: &[f32; KEY_LANES] =
+                            self.rays.y[i..i + KEY_LANES].try_into().expect("lane slice");
+                        let px = std::array::from_fn(|l| (u + l) as i32);
+                        found = kf.geom.locate_lanes(x, y, &px, &[v as i32; KEY_LANES]).map(Some);
+                    }
+                }
+                let (x, y) = (self.rays.x[i], self.rays.y[i]);
+                let hit = match &found[lane] {
+                    Some(loc) => kf.geom.shade(&self.scene, x, y, loc),
+                    None => kf.geom.cast(&self.scene, x, y, u as i32, v as i32, None),
+                };
                 kf.l[i] = hit.l;
                 kf.key[i] = hit.key;
                 kf.id[i] = hit.id;
@@ -445,15 +462,22 @@ impl Engine {
         if zmin.is_finite() && zmin > 0.0 {
             self.zmin_bg = zmin as f64;
         }
+        // Edges row by row without branches: outside the image a pixel is compared with
+        // itself (never different).
+        kf.mixed.fill(false);
         for y in 0..h {
+            let row = &kf.key[y * w..(y + 1) * w];
+            let up = if y > 0 { &kf.key[(y - 1) * w..y * w] } else { row };
+            let down = if y + 1 < h {
+                &kf.key[(y + 1) * w..(y + 2) * w]
+            } else {
+                row
+            };
+            let edge = &mut kf.edge[y * w..(y + 1) * w];
             for x in 0..w {
-                let i = y * w + x;
-                let k = kf.key[i];
-                kf.mixed[i] = false;
-                kf.edge[i] = (x + 1 < w && kf.key[i + 1] != k)
-                    || (x > 0 && kf.key[i - 1] != k)
-                    || (y + 1 < h && kf.key[i + w] != k)
-                    || (y > 0 && kf.key[i - w] != k);
+                let k = row[x];
+                let (left, right) = (row[x.saturating_sub(1)], row[(x + 1).min(w - 1)]);
+                edge[x] = (left != k) | (right != k) | (up[x] != k) | (down[x] != k);
             }
         }
         if cfg.render.edge_supersampling {
@@ -742,22 +766,30 @@ impl Engine {
         }
         filters::window_min_max_in_place(&mut self.lo, &mut self.hi, w, h, radius, &mut self.scratch);
         let margin = cfg.render.quiet_margin_log as f32;
-        let (on, off) = (&self.thresholds.on, &self.thresholds.off);
+        let n = w * h;
+        let (on, off, reference) = (
+            &self.thresholds.on[..n],
+            &self.thresholds.off[..n],
+            &self.reference[..n],
+        );
+        let (lo, hi, class) = (&self.lo[..n], &self.hi[..n], &mut self.class[..n]);
+        let (id0, id1, key0, key1) = (&kf0.id[..n], &kf1.id[..n], &kf0.key[..n], &kf1.key[..n]);
+        let (mixed0, mixed1, l1s) = (&kf0.mixed[..n], &kf1.mixed[..n], &kf1.l[..n]);
+        // Every index is written and the cursor advances only for listed pixels (no branch
+        // per pixel); non-short-circuit `&` and `|` keep the tests branch-free too.
         self.work.clear();
-        for i in 0..w * h {
-            let m = margin
-                + if kf0.id[i] != 0 || kf1.id[i] != 0 {
-                    shade_margin
-                } else {
-                    0.0
-                };
-            let r = self.reference[i];
-            let quiet = self.hi[i] + m < r + on[i] && self.lo[i] - m > r - off[i];
+        self.work.resize(n, 0);
+        let work = &mut self.work[..];
+        let mut listed = 0usize;
+        for i in 0..n {
+            let m = margin + if (id0[i] | id1[i]) != 0 { shade_margin } else { 0.0 };
+            let r = reference[i];
+            let quiet = (hi[i] + m < r + on[i]) & (lo[i] - m > r - off[i]);
             // The same surface at both key frames, without the other surface of a nearby edge
             // inside the pixel: its texture coordinates move smoothly in between (edges move
             // by under a pixel per render step and do not turn back within an interval).
-            let same = kf0.key[i] == kf1.key[i] && !kf0.mixed[i] && !kf1.mixed[i] && kf0.key[i] != u16::MAX;
-            self.class[i] = if quiet {
+            let same = (key0[i] == key1[i]) & !mixed0[i] & !mixed1[i] & (key0[i] != u16::MAX);
+            class[i] = if quiet {
                 QUIET
             } else if same {
                 STABLE
@@ -766,12 +798,12 @@ impl Engine {
             };
             // Quiet pixels whose key-frame value is strictly inside the thresholds cannot
             // cross; the others (and stable pixels) are visited by `advance`, in pixel order.
-            let l1 = kf1.l[i];
-            let settled = quiet && l1 < r + on[i] && l1 > r - off[i];
-            if !settled && (quiet || same) {
-                self.work.push(i as u32);
-            }
+            let l1 = l1s[i];
+            let settled = quiet & (l1 < r + on[i]) & (l1 > r - off[i]);
+            work[listed] = i as u32;
+            listed += usize::from(!settled & (quiet | same));
         }
+        self.work.truncate(listed);
     }
 }
 

@@ -405,7 +405,7 @@ impl Texture {
 
     /// Log intensity at surface coordinates `(u, v)` (m) for a pixel footprint of
     /// `footprint_m` metres on the surface (trilinear mip-mapping).
-    #[inline]
+    #[inline(always)]
     pub fn sample(&self, u: f32, v: f32, footprint_m: f32) -> f32 {
         let lod = fast_log2((footprint_m * self.inv_texel).max(1e-6)).clamp(0.0, self.max_level);
         if lod <= 0.0 {

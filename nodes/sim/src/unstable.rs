@@ -12,6 +12,9 @@ use crate::camera::Rays;
 use crate::render::FrameGeom;
 use crate::scene::Scene;
 
+/// Pixel centres located together (a multiple of the SIMD width).
+const LANES: usize = 8;
+
 /// Marks "no unstable neighbour" in [`UnstableList::neighbours`].
 pub const NONE: u32 = u32::MAX;
 
@@ -172,7 +175,23 @@ impl UnstableList {
     /// those whose surface differs from a listed 4-neighbour's (as of the neighbour's latest
     /// render) are edge sampled. Returns the number of edge-sampled pixels.
     pub fn render(&mut self, scene: &Scene, geom: &FrameGeom, w: usize, supersample: bool) -> u64 {
-        for &a in &self.active {
+        // Centres located `LANES` at a time (see `FrameGeom::locate_lanes`), then shaded.
+        let mut groups = self.active.chunks_exact(LANES);
+        for g in &mut groups {
+            let js: [usize; LANES] = std::array::from_fn(|l| g[l] as usize);
+            let px = js.map(|j| (self.pixel[j] as usize % w) as i32);
+            let py = js.map(|j| (self.pixel[j] as usize / w) as i32);
+            let (x, y) = (js.map(|j| self.x[j]), js.map(|j| self.y[j]));
+            let found = geom.locate_lanes(&x, &y, &px, &py);
+            for l in 0..LANES {
+                let hit = geom.shade(scene, x[l], y[l], &found[l]);
+                let j = js[l];
+                self.l[j] = hit.l;
+                self.key[j] = hit.key;
+                self.id[j] = hit.id;
+            }
+        }
+        for &a in groups.remainder() {
             let j = a as usize;
             let i = self.pixel[j] as usize;
             let hit = geom.cast(scene, self.x[j], self.y[j], (i % w) as i32, (i / w) as i32, None);
