@@ -100,6 +100,11 @@ fn description() -> NodeDescription {
         d.min_hits,
         "matches before a track is listed in `tracks` (its events carry its id from the start)",
     )
+    .param(
+        "absorb_overlap",
+        d.absorb_overlap,
+        "an unmatched segment this much inside a track's predicted box (fraction of its box) takes the track's id (0 = off)",
+    )
     .build()
 }
 
@@ -116,6 +121,7 @@ fn main() -> ExitCode {
             min_events: cfg.param("min_events")?,
             max_missing_s: cfg.param("max_missing_s")?,
             min_hits: cfg.param("min_hits")?,
+            absorb_overlap: cfg.param("absorb_overlap")?,
         };
         Ok(Node(Tracker::new(params)?))
     })
@@ -152,6 +158,7 @@ mod tests {
                 "min_events",
                 "max_missing_s",
                 "min_hits",
+                "absorb_overlap",
             ]
         );
         let default_of = |n: &str| d.params.iter().find(|p| p.name == n).map(|p| p.default.clone());

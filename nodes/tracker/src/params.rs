@@ -57,6 +57,14 @@ pub struct TrackerParams {
     /// `Track`, which the evaluator's object-motion score looks up); SORT (Bewley et al.,
     /// ICIP 2016) uses 3.
     pub min_hits: u32,
+    /// A segment left unmatched by the one-to-one association whose box lies at least this
+    /// fraction (intersection over the segment box's area) inside a live track's predicted box
+    /// is a fragment of that object and takes its id instead of opening a new track (the
+    /// track's filter is corrected with it only when nothing else matched the track). 0 = off.
+    /// Default 0.5 (most of the fragment inside the object's box; not tuned): the hierarchical
+    /// merger does not always join an object's clusters, and each piece opening a track of its
+    /// own was most of the id switches the evaluator counted on the simulator.
+    pub absorb_overlap: f64,
 }
 
 impl Default for TrackerParams {
@@ -72,6 +80,7 @@ impl Default for TrackerParams {
             min_events: 30,
             max_missing_s: 0.5,
             min_hits: 1,
+            absorb_overlap: 0.5,
         }
     }
 }
@@ -110,6 +119,7 @@ impl TrackerParams {
             ("bbox_weight", self.bbox_weight),
             ("measurement_std_box_fraction", self.measurement_std_box_fraction),
             ("max_missing_s", self.max_missing_s),
+            ("absorb_overlap", self.absorb_overlap),
         ];
         for (name, v) in non_negative {
             if !(v.is_finite() && v >= 0.0) {

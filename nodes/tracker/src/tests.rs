@@ -489,3 +489,67 @@ fn invalid_parameters_are_refused() {
         );
     }
 }
+
+#[test]
+fn fragments_of_a_tracked_object_take_its_id_and_a_distant_segment_does_not() -> Result<(), TrackerError> {
+    let run = |absorb_overlap: f64| -> Result<(u32, u32, u32, Vec<u32>, u32), TrackerError> {
+        let mut tracker = Tracker::new(TrackerParams {
+            absorb_overlap,
+            ..TrackerParams::default()
+        })?;
+        let mut id = 0;
+        for k in 0..4 {
+            let (n, seg) = frame(
+                &[Obj {
+                    label: 1,
+                    centroid: [100.0 + k as f64, 100.0],
+                    events: 200,
+                }],
+                50,
+            );
+            id = id_of(&seg, &tracker.update(span(k), n, &seg)?, 1);
+        }
+        // The object comes in two pieces, 4 px either side of where it is expected, and a
+        // separate object appears far away.
+        let (n, seg) = frame(
+            &[
+                Obj {
+                    label: 1,
+                    centroid: [100.0, 100.0],
+                    events: 120,
+                },
+                Obj {
+                    label: 2,
+                    centroid: [108.0, 100.0],
+                    events: 80,
+                },
+                Obj {
+                    label: 3,
+                    centroid: [300.0, 200.0],
+                    events: 100,
+                },
+            ],
+            50,
+        );
+        let out = tracker.update(span(4), n, &seg)?;
+        let ids = out.tracks.iter().map(|t| t.id).collect();
+        let listed_events = out.tracks.iter().find(|t| t.id == id).map_or(0, |t| t.events);
+        Ok((
+            id_of(&seg, &out, 1),
+            id_of(&seg, &out, 2),
+            id_of(&seg, &out, 3),
+            ids,
+            listed_events,
+        ))
+    };
+    let (a, b, c, ids, events) = run(0.5)?;
+    assert_eq!(a, b, "both pieces carry the object's id");
+    assert!(c != a && c != 0, "the distant object has its own track");
+    assert_eq!(ids.len(), 2, "one listed track per id: {ids:?}");
+    assert_eq!(events, 200, "the listed track counts both pieces");
+    // Off: the second piece opens a track of its own.
+    let (a, b, _, ids, _) = run(0.0)?;
+    assert!(a != b && b != 0);
+    assert_eq!(ids.len(), 3);
+    Ok(())
+}

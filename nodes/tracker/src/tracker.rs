@@ -104,10 +104,13 @@ fn bbox_f64(b: [f32; 4]) -> [f64; 4] {
 ///    than `max_missing_s` are dropped;
 /// 2. tracks are matched one-to-one to the segments with label != 0 that have events
 ///    ([`crate::association`]); a matched track's filter is corrected with the segment centroid;
-/// 3. a tentative track (fewer than `min_hits` matches) that was not matched is dropped;
-/// 4. each unmatched segment with at least `min_events` events opens a track with a new id
+/// 3. a segment still unmatched whose box lies mostly inside a live track's predicted box
+///    (`absorb_overlap`) is a fragment of that object and takes its id (it corrects the track's
+///    filter only if nothing else matched the track);
+/// 4. a tentative track (fewer than `min_hits` matches) that was not matched is dropped;
+/// 5. each unmatched segment with at least `min_events` events opens a track with a new id
 ///    (1, 2, 3, ...; ids are never reused);
-/// 5. every event of a segment takes the id of the segment's track; events of label 0 and of
+/// 6. every event of a segment takes the id of the segment's track; events of label 0 and of
 ///    small unmatched segments (no track) are background, 0.
 ///
 /// Events of a tentative track carry its id too, since the evaluator scores per-event labels and
@@ -250,6 +253,39 @@ impl Tracker {
             }
         }
 
+        // ---- fragments: unmatched segments inside a live track's predicted box ----
+        let mut absorbed = vec![false; segments.len()];
+        if self.params.absorb_overlap > 0.0 {
+            for &k in &candidates {
+                if track_of_segment[k].is_some() {
+                    continue;
+                }
+                let sb = bbox_f64(segments[k].bbox);
+                let best = self
+                    .tracks
+                    .iter()
+                    .enumerate()
+                    .map(|(ti, tr)| (ti, inside_fraction(sb, tr.predicted_bbox())))
+                    .filter(|&(_, f)| f >= self.params.absorb_overlap)
+                    .max_by(|a, b| a.1.total_cmp(&b.1));
+                if let Some((ti, _)) = best {
+                    let s = &segments[k];
+                    let tr = &mut self.tracks[ti];
+                    if !matched_track[ti] {
+                        tr.kf
+                            .update(s.centroid, self.params.measurement_std(bbox_f64(s.bbox)));
+                        tr.box_offsets = box_offsets(s);
+                        tr.hits = tr.hits.saturating_add(1);
+                        tr.last_match_t = t;
+                        matched_track[ti] = true;
+                    } else {
+                        absorbed[k] = true;
+                    }
+                    track_of_segment[k] = Some(ti);
+                }
+            }
+        }
+
         // ---- new tracks (enough ids were checked above) ----
         let new_segments: Vec<usize> = candidates
             .iter()
@@ -291,19 +327,29 @@ impl Tracker {
                 }
             })
             .collect();
+        // Events of absorbed fragments count with their track's main segment.
+        let mut fragment_events = vec![0u32; self.tracks.len()];
+        for (k, m) in track_of_segment.iter().enumerate() {
+            if let Some(ti) = *m
+                && absorbed[k]
+            {
+                fragment_events[ti] = fragment_events[ti].saturating_add(counts[k]);
+            }
+        }
         let mut tracks: Vec<Track> = track_of_segment
             .iter()
             .enumerate()
-            .filter_map(|(k, m)| m.map(|ti| (k, &self.tracks[ti])))
-            .filter(|(_, tr)| tr.hits >= self.params.min_hits)
-            .map(|(k, tr)| Track {
+            .filter(|&(k, _)| !absorbed[k])
+            .filter_map(|(k, m)| m.map(|ti| (k, ti, &self.tracks[ti])))
+            .filter(|(_, _, tr)| tr.hits >= self.params.min_hits)
+            .map(|(k, ti, tr)| Track {
                 id: tr.id,
                 centroid: tr.kf.position(),
                 velocity: tr.kf.velocity(),
                 bbox: segments[k].bbox,
                 translation: segments[k].translation,
                 age: u32::try_from(self.slices - tr.created_slice).unwrap_or(u32::MAX),
-                events: counts[k],
+                events: counts[k].saturating_add(fragment_events[ti]),
             })
             .collect();
         tracks.sort_by_key(|tr| tr.id);
@@ -322,6 +368,15 @@ impl Tracker {
             egomotion: segmentation.egomotion,
         })
     }
+}
+
+/// The fraction of box `inner`'s area (inclusive pixel extents) that lies inside box `outer`,
+/// in [0, 1].
+fn inside_fraction(inner: [f64; 4], outer: [f64; 4]) -> f64 {
+    let area = (inner[2] - inner[0] + 1.0).max(0.0) * (inner[3] - inner[1] + 1.0).max(0.0);
+    let iw = (inner[2].min(outer[2]) + 1.0 - inner[0].max(outer[0])).max(0.0);
+    let ih = (inner[3].min(outer[3]) + 1.0 - inner[1].max(outer[1])).max(0.0);
+    if area > 0.0 { iw * ih / area } else { 0.0 }
 }
 
 /// A segment's box relative to its centroid, pixels.
