@@ -105,6 +105,21 @@ fn description() -> NodeDescription {
         d.absorb_overlap,
         "an unmatched segment this much inside a track's predicted box (fraction of its box) takes the track's id (0 = off)",
     )
+    .param(
+        "merge_velocity_px_s",
+        d.merge_velocity_px_s,
+        "two tracks whose segments touch and whose image velocities differ by at most this (px/s) are one object (0 = off)",
+    )
+    .param(
+        "merge_gap_px",
+        d.merge_gap_px,
+        "largest gap between the boxes of two tracks merged as one object, pixels",
+    )
+    .param(
+        "min_hits_to_merge",
+        d.min_hits_to_merge,
+        "matches each track needs before it can be merged with another",
+    )
     .build()
 }
 
@@ -122,6 +137,9 @@ fn main() -> ExitCode {
             max_missing_s: cfg.param("max_missing_s")?,
             min_hits: cfg.param("min_hits")?,
             absorb_overlap: cfg.param("absorb_overlap")?,
+            merge_velocity_px_s: cfg.param("merge_velocity_px_s")?,
+            merge_gap_px: cfg.param("merge_gap_px")?,
+            min_hits_to_merge: cfg.param("min_hits_to_merge")?,
         };
         Ok(Node(Tracker::new(params)?))
     })
@@ -159,6 +177,9 @@ mod tests {
                 "max_missing_s",
                 "min_hits",
                 "absorb_overlap",
+                "merge_velocity_px_s",
+                "merge_gap_px",
+                "min_hits_to_merge",
             ]
         );
         let default_of = |n: &str| d.params.iter().find(|p| p.name == n).map(|p| p.default.clone());

@@ -65,6 +65,20 @@ pub struct TrackerParams {
     /// merger does not always join an object's clusters, and each piece opening a track of its
     /// own was most of the id switches the evaluator counted on the simulator.
     pub absorb_overlap: f64,
+    /// Two tracks matched in the same slice, each matched at least `min_hits_to_merge` times,
+    /// whose segments' boxes lie within `merge_gap_px` of each other and whose filtered image
+    /// velocities differ by at most this (px/s), are one object seen in pieces: the younger
+    /// track's segments take the older one's id, the older track's box grows to cover both, and
+    /// the younger track ends. 0 = off. Default 60 px/s (2 px per 30 ms slice, about the
+    /// centroid noise of a fragment; the objects of EVIMO2 and of the simulator move at
+    /// hundreds of px/s relative to the background).
+    pub merge_velocity_px_s: f64,
+    /// See `merge_velocity_px_s`: largest gap between the two boxes, pixels (default 4: touching
+    /// or overlapping, as the hierarchical merger's `touch_px`).
+    pub merge_gap_px: f64,
+    /// See `merge_velocity_px_s`: matches each track needs before its velocity is trusted
+    /// (default 3: the filter has seen two displacements).
+    pub min_hits_to_merge: u32,
 }
 
 impl Default for TrackerParams {
@@ -81,6 +95,9 @@ impl Default for TrackerParams {
             max_missing_s: 0.5,
             min_hits: 1,
             absorb_overlap: 0.5,
+            merge_velocity_px_s: 60.0,
+            merge_gap_px: 4.0,
+            min_hits_to_merge: 3,
         }
     }
 }
@@ -120,6 +137,8 @@ impl TrackerParams {
             ("measurement_std_box_fraction", self.measurement_std_box_fraction),
             ("max_missing_s", self.max_missing_s),
             ("absorb_overlap", self.absorb_overlap),
+            ("merge_velocity_px_s", self.merge_velocity_px_s),
+            ("merge_gap_px", self.merge_gap_px),
         ];
         for (name, v) in non_negative {
             if !(v.is_finite() && v >= 0.0) {

@@ -553,3 +553,44 @@ fn fragments_of_a_tracked_object_take_its_id_and_a_distant_segment_does_not() ->
     assert_eq!(ids.len(), 3);
     Ok(())
 }
+
+#[test]
+fn touching_tracks_that_move_alike_become_one_and_others_stay_apart() -> Result<(), TrackerError> {
+    // Two pieces 20 px apart (their 20 px boxes touch), moving at `va` and `vb` px/s.
+    let run = |va: f64, vb: f64| -> Result<Vec<(u32, u32)>, TrackerError> {
+        let mut tracker = Tracker::new(TrackerParams::default())?;
+        let mut ids = Vec::new();
+        for k in 0..8 {
+            let t = k as f64 * DT;
+            let (n, seg) = frame(
+                &[
+                    Obj {
+                        label: 1,
+                        centroid: [200.0 + va * t, 100.0],
+                        events: 150,
+                    },
+                    Obj {
+                        label: 2,
+                        centroid: [220.0 + vb * t, 100.0],
+                        events: 150,
+                    },
+                ],
+                50,
+            );
+            let out = tracker.update(span(k), n, &seg)?;
+            ids.push((id_of(&seg, &out, 1), id_of(&seg, &out, 2)));
+        }
+        Ok(ids)
+    };
+    let alike = run(150.0, 150.0)?;
+    // Separate until both tracks have three matches, then one id from there on.
+    assert!(alike[0].0 != alike[0].1, "{alike:?}");
+    assert!(
+        alike[3..].iter().all(|&(a, b)| a == b && a == alike[0].0),
+        "{alike:?}"
+    );
+    // Moving apart at 100 px/s relative: never merged (they touch only at first).
+    let apart = run(150.0, 250.0)?;
+    assert!(apart.iter().all(|&(a, b)| a != b), "{apart:?}");
+    Ok(())
+}

@@ -219,11 +219,13 @@ impl Tracker {
         self.tracks.retain(|tr| t - tr.last_match_t <= max_missing);
 
         // ---- association ----
+        // Boxes as predicted before any correction of this slice (matching and fragments).
+        let predicted: Vec<[f64; 4]> = self.tracks.iter().map(TrackState::predicted_bbox).collect();
         let costs: Vec<Vec<Option<f64>>> = self
             .tracks
             .iter()
-            .map(|tr| {
-                let pb = tr.predicted_bbox();
+            .zip(&predicted)
+            .map(|(tr, &pb)| {
                 candidates
                     .iter()
                     .map(|&k| {
@@ -261,11 +263,10 @@ impl Tracker {
                     continue;
                 }
                 let sb = bbox_f64(segments[k].bbox);
-                let best = self
-                    .tracks
+                let best = predicted
                     .iter()
                     .enumerate()
-                    .map(|(ti, tr)| (ti, inside_fraction(sb, tr.predicted_bbox())))
+                    .map(|(ti, &pb)| (ti, inside_fraction(sb, pb)))
                     .filter(|&(_, f)| f >= self.params.absorb_overlap)
                     .max_by(|a, b| a.1.total_cmp(&b.1));
                 if let Some((ti, _)) = best {
@@ -311,6 +312,27 @@ impl Tracker {
             track_of_segment[k] = Some(self.tracks.len() - 1);
         }
 
+        // ---- pieces of one object: tracks whose segments touch and move alike ----
+        let mut ended = vec![false; self.tracks.len()];
+        if self.params.merge_velocity_px_s > 0.0 {
+            self.merge_pieces(segments, &mut track_of_segment, &mut absorbed, &mut ended);
+        }
+        // A track's box is that of all its pieces in this slice, so that the pieces fall inside
+        // its predicted box next time (and are absorbed there).
+        let mut union: Vec<Option<[f64; 4]>> = vec![None; self.tracks.len()];
+        for (k, m) in track_of_segment.iter().enumerate() {
+            if let Some(ti) = *m {
+                let b = bbox_f64(segments[k].bbox);
+                union[ti] = Some(union[ti].map_or(b, |u| box_union(u, b)));
+            }
+        }
+        for (tr, u) in self.tracks.iter_mut().zip(&union) {
+            if let Some(u) = u {
+                let [cx, cy] = tr.kf.position();
+                tr.box_offsets = [u[0] - cx, u[1] - cy, u[2] - cx, u[3] - cy];
+            }
+        }
+
         // ---- outputs ----
         let id_of_segment: Vec<u32> = track_of_segment
             .iter()
@@ -354,11 +376,14 @@ impl Tracker {
             .collect();
         tracks.sort_by_key(|tr| tr.id);
 
-        // Tentative tracks missed in this slice are dropped at once.
+        // Tentative tracks missed in this slice are dropped at once; tracks merged into another
+        // end.
         let min_hits = self.params.min_hits;
-        let mut keep = matched_track.into_iter();
-        self.tracks
-            .retain(|tr| keep.next().unwrap_or(true) || tr.hits >= min_hits);
+        let mut keep = matched_track.into_iter().zip(ended);
+        self.tracks.retain(|tr| {
+            let (matched, ended) = keep.next().unwrap_or((true, false));
+            !ended && (matched || tr.hits >= min_hits)
+        });
 
         self.last_t = Some(t);
         self.slices += 1;
@@ -368,6 +393,82 @@ impl Tracker {
             egomotion: segmentation.egomotion,
         })
     }
+}
+
+impl Tracker {
+    /// Merges tracks that are pieces of one object (see `TrackerParams::merge_velocity_px_s`):
+    /// repeatedly takes the closest-moving pair of tracks matched in this slice whose segments'
+    /// boxes touch; the younger one's segments become fragments of the older one
+    /// (`absorbed`) and the younger one is marked `ended` (the caller grows the older one's box
+    /// over all its pieces).
+    fn merge_pieces(
+        &mut self,
+        segments: &[Segment],
+        track_of_segment: &mut [Option<usize>],
+        absorbed: &mut [bool],
+        ended: &mut [bool],
+    ) {
+        let p = &self.params;
+        loop {
+            // Union box of each track's segments in this slice.
+            let mut boxes: Vec<Option<[f64; 4]>> = vec![None; self.tracks.len()];
+            for (k, m) in track_of_segment.iter().enumerate() {
+                if let Some(ti) = *m {
+                    let b = bbox_f64(segments[k].bbox);
+                    boxes[ti] = Some(boxes[ti].map_or(b, |u| box_union(u, b)));
+                }
+            }
+            let mut best: Option<(usize, usize, f64)> = None;
+            for a in 0..self.tracks.len() {
+                for b in a + 1..self.tracks.len() {
+                    let (Some(ba), Some(bb)) = (boxes[a], boxes[b]) else {
+                        continue;
+                    };
+                    let (ta, tb) = (&self.tracks[a], &self.tracks[b]);
+                    if ended[a] || ended[b] || ta.hits < p.min_hits_to_merge || tb.hits < p.min_hits_to_merge
+                    {
+                        continue;
+                    }
+                    if box_gap(ba, bb) > p.merge_gap_px {
+                        continue;
+                    }
+                    let (va, vb) = (ta.kf.velocity(), tb.kf.velocity());
+                    let dv = (va[0] - vb[0]).hypot(va[1] - vb[1]);
+                    if dv <= p.merge_velocity_px_s && best.is_none_or(|(_, _, d)| dv < d) {
+                        best = Some((a, b, dv));
+                    }
+                }
+            }
+            let Some((a, b, _)) = best else {
+                return;
+            };
+            // The older track (smaller id) keeps its id.
+            let (keep, end) = if self.tracks[a].id < self.tracks[b].id {
+                (a, b)
+            } else {
+                (b, a)
+            };
+            for (k, m) in track_of_segment.iter_mut().enumerate() {
+                if *m == Some(end) {
+                    *m = Some(keep);
+                    absorbed[k] = true;
+                }
+            }
+            ended[end] = true;
+        }
+    }
+}
+
+/// The smallest box holding boxes `a` and `b`.
+fn box_union(a: [f64; 4], b: [f64; 4]) -> [f64; 4] {
+    [a[0].min(b[0]), a[1].min(b[1]), a[2].max(b[2]), a[3].max(b[3])]
+}
+
+/// Gap between two boxes (inclusive pixel extents), pixels: 0 when they touch or overlap.
+fn box_gap(a: [f64; 4], b: [f64; 4]) -> f64 {
+    let gx = (a[0].max(b[0]) - a[2].min(b[2]) - 1.0).max(0.0);
+    let gy = (a[1].max(b[1]) - a[3].min(b[3]) - 1.0).max(0.0);
+    gx.max(gy)
 }
 
 /// The fraction of box `inner`'s area (inclusive pixel extents) that lies inside box `outer`,
