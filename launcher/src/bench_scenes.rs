@@ -43,6 +43,9 @@ pub struct SceneRow {
     pub rmse_mps: Option<[f64; 3]>,
     /// Median egomotion direction error, degrees.
     pub median_direction_error_deg: Option<f64>,
+    /// Id switches of the object with the most (issue 5's target: at most one per object per
+    /// sequence); None without moving objects.
+    pub max_id_switches: Option<u64>,
     /// Run folder.
     pub run: PathBuf,
 }
@@ -67,6 +70,9 @@ fn row_from_report(scene: &str, seed: u64, run: &Path, report: &Value) -> SceneR
         iou_per_object: pick(&s["iou_per_object_mean"]),
         rmse_mps: rmse,
         median_direction_error_deg: num(&s["egomotion"]["direction_error"]["median_deg"]),
+        max_id_switches: s["iou_per_object"]
+            .as_array()
+            .and_then(|objs| objs.iter().filter_map(|o| o["id_switches"].as_u64()).max()),
         run: run.to_path_buf(),
     }
 }
@@ -134,15 +140,15 @@ fn mean(vals: impl Iterator<Item = Option<f64>>) -> Option<f64> {
 pub fn markdown(rows: &[SceneRow], graph: &Path) -> String {
     let mut s = format!(
         "{BENCH_VERSION} on {} (IoU in %, RMSE in m/s with the predicted direction scaled by the true speed)\n\n\
-         | Scene | IoU mask | IoU events | IoU per object | Vx RMSE | Vy RMSE | Vz RMSE | median dir. err (deg) |\n\
-         |---|---:|---:|---:|---:|---:|---:|---:|\n",
+         | Scene | IoU mask | IoU events | IoU per object | Vx RMSE | Vy RMSE | Vz RMSE | median dir. err (deg) | id switches (worst object) |\n\
+         |---|---:|---:|---:|---:|---:|---:|---:|---:|\n",
         graph.display()
     );
     let f = |v: Option<f64>, d: usize| v.map_or("n/a".into(), |x| format!("{x:.d$}"));
     for r in rows {
         let rm = |i: usize| r.rmse_mps.map(|a| a[i]);
         s.push_str(&format!(
-            "| {} | {} | {} | {} | {} | {} | {} | {} |\n",
+            "| {} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
             r.scene,
             pct(r.iou_mask),
             pct(r.iou_events),
@@ -150,19 +156,21 @@ pub fn markdown(rows: &[SceneRow], graph: &Path) -> String {
             f(rm(0), 3),
             f(rm(1), 3),
             f(rm(2), 3),
-            f(r.median_direction_error_deg, 1)
+            f(r.median_direction_error_deg, 1),
+            r.max_id_switches.map_or("n/a".into(), |n| n.to_string())
         ));
     }
     let rm_mean = |i: usize| mean(rows.iter().map(|r| r.rmse_mps.map(|a| a[i])));
     s.push_str(&format!(
-        "| **mean** | {} | {} | {} | {} | {} | {} | {} |\n",
+        "| **mean** | {} | {} | {} | {} | {} | {} | {} | {} |\n",
         pct(mean(rows.iter().map(|r| r.iou_mask))),
         pct(mean(rows.iter().map(|r| r.iou_events))),
         pct(mean(rows.iter().map(|r| r.iou_per_object))),
         f(rm_mean(0), 3),
         f(rm_mean(1), 3),
         f(rm_mean(2), 3),
-        f(mean(rows.iter().map(|r| r.median_direction_error_deg)), 1)
+        f(mean(rows.iter().map(|r| r.median_direction_error_deg)), 1),
+        f(mean(rows.iter().map(|r| r.max_id_switches.map(|n| n as f64))), 1)
     ));
     s
 }
@@ -176,7 +184,8 @@ mod tests {
         let report: Value = serde_json::json!({"sequence": {
             "windows_with_moving_object": 3,
             "iou_mask": {"mean": 0.5}, "iou_events": {"mean": 0.25}, "iou_per_object_mean": 0.75,
-            "egomotion": {"rmse_mps": [0.1, 0.2, 0.3], "direction_error": {"median_deg": 4.0}}
+            "egomotion": {"rmse_mps": [0.1, 0.2, 0.3], "direction_error": {"median_deg": 4.0}},
+            "iou_per_object": [{"id_switches": 2}, {"id_switches": 5}]
         }});
         let r = row_from_report("a", 1, Path::new("x"), &report);
         assert_eq!(
@@ -184,13 +193,14 @@ mod tests {
             (Some(0.5), Some(0.25), Some(0.75))
         );
         assert_eq!(r.rmse_mps, Some([0.1, 0.2, 0.3]));
+        assert_eq!(r.max_id_switches, Some(5));
         let empty: Value = serde_json::json!({"sequence": {"windows_with_moving_object": 0,
             "iou_mask": {"mean": 0.0}, "egomotion": {"rmse_mps": null, "direction_error": {"median_deg": null}}}});
         let e = row_from_report("b", 2, Path::new("y"), &empty);
         assert_eq!(e.iou_mask, None, "a scene without moving objects has no IoU");
         let md = markdown(&[r, e], Path::new("g.yaml"));
         assert!(
-            md.contains("| **mean** | 50.00 | 25.00 | 75.00 | 0.100 | 0.200 | 0.300 | 4.0 |"),
+            md.contains("| **mean** | 50.00 | 25.00 | 75.00 | 0.100 | 0.200 | 0.300 | 4.0 | 5.0 |"),
             "{md}"
         );
         assert!(md.contains("| b | n/a |"), "{md}");
