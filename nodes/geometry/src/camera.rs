@@ -1,5 +1,6 @@
 //! The camera model: pixels <-> normalized coordinates through the lens distortion.
 
+use evseg_schemas::align::AlignError;
 use evseg_schemas::{CameraInfo, Distortion};
 
 /// Iterations of the fixed-point undistortion (converges to ~1e-12 for the lenses of EVIMO2 and
@@ -126,6 +127,18 @@ impl UndistortTable {
         self.xy
             .get(v as usize * self.width as usize + u as usize)
             .copied()
+    }
+
+    /// Normalized coordinates of event `index` at pixel `(u, v)`; an event outside the sensor
+    /// is an error naming it.
+    pub fn event(&self, index: usize, u: u16, v: u16) -> Result<[f32; 2], AlignError> {
+        self.get(u, v).ok_or(AlignError::EventOutside {
+            index,
+            x: u,
+            y: v,
+            width: self.width,
+            height: self.height,
+        })
     }
 }
 

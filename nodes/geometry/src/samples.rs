@@ -56,15 +56,7 @@ pub fn flow_samples(
     let mut out = Vec::with_capacity(events.len());
     for i in 0..events.len() {
         let (u, v) = (events.x[i], events.y[i]);
-        let Some([x, y]) = table.get(u, v) else {
-            return Err(AlignError::EventOutside {
-                index: i,
-                x: u,
-                y: v,
-                width: table.width,
-                height: table.height,
-            });
-        };
+        let [x, y] = table.event(i, u, v)?;
         let (fx, fy, c) = (f64::from(flow.nx[i]), f64::from(flow.ny[i]), flow.confidence[i]);
         let n = fx.hypot(fy);
         if !(c > min_confidence && n.is_finite() && n > 0.0) {

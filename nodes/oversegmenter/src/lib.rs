@@ -136,16 +136,7 @@ impl Oversegmenter {
         let mut index = Vec::with_capacity(events.len());
         for i in 0..events.len() {
             let (u, v) = (events.x[i], events.y[i]);
-            let Some([x, y]) = table.get(u, v) else {
-                return Err(AlignError::EventOutside {
-                    index: i,
-                    x: u,
-                    y: v,
-                    width: table.width,
-                    height: table.height,
-                }
-                .into());
-            };
+            let [x, y] = table.event(i, u, v)?;
             let (nx, ny, c) = (flow.nx[i], flow.ny[i], flow.confidence[i]);
             if !(c > p.min_confidence && nx.is_finite() && ny.is_finite()) {
                 continue;
