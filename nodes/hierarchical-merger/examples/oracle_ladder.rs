@@ -264,7 +264,18 @@ fn main() -> anyhow::Result<()> {
                 slices.push((s.slice, s.truth.unwrap_or_default()));
             }
         }
-        let mut est = PlaneFitEstimator::new(&camera, PlaneFitParams::default())?;
+        // Plane-fit settings from env (NF_LOOKAHEAD_MS, NF_RADIUS, NF_OUTLIER_MS, NF_DT_MAX_MS,
+        // NF_MIN_CONF), defaults otherwise.
+        let d = PlaneFitParams::default();
+        let nf = PlaneFitParams {
+            lookahead_s: env_or("NF_LOOKAHEAD_MS", d.lookahead_s * 1e3)? * 1e-3,
+            radius: env_or("NF_RADIUS", d.radius)?,
+            outlier_s: env_or("NF_OUTLIER_MS", d.outlier_s * 1e3)? * 1e-3,
+            dt_max_s: env_or("NF_DT_MAX_MS", d.dt_max_s * 1e3)? * 1e-3,
+            min_confidence: env_or("NF_MIN_CONF", d.min_confidence)?,
+            ..d
+        };
+        let mut est = PlaneFitEstimator::new(&camera, nf)?;
         let mut overseg = Oversegmenter::new(OversegParams::default())?;
         let mut table = TableCache::default();
         let table = table.get(&camera).clone();

@@ -161,6 +161,11 @@ fn main() -> ExitCode {
         "faster fits are invalid, pixels/s",
     )
     .param(
+        "lookahead_ms",
+        d.lookahead_s * 1e3,
+        "non-causal fit: neighbours up to this after the event (within the slice), ms; 0 = causal",
+    )
+    .param(
         "min_confidence",
         d.min_confidence,
         "fits with a confidence at or below this are invalid, [0, 1)",
@@ -176,6 +181,7 @@ fn main() -> ExitCode {
             max_refits: cfg.param::<usize>("max_refits")?,
             max_speed_px_s: cfg.param::<f64>("max_speed_px_s")?,
             min_confidence: cfg.param::<f64>("min_confidence")?,
+            lookahead_s: cfg.param::<f64>("lookahead_ms")? * 1e-3,
         };
         params.validate()?;
         Ok(NormalFlowNode {

@@ -40,6 +40,11 @@ pub struct PlaneFitParams {
     /// raises the sign-correct rate from 0.855 to 0.977 for a coverage of 0.636 instead of 0.764
     /// (0.8: 0.983 at 0.430). 0 keeps every fit.
     pub min_confidence: f64,
+    /// Non-causal fitting within a slice, seconds: an event is fitted once the events up to
+    /// `lookahead_s` after it (and within its slice) are on the surface, so neighbours the edge
+    /// reaches after the event take part (ages in `[-lookahead_s, dt_max]`). 0 = causal (each
+    /// event fitted right after it is written). Default: see the crate README (length study).
+    pub lookahead_s: f64,
 }
 
 /// Largest supported [`PlaneFitParams::radius`] (a 7 x 7 window; fixed-size buffers).
@@ -56,6 +61,7 @@ impl Default for PlaneFitParams {
             max_refits: 3,
             max_speed_px_s: 20_000.0,
             min_confidence: 0.5,
+            lookahead_s: 0.0,
         }
     }
 }
@@ -99,7 +105,8 @@ impl PlaneFitParams {
                 window,
             });
         }
-        let checks: [(&'static str, f64, bool, &'static str); 4] = [
+        let checks: [(&'static str, f64, bool, &'static str); 5] = [
+            ("lookahead", self.lookahead_s, self.lookahead_s >= 0.0, ">= 0"),
             ("dt_min", self.dt_min_s, self.dt_min_s >= 0.0, ">= 0"),
             ("dt_max", self.dt_max_s, self.dt_max_s > self.dt_min_s, "> dt_min"),
             ("outlier", self.outlier_s, self.outlier_s > 0.0, "> 0"),
