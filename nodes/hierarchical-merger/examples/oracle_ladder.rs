@@ -265,7 +265,7 @@ fn main() -> anyhow::Result<()> {
             }
         }
         // Plane-fit settings from env (NF_LOOKAHEAD_MS, NF_RADIUS, NF_OUTLIER_MS, NF_DT_MAX_MS,
-        // NF_MIN_CONF), defaults otherwise.
+        // NF_MIN_CONF, NF_MAX_DIR_SD_DEG), defaults otherwise.
         let d = PlaneFitParams::default();
         let nf = PlaneFitParams {
             lookahead_s: env_or("NF_LOOKAHEAD_MS", d.lookahead_s * 1e3)? * 1e-3,
@@ -273,6 +273,8 @@ fn main() -> anyhow::Result<()> {
             outlier_s: env_or("NF_OUTLIER_MS", d.outlier_s * 1e3)? * 1e-3,
             dt_max_s: env_or("NF_DT_MAX_MS", d.dt_max_s * 1e3)? * 1e-3,
             min_confidence: env_or("NF_MIN_CONF", d.min_confidence)?,
+            max_direction_sd_rad: env_or("NF_MAX_DIR_SD_DEG", d.max_direction_sd_rad.to_degrees())?
+                .to_radians(),
             ..d
         };
         let mut est = PlaneFitEstimator::new(&camera, nf)?;

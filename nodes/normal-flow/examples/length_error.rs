@@ -29,17 +29,19 @@ impl Bins {
         self.bins.entry((order, label)).or_default().push(e);
     }
     fn print(&mut self, title: &str) {
-        println!("  {title}: bin | n | median e | median |e| | p90 |e|");
+        let total: f64 = self.bins.values().flatten().map(|x| x.abs()).sum();
+        println!("  {title}: bin | n | median e | median |e| | p90 |e| | share of sum |e|");
         for ((_, label), v) in &mut self.bins {
             let mut a: Vec<f64> = v.iter().map(|x| x.abs()).collect();
             v.sort_by(f64::total_cmp);
             a.sort_by(f64::total_cmp);
             let n = v.len();
             println!(
-                "    {label:>14} | {n:7} | {:+.3} | {:.3} | {:.3}",
+                "    {label:>14} | {n:7} | {:+.3} | {:.3} | {:.3} | {:.3}",
                 v[n / 2],
                 a[n / 2],
-                a[n * 9 / 10]
+                a[n * 9 / 10],
+                a.iter().sum::<f64>() / total
             );
         }
     }
@@ -64,6 +66,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             "--radius" => params.radius = value(&mut args, &a)?,
             "--dt-max-ms" => params.dt_max_s = value::<f64>(&mut args, &a)? * 1e-3,
             "--min-confidence" => params.min_confidence = value(&mut args, &a)?,
+            "--max-direction-sd-deg" => {
+                params.max_direction_sd_rad = value::<f64>(&mut args, &a)?.to_radians()
+            }
             "--lookahead-ms" => params.lookahead_s = value::<f64>(&mut args, &a)? * 1e-3,
             "--outlier-ms" => params.outlier_s = value::<f64>(&mut args, &a)? * 1e-3,
             _ => presets.push(a),
@@ -84,6 +89,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let (mut speed, mut conf, mut inl, mut pts, mut pol): (Bins, Bins, Bins, Bins, Bins) =
             Default::default();
         let (mut offs, mut gap, mut grid, mut outl): (Bins, Bins, Bins, Bins) = Default::default();
+        // Absolute length errors |p| - u . n0 (px/s), by the angle between n0 and u and by the
+        // fit's direction standard deviation.
+        let (mut abs_angle, mut abs_dsd, mut rel_dsd): (Bins, Bins, Bins) = Default::default();
         let mut all = Vec::new();
         let mut per_pixel: Vec<(f64, f64, u32)> = vec![(0.0, 0.0, 0); w * h];
         let mut t = 0.0f64;
@@ -116,6 +124,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     continue;
                 }
                 let rel = s_est / s_true - 1.0;
+                let abs_err = s_est - s_true;
+                let un = u[0].hypot(u[1]);
+                let k = bin_of(
+                    (s_true / un).clamp(-1.0, 1.0).acos().to_degrees(),
+                    &[30.0, 50.0, 65.0, 75.0, 85.0],
+                );
+                abs_angle.add(k.0, k.1, abs_err);
+                let k = bin_of(fit.direction_sd_rad.to_degrees(), &[1.0, 2.0, 4.0, 8.0, 16.0]);
+                abs_dsd.add(k.0, k.1.clone(), abs_err);
+                rel_dsd.add(k.0, k.1, rel);
                 all.push(rel);
                 let pp = &mut per_pixel[idx];
                 pp.0 += rel;
@@ -177,6 +195,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         offs.print("plane offset at own pixel, px of travel");
         gap.print("since previous same-pol event at pixel, px of travel");
         grid.print("n0 angle to pixel axes, deg");
+        abs_angle.print("ABSOLUTE error px/s by angle(n0, u) deg");
+        abs_dsd.print("ABSOLUTE error px/s by direction sd deg");
+        rel_dsd.print("relative error by direction sd deg");
     }
     Ok(())
 }

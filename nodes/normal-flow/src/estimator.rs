@@ -332,6 +332,9 @@ impl PlaneFitEstimator {
         if speed.is_nan() || speed > self.params.max_speed_px_s {
             return None;
         }
+        if fit.direction_sd_rad.is_nan() || fit.direction_sd_rad >= self.params.max_direction_sd_rad {
+            return None;
+        }
         let inlier_share = fit.inliers as f64 / fit.points as f64;
         let quality = (1.0 - fit.rms_s / self.params.outlier_s).clamp(0.0, 1.0);
         let confidence = inlier_share * quality;

@@ -45,6 +45,11 @@ pub struct PlaneFitParams {
     /// reaches after the event take part (ages in `[-lookahead_s, dt_max]`). 0 = causal (each
     /// event fitted right after it is written). Default: see the crate README (length study).
     pub lookahead_s: f64,
+    /// Fits whose gradient direction is this uncertain (radians, [`PlaneFit::direction_sd_rad`](
+    /// crate::PlaneFit::direction_sd_rad)) or more are invalid: the length of a normal flow
+    /// measured along a wrong direction is off by the flow along the edge times the sine of the
+    /// error. Infinite = no test. Default: see the crate README (length study).
+    pub max_direction_sd_rad: f64,
 }
 
 /// Largest supported [`PlaneFitParams::radius`] (a 7 x 7 window; fixed-size buffers).
@@ -62,6 +67,7 @@ impl Default for PlaneFitParams {
             max_speed_px_s: 20_000.0,
             min_confidence: 0.5,
             lookahead_s: 0.0,
+            max_direction_sd_rad: f64::INFINITY,
         }
     }
 }
@@ -103,6 +109,13 @@ impl PlaneFitParams {
             return Err(ParamsError::MinPoints {
                 got: self.min_points,
                 window,
+            });
+        }
+        if self.max_direction_sd_rad.is_nan() || self.max_direction_sd_rad <= 0.0 {
+            return Err(ParamsError::Range {
+                name: "max_direction_sd",
+                rule: "> 0 (infinite = no test)",
+                value: self.max_direction_sd_rad,
             });
         }
         let checks: [(&'static str, f64, bool, &'static str); 5] = [
