@@ -295,8 +295,8 @@ fn jittered_edge_events(speed: f64, jitter_px: f64) -> Events {
     let mut list: Vec<(f64, u16, u16)> = (0..clean.len())
         .map(|i| {
             let (x, y) = (clean.x[i], clean.y[i]);
-            let h = (u32::from(x) * 73_856_093 ^ u32::from(y) * 19_349_663) % 1000;
-            let j = (f64::from(h) / 999.0 * 2.0 - 1.0) * jitter_px / speed;
+            let h = ((u64::from(x) * 73_856_093) ^ (u64::from(y) * 19_349_663)) % 1000;
+            let j = (h as f64 / 999.0 * 2.0 - 1.0) * jitter_px / speed;
             (clean.t[i] + j, x, y)
         })
         .collect();
