@@ -264,7 +264,20 @@ fn main() -> anyhow::Result<()> {
                 slices.push((s.slice, s.truth.unwrap_or_default()));
             }
         }
-        let mut est = PlaneFitEstimator::new(&camera, PlaneFitParams::default())?;
+        // Plane-fit settings from env (NF_LOOKAHEAD_MS, NF_RADIUS, NF_OUTLIER_MS, NF_DT_MAX_MS,
+        // NF_MIN_CONF, NF_MAX_DIR_SD_DEG), defaults otherwise.
+        let d = PlaneFitParams::default();
+        let nf = PlaneFitParams {
+            lookahead_s: env_or("NF_LOOKAHEAD_MS", d.lookahead_s * 1e3)? * 1e-3,
+            radius: env_or("NF_RADIUS", d.radius)?,
+            outlier_s: env_or("NF_OUTLIER_MS", d.outlier_s * 1e3)? * 1e-3,
+            dt_max_s: env_or("NF_DT_MAX_MS", d.dt_max_s * 1e3)? * 1e-3,
+            min_confidence: env_or("NF_MIN_CONF", d.min_confidence)?,
+            max_direction_sd_rad: env_or("NF_MAX_DIR_SD_DEG", d.max_direction_sd_rad.to_degrees())?
+                .to_radians(),
+            ..d
+        };
+        let mut est = PlaneFitEstimator::new(&camera, nf)?;
         let mut overseg = Oversegmenter::new(OversegParams::default())?;
         let mut table = TableCache::default();
         let table = table.get(&camera).clone();
@@ -337,9 +350,30 @@ fn main() -> anyhow::Result<()> {
             // estimated normal flow and with the true normal flow along the estimated n0.
             {
                 let samples = evseg_geometry::flow_samples(&table, &s.events, &flow, s.omega, 0.0)?;
+                // R6_BOUNDARY_PX=k (default 0 = keep all): leave out background events within k
+                // px (Chebyshev) of an object event of the slice.
+                let margin: usize = env_or("R6_BOUNDARY_PX", 0usize)?;
+                let mut near_obj = vec![false; if margin > 0 { w * h } else { 0 }];
+                if margin > 0 {
+                    for i in 0..n_ev {
+                        if truth.event_object[i] != 0 {
+                            let (x, y) = (usize::from(s.events.x[i]), usize::from(s.events.y[i]));
+                            for yy in y.saturating_sub(margin)..=(y + margin).min(h - 1) {
+                                for xx in x.saturating_sub(margin)..=(x + margin).min(w - 1) {
+                                    near_obj[yy * w + xx] = true;
+                                }
+                            }
+                        }
+                    }
+                }
                 let bg: Vec<evseg_geometry::FlowSample> = samples
                     .iter()
                     .filter(|sm| truth.event_object[sm.index] == 0)
+                    .filter(|sm| {
+                        margin == 0
+                            || !near_obj
+                                [usize::from(s.events.y[sm.index]) * w + usize::from(s.events.x[sm.index])]
+                    })
                     .copied()
                     .collect();
                 let bg_true: Vec<evseg_geometry::FlowSample> = bg

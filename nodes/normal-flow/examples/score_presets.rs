@@ -35,6 +35,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             "--dt-min-ms" => params.dt_min_s = value::<f64>(&mut args, &a)? * 1e-3,
             "--dt-max-ms" => params.dt_max_s = value::<f64>(&mut args, &a)? * 1e-3,
             "--min-confidence" => params.min_confidence = value(&mut args, &a)?,
+            "--max-direction-sd-deg" => {
+                params.max_direction_sd_rad = value::<f64>(&mut args, &a)?.to_radians()
+            }
+            "--lookahead-ms" => params.lookahead_s = value::<f64>(&mut args, &a)? * 1e-3,
+            "--outlier-ms" => params.outlier_s = value::<f64>(&mut args, &a)? * 1e-3,
             "--json" => json = true,
             "--seed" => seed = value(&mut args, &a)?,
             "--learned" => learned_path = value(&mut args, &a)?,

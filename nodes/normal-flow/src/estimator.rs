@@ -86,6 +86,9 @@ pub struct PlaneFitEstimator {
     nb: Neighbourhood,
     last_t: f64,
     stats: EstimatorStats,
+    last_fit: Option<PlaneFit>,
+    /// Per event of the slice in progress: written to its surface (reused buffer).
+    written: Vec<bool>,
 }
 
 impl PlaneFitEstimator {
@@ -113,6 +116,8 @@ impl PlaneFitEstimator {
             nb: Neighbourhood::default(),
             last_t: f64::NEG_INFINITY,
             stats: EstimatorStats::default(),
+            last_fit: None,
+            written: Vec::new(),
         })
     }
 
@@ -129,6 +134,13 @@ impl PlaneFitEstimator {
     /// Counters so far.
     pub fn stats(&self) -> EstimatorStats {
         self.stats
+    }
+
+    /// The plane fitted to the last event given to [`push_event`](Self::push_event) (also when
+    /// the estimate was then judged invalid); `None` when no plane could be fitted. For
+    /// diagnostics (`examples/length_error.rs`).
+    pub fn last_fit(&self) -> Option<PlaneFit> {
+        self.last_fit
     }
 
     /// Forgets every event seen (empty surfaces, counters kept).
@@ -154,46 +166,110 @@ impl PlaneFitEstimator {
         out.nx.clear();
         out.ny.clear();
         out.confidence.clear();
-        out.nx.reserve(n);
-        out.ny.reserve(n);
-        out.confidence.reserve(n);
-        for i in 0..n {
-            let est = self.push_event(events.t[i], events.x[i], events.y[i], events.p[i]);
-            let (nx, ny) = if est.confidence > 0.0 {
-                let idx = events.y[i] as usize * self.width + events.x[i] as usize;
-                let [j00, j01, j10, j11] = self.jacobian[idx];
+        out.nx.resize(n, 0.0);
+        out.ny.resize(n, 0.0);
+        out.confidence.resize(n, 0.0);
+        let width = self.width;
+        let jacobian = std::mem::take(&mut self.jacobian);
+        self.run(events, |i, est, _| {
+            if est.confidence > 0.0 {
+                let idx = events.y[i] as usize * width + events.x[i] as usize;
+                let [j00, j01, j10, j11] = jacobian[idx];
                 let [fu, fv] = [est.flow_px[0] as f32, est.flow_px[1] as f32];
-                (j00 * fu + j01 * fv, j10 * fu + j11 * fv)
-            } else {
-                (0.0, 0.0)
-            };
-            out.nx.push(nx);
-            out.ny.push(ny);
-            out.confidence.push(est.confidence as f32);
-        }
+                out.nx[i] = j00 * fu + j01 * fv;
+                out.ny[i] = j10 * fu + j11 * fv;
+                out.confidence[i] = est.confidence as f32;
+            }
+        });
+        self.jacobian = jacobian;
         Ok(())
     }
 
     /// Processes `events` in order and returns their normal flow in pixels per second.
     pub fn process_pixels(&mut self, events: &Events) -> Result<Vec<PixelEstimate>, EstimatorError> {
         check_columns(events)?;
-        Ok((0..events.len())
-            .map(|i| self.push_event(events.t[i], events.x[i], events.y[i], events.p[i]))
-            .collect())
+        let mut out = vec![PixelEstimate::INVALID; events.len()];
+        self.run(events, |i, est, _| out[i] = est);
+        Ok(out)
+    }
+
+    /// As [`process_pixels`](Self::process_pixels), with each event's fitted plane (also when
+    /// the estimate was judged invalid; `None` when no plane could be fitted). For diagnostics
+    /// (`examples/length_error.rs`).
+    pub fn process_with_fits(
+        &mut self,
+        events: &Events,
+    ) -> Result<Vec<(PixelEstimate, Option<PlaneFit>)>, EstimatorError> {
+        check_columns(events)?;
+        let mut out = vec![(PixelEstimate::INVALID, None); events.len()];
+        self.run(events, |i, est, fit| out[i] = (est, fit));
+        Ok(out)
+    }
+
+    /// Writes every event of the slice to the surfaces and fits it, handing `(index, estimate,
+    /// plane)`
+    /// to `sink`. Causal (each event fitted right after it is written) when `lookahead_s` is 0;
+    /// otherwise an event is fitted once the first event later than `t + lookahead_s` arrives
+    /// (or at the end of the slice), with the neighbours written up to then.
+    fn run(&mut self, events: &Events, mut sink: impl FnMut(usize, PixelEstimate, Option<PlaneFit>)) {
+        let n = events.len();
+        let la = self.params.lookahead_s;
+        if la <= 0.0 {
+            for i in 0..n {
+                let est = self.push_event(events.t[i], events.x[i], events.y[i], events.p[i]);
+                sink(i, est, self.last_fit);
+            }
+            return;
+        }
+        let mut written = std::mem::take(&mut self.written);
+        written.clear();
+        written.resize(n, false);
+        let mut next = 0;
+        for j in 0..n {
+            while next < j && (!written[next] || events.t[next] + la < events.t[j]) {
+                let est = self.fit_written(written[next], events, next, la);
+                sink(next, est, self.last_fit);
+                next += 1;
+            }
+            written[j] = self.write_event(events.t[j], events.x[j], events.y[j], events.p[j]);
+        }
+        while next < n {
+            let est = self.fit_written(written[next], events, next, la);
+            sink(next, est, self.last_fit);
+            next += 1;
+        }
+        self.written = written;
+    }
+
+    fn fit_written(&mut self, written: bool, events: &Events, i: usize, lookahead: f64) -> PixelEstimate {
+        self.last_fit = None;
+        if !written {
+            return PixelEstimate::INVALID;
+        }
+        self.fit_event(events.t[i], events.x[i], events.y[i], events.p[i], lookahead)
     }
 
     /// Adds one event (`t` seconds, pixel `(x, y)`, polarity `p`, non-zero = ON) to its surface
-    /// and fits its plane.
+    /// and fits its plane (causally: `lookahead_s` applies to [`process`](Self::process) only).
     pub fn push_event(&mut self, t: f64, x: u16, y: u16, p: u8) -> PixelEstimate {
+        self.last_fit = None;
+        if !self.write_event(t, x, y, p) {
+            return PixelEstimate::INVALID;
+        }
+        self.fit_event(t, x, y, p, 0.0)
+    }
+
+    /// Counts the event and writes it to its surface; false when it is ignored.
+    fn write_event(&mut self, t: f64, x: u16, y: u16, p: u8) -> bool {
         self.stats.events += 1;
         let (xu, yu) = (x as usize, y as usize);
         if xu >= self.width || yu >= self.height {
             self.stats.out_of_sensor += 1;
-            return PixelEstimate::INVALID;
+            return false;
         }
         if !t.is_finite() {
             self.stats.bad_time += 1;
-            return PixelEstimate::INVALID;
+            return false;
         }
         if t < self.last_t {
             self.stats.out_of_order += 1;
@@ -201,10 +277,18 @@ impl PlaneFitEstimator {
             self.last_t = t;
         }
         let pol = usize::from(p != 0);
-        let w = self.width;
-        let surface = &mut self.surface[pol];
-        let own = &mut surface[yu * w + xu];
+        let own = &mut self.surface[pol][yu * self.width + xu];
         *own = own.max(t);
+        true
+    }
+
+    /// Fits the plane of a written event to the neighbours on its surface whose age is within
+    /// `[-lookahead, dt_max]` (and at least `dt_min` in magnitude).
+    fn fit_event(&mut self, t: f64, x: u16, y: u16, p: u8, lookahead: f64) -> PixelEstimate {
+        let (xu, yu) = (x as usize, y as usize);
+        let pol = usize::from(p != 0);
+        let w = self.width;
+        let surface = &self.surface[pol];
         let r = self.params.radius;
         let (x0, x1) = (xu.saturating_sub(r), (xu + r).min(self.width - 1));
         let (y0, y1) = (yu.saturating_sub(r), (yu + r).min(self.height - 1));
@@ -218,18 +302,18 @@ impl PlaneFitEstimator {
                 let xx = x0 + k;
                 let age = t - ts;
                 let own_pixel = xx == xu && yy == yu;
-                if own_pixel || (age >= dt_min && age <= dt_max) {
+                if own_pixel || (age.abs() >= dt_min && age <= dt_max && age >= -lookahead) {
                     nb.push(xx as f64 - xu as f64, dy, if own_pixel { 0.0 } else { -age });
                 }
             }
         }
-        let estimate = fit_plane(
+        self.last_fit = fit_plane(
             nb,
             self.params.outlier_s,
             self.params.max_refits,
             self.params.min_points,
-        )
-        .and_then(|fit| self.judge(&fit));
+        );
+        let estimate = self.last_fit.and_then(|fit| self.judge(&fit));
         match estimate {
             Some(e) => {
                 self.stats.valid += 1;
@@ -246,6 +330,9 @@ impl PlaneFitEstimator {
         let flow = fit.normal_flow_px()?;
         let speed = fit.speed_px_s();
         if speed.is_nan() || speed > self.params.max_speed_px_s {
+            return None;
+        }
+        if fit.direction_sd_rad.is_nan() || fit.direction_sd_rad >= self.params.max_direction_sd_rad {
             return None;
         }
         let inlier_share = fit.inliers as f64 / fit.points as f64;

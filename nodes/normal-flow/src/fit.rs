@@ -81,6 +81,12 @@ pub struct PlaneFit {
     pub points: usize,
     /// Root-mean-square time residual of the inliers, seconds.
     pub rms_s: f64,
+    /// Standard deviation of the gradient's direction, radians: the least-squares covariance of
+    /// `(gx, gy)` (residual variance `ss / (inliers - 3)`) across the gradient, divided by `|g|`.
+    /// The normal flow's length measured along a direction off by `theta` differs from the true
+    /// one by about `u_t sin(theta)` (`u_t` the flow along the edge), so this bounds the length
+    /// error where the flow along the edge is large. Infinite with 3 inliers or a flat plane.
+    pub direction_sd_rad: f64,
 }
 
 impl PlaneFit {
@@ -130,6 +136,23 @@ impl Sums {
     /// Solves `[sxx sxy sx; sxy syy sy; sx sy n] [gx gy c] = [sxt syt st]` by the adjugate.
     /// The matrix has integer entries (pixel offsets), so a non-singular one has `|det| >= 1`;
     /// below 0.5 the points are collinear (or fewer than 3) and there is no plane.
+    /// The upper-left 2 x 2 block of the inverse matrix (the covariance of `(gx, gy)` per unit
+    /// residual variance) as `[cxx, cxy, cyy]`; `None` when singular.
+    fn gradient_covariance(&self) -> Option<[f64; 3]> {
+        let (a, b, c) = (self.sxx, self.sxy, self.sx);
+        let (d, e) = (self.syy, self.sy);
+        let f = self.n;
+        let c00 = d * f - e * e;
+        let c01 = c * e - b * f;
+        let c02 = b * e - c * d;
+        let c11 = a * f - c * c;
+        let det = a * c00 + b * c01 + c * c02;
+        if det.abs() < 0.5 {
+            return None;
+        }
+        Some([c00 / det, c01 / det, c11 / det])
+    }
+
     #[inline]
     fn solve(&self) -> Option<[f64; 3]> {
         let (a, b, c) = (self.sxx, self.sxy, self.sx);
@@ -211,6 +234,15 @@ pub fn fit_plane(
             ss += r * r;
         }
     }
+    let g = sol[0].hypot(sol[1]);
+    let direction_sd_rad = match sums.gradient_covariance() {
+        Some([cxx, cxy, cyy]) if kept > 3 && g > 0.0 => {
+            let (qx, qy) = (-sol[1] / g, sol[0] / g);
+            let var = ss / (kept - 3) as f64 * (qx * qx * cxx + 2.0 * qx * qy * cxy + qy * qy * cyy);
+            var.max(0.0).sqrt() / g
+        }
+        _ => f64::INFINITY,
+    };
     Some(PlaneFit {
         gx: sol[0],
         gy: sol[1],
@@ -218,6 +250,7 @@ pub fn fit_plane(
         inliers: kept,
         points: n,
         rms_s: (ss / kept as f64).sqrt(),
+        direction_sd_rad,
     })
 }
 
@@ -243,6 +276,7 @@ mod tests {
         assert!((fit.c - 0.0005).abs() < 1e-12);
         assert_eq!((fit.inliers, fit.points), (25, 25));
         assert!(fit.rms_s < 1e-12);
+        assert!(fit.direction_sd_rad < 1e-6);
         let [vx, vy] = fit.normal_flow_px().expect("flow");
         // v = g / |g|^2 = (0.002, -0.001) / 5e-6 = (400, -200) px/s.
         assert!((vx - 400.0).abs() < 1e-6 && (vy + 200.0).abs() < 1e-6);

@@ -161,6 +161,20 @@ fn main() -> ExitCode {
         "faster fits are invalid, pixels/s",
     )
     .param(
+        "lookahead_ms",
+        d.lookahead_s * 1e3,
+        "non-causal fit: neighbours up to this after the event (within the slice), ms; 0 = causal",
+    )
+    .param(
+        "max_direction_sd_deg",
+        if d.max_direction_sd_rad.is_finite() {
+            serde_json::Value::from(d.max_direction_sd_rad.to_degrees())
+        } else {
+            serde_json::Value::Null
+        },
+        "fits whose gradient direction standard deviation reaches this are invalid, degrees (null = no test)",
+    )
+    .param(
         "min_confidence",
         d.min_confidence,
         "fits with a confidence at or below this are invalid, [0, 1)",
@@ -176,6 +190,10 @@ fn main() -> ExitCode {
             max_refits: cfg.param::<usize>("max_refits")?,
             max_speed_px_s: cfg.param::<f64>("max_speed_px_s")?,
             min_confidence: cfg.param::<f64>("min_confidence")?,
+            lookahead_s: cfg.param::<f64>("lookahead_ms")? * 1e-3,
+            max_direction_sd_rad: cfg
+                .param_opt::<f64>("max_direction_sd_deg")?
+                .map_or(f64::INFINITY, f64::to_radians),
         };
         params.validate()?;
         Ok(NormalFlowNode {

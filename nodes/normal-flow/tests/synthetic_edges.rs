@@ -129,9 +129,14 @@ fn radius_one_window_works_too() {
 fn surfaces_persist_across_slices() {
     let events = edge_events(30.0, 400.0, 0);
     let camera = camera();
-    let mut whole = PlaneFitEstimator::new(&camera, PlaneFitParams::default()).expect("valid");
+    // Causal: with a lookahead the fit of an event depends on where its slice ends.
+    let causal = PlaneFitParams {
+        lookahead_s: 0.0,
+        ..PlaneFitParams::default()
+    };
+    let mut whole = PlaneFitEstimator::new(&camera, causal).expect("valid");
     let all = whole.process(&events).expect("consistent");
-    let mut split = PlaneFitEstimator::new(&camera, PlaneFitParams::default()).expect("valid");
+    let mut split = PlaneFitEstimator::new(&camera, causal).expect("valid");
     let mid = events.len() / 2;
     let mut first = Events::default();
     first.extend_from(&events, 0..mid);
@@ -148,7 +153,7 @@ fn surfaces_persist_across_slices() {
     );
     assert_eq!(whole.stats(), split.stats());
     // A fresh estimator on the second half alone lacks the history for its first events.
-    let mut fresh = PlaneFitEstimator::new(&camera, PlaneFitParams::default()).expect("valid");
+    let mut fresh = PlaneFitEstimator::new(&camera, causal).expect("valid");
     let c = fresh.process(&second).expect("consistent");
     assert!(
         fresh.stats().valid < valid_second,
@@ -286,4 +291,96 @@ fn bad_parameters_are_refused() {
     }
     let empty = CameraInfo::pinhole(0, 10, 100.0, "empty");
     assert!(PlaneFitEstimator::new(&empty, PlaneFitParams::default()).is_err());
+}
+
+/// The edge of [`edge_events`] with every timestamp shifted by a pseudo-random jitter of up to
+/// `jitter_px / speed` seconds (a fixed hash per pixel, as a per-pixel threshold mismatch would).
+fn jittered_edge_events(speed: f64, jitter_px: f64) -> Events {
+    let clean = edge_events(0.0, speed, 1);
+    let mut list: Vec<(f64, u16, u16)> = (0..clean.len())
+        .map(|i| {
+            let (x, y) = (clean.x[i], clean.y[i]);
+            let h = ((u64::from(x) * 73_856_093) ^ (u64::from(y) * 19_349_663)) % 1000;
+            let j = (h as f64 / 999.0 * 2.0 - 1.0) * jitter_px / speed;
+            (clean.t[i] + j, x, y)
+        })
+        .collect();
+    list.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let mut ev = Events::with_capacity(list.len());
+    for (t, x, y) in list {
+        ev.push(t, x, y, 1);
+    }
+    ev
+}
+
+/// Median of `|p| / speed` over the checkable valid events.
+fn median_speed_ratio(events: &Events, params: PlaneFitParams, speed: f64) -> f64 {
+    let mut est = PlaneFitEstimator::new(&camera(), params).expect("valid");
+    let px = est.process_pixels(events).expect("consistent");
+    let mut ratios: Vec<f64> = px
+        .iter()
+        .enumerate()
+        .filter(|(i, e)| e.confidence > 0.0 && checkable(events.x[*i], events.y[*i], 2, 0.0))
+        .map(|(_, e)| e.flow_px[0].hypot(e.flow_px[1]) / speed)
+        .collect();
+    assert!(ratios.len() > 1000, "only {} valid events", ratios.len());
+    ratios.sort_by(f64::total_cmp);
+    ratios[ratios.len() / 2]
+}
+
+#[test]
+fn causal_fit_overestimates_jittered_speed_and_lookahead_removes_it() {
+    // Jitter of +-0.4 px of travel: the causal fit keeps only the early-firing pixels at the
+    // edge front, so the surface looks compressed along the motion.
+    let speed = 150.0;
+    let events = jittered_edge_events(speed, 0.4);
+    let causal_params = PlaneFitParams {
+        lookahead_s: 0.0,
+        ..PlaneFitParams::default()
+    };
+    let causal = median_speed_ratio(&events, causal_params, speed);
+    let lookahead = PlaneFitParams {
+        lookahead_s: 0.03,
+        ..PlaneFitParams::default()
+    };
+    let non_causal = median_speed_ratio(&events, lookahead, speed);
+    println!("jittered edge: median speed ratio causal {causal:.4}, lookahead {non_causal:.4}");
+    assert!(causal > 1.01, "causal median ratio {causal}");
+    assert!(
+        (non_causal - 1.0).abs() < 0.5 * (causal - 1.0),
+        "lookahead median ratio {non_causal}, causal {causal}"
+    );
+}
+
+#[test]
+fn lookahead_keeps_clean_edges_exact() {
+    let events = edge_events(30.0, 200.0, 1);
+    let params = PlaneFitParams {
+        lookahead_s: 0.03,
+        ..PlaneFitParams::default()
+    };
+    let ratio = median_speed_ratio(&events, params, 200.0);
+    assert!((ratio - 1.0).abs() < 0.01, "ratio {ratio}");
+}
+
+#[test]
+fn direction_test_drops_uncertain_fits_only() {
+    let speed = 150.0;
+    let events = jittered_edge_events(speed, 0.4);
+    let mut all = PlaneFitEstimator::new(&camera(), PlaneFitParams::default()).expect("valid");
+    all.process(&events).expect("consistent");
+    let strict = PlaneFitParams {
+        max_direction_sd_rad: 1f64.to_radians(),
+        ..PlaneFitParams::default()
+    };
+    let mut some = PlaneFitEstimator::new(&camera(), strict).expect("valid");
+    some.process(&events).expect("consistent");
+    assert!(some.stats().valid < all.stats().valid);
+    // A clean edge has an exact direction: nothing dropped.
+    let clean = edge_events(0.0, speed, 1);
+    let mut a = PlaneFitEstimator::new(&camera(), PlaneFitParams::default()).expect("valid");
+    let mut b = PlaneFitEstimator::new(&camera(), strict).expect("valid");
+    a.process(&clean).expect("consistent");
+    b.process(&clean).expect("consistent");
+    assert_eq!(a.stats().valid, b.stats().valid);
 }
