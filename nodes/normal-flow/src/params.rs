@@ -44,16 +44,15 @@ pub struct PlaneFitParams {
     /// `lookahead_s` after it (and within its slice) are on the surface, so neighbours the edge
     /// reaches after the event take part (ages in `[-lookahead_s, dt_max]`). 0 = causal (each
     /// event fitted right after it is written).
-    /// Default 0.03 s, the default slice length (slicer), so that an event sees the rest of its
-    /// slice (a longer lookahead changes nothing). The causal fit keeps, at the edge front, only
-    /// the pixels that fired early, which compresses the surface along the motion: on the
-    /// simulator background the speed was overestimated by +3 % (median) and a jittered
-    /// synthetic edge gives +5 % (test `causal_fit_overestimates_jittered_speed...`). Measured
-    /// (score_presets, seeds 1 and 2, four presets; crate README, length study): median relative
-    /// magnitude error 0.044-0.082 -> 0.022-0.028, coverage +0.10 to +0.26, sign-correct rate
-    /// up on every preset, about 12 % slower. Egomotion (oracle_ladder R6) improves on
-    /// camera-only and on object presets away from object boundaries, but gets worse on object
-    /// presets when background events next to the objects are kept (more of them are covered).
+    /// Default 0 (causal). 0.03 s (the slice length; longer changes nothing) gives better flow
+    /// on every measure: the causal fit keeps, at the edge front, only the pixels that fired
+    /// early, which compresses the surface along the motion (+3 % median speed on the simulator
+    /// background, +5 % on a jittered synthetic edge, test
+    /// `causal_fit_overestimates_jittered_speed_and_lookahead_removes_it`); with 30 ms the median
+    /// relative magnitude error fell from 0.044-0.082 to 0.022-0.028 and coverage rose by 0.10 to
+    /// 0.26 (score_presets, seeds 1 and 2, four presets), about 12 % slower. End to end the
+    /// method's egomotion improved but its IoU fell (`evseg bench`: IoU mask 25.25 -> 23.11 %,
+    /// direction error 45.5 -> 34.9 deg; crate README, length study), so it is off by default.
     pub lookahead_s: f64,
     /// Fits whose gradient direction is this uncertain (radians, [`PlaneFit::direction_sd_rad`](
     /// crate::PlaneFit::direction_sd_rad)) or more are invalid: the length of a normal flow
@@ -76,7 +75,7 @@ impl Default for PlaneFitParams {
             max_refits: 3,
             max_speed_px_s: 20_000.0,
             min_confidence: 0.5,
-            lookahead_s: 0.03,
+            lookahead_s: 0.0,
             max_direction_sd_rad: f64::INFINITY,
         }
     }
