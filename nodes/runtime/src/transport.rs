@@ -330,17 +330,37 @@ pub const SHM_DIRECT_MIN_BYTES: usize = 64 * 1024;
 /// [`crate::config::ShmSettings::pool_bytes`]).
 pub type ShmPool = Arc<zenoh::shm::ShmProvider<zenoh::shm::PosixShmProviderBackend>>;
 
-/// The session's shared-memory pool, or `None` when shared memory is off or cannot be created
-/// (then every frame goes through the heap; logged).
+/// How long a node waits at start-up for its session's shared-memory pool to be created.
+pub const SHM_POOL_WAIT: Duration = Duration::from_secs(2);
+
+/// The session's shared-memory pool, or `None` when shared memory is off or the pool is not
+/// ready within [`SHM_POOL_WAIT`] (then every frame goes through the heap; logged).
+///
+/// Polls the session's provider state instead of waiting on it: Zenoh creates the pool in the
+/// background and hands it over through a one-message channel; waiting on that channel would
+/// take the message away from the session, whose own transport optimisation (moving smaller
+/// frames to shared memory) would then never see the pool ready.
 pub fn shm_pool(session: &zenoh::Session, enabled: bool) -> Option<ShmPool> {
+    use zenoh::shm::ShmProviderState;
     if !enabled {
         return None;
     }
-    let pool = session.get_shm_provider().wait();
-    if pool.is_none() {
-        tracing::warn!("shared memory enabled but its pool could not be created; frames go through the heap");
+    let start = Instant::now();
+    loop {
+        match session.get_shm_provider() {
+            ShmProviderState::Ready(pool) => return Some(pool),
+            ShmProviderState::Initializing(_) if start.elapsed() < SHM_POOL_WAIT => {
+                std::thread::sleep(Duration::from_millis(1));
+            }
+            state => {
+                tracing::warn!(
+                    ?state,
+                    "shared memory enabled but its pool is not available; large frames go through the heap"
+                );
+                return None;
+            }
+        }
     }
-    pool
 }
 
 /// Encodes a frame into a Zenoh payload: a large frame is written once, straight into a
@@ -432,6 +452,17 @@ mod tests {
                 .unwrap(),
             p
         );
+    }
+
+    #[test]
+    fn taking_the_pool_leaves_it_ready_for_the_session_itself() {
+        let s = session(true);
+        assert!(shm_pool(&s, true).is_some());
+        // Zenoh's transport asks for the same pool; it must see it ready, not initializing.
+        assert!(matches!(
+            s.get_shm_provider(),
+            zenoh::shm::ShmProviderState::Ready(_)
+        ));
     }
 
     #[test]
