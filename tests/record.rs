@@ -59,7 +59,7 @@ fn published(stdout: &str) -> BTreeMap<String, u64> {
         }
         if in_table {
             match (cols.len(), cols.get(2).and_then(|v| v.parse::<u64>().ok())) {
-                (6, Some(n)) => {
+                (7, Some(n)) => {
                     map.insert(cols[0].to_string(), n);
                 }
                 _ => in_table = false,

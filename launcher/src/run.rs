@@ -214,7 +214,7 @@ impl Display {
         }
         self.last = Instant::now();
         let mut line = format!("[{elapsed:6.1}s]");
-        let (mut dropped, mut refused) = (0, 0);
+        let (mut dropped, mut refused, mut missed) = (0, 0, 0);
         for id in order {
             match stats.get(id) {
                 Some(s) => {
@@ -222,12 +222,13 @@ impl Display {
                     line.push_str(&format!(" {id}:{}{mark}", s.processed));
                     dropped += s.dropped;
                     refused += s.refused;
+                    missed += s.missed;
                 }
                 None => line.push_str(&format!(" {id}:-")),
             }
         }
-        if dropped + refused > 0 {
-            line.push_str(&format!("  dropped {dropped} refused {refused}"));
+        if dropped + refused + missed > 0 {
+            line.push_str(&format!("  dropped {dropped} refused {refused} missed {missed}"));
         }
         let mut err = std::io::stderr();
         if self.tty {
@@ -548,12 +549,13 @@ fn indent(text: &str) -> String {
 
 /// A per-node summary table of a finished run.
 pub fn summary(outcome: &RunOutcome, order: &[String]) -> String {
-    let mut s = String::from("node                 processed  published  dropped  refused   busy s\n");
+    let mut s =
+        String::from("node                 processed  published  dropped  refused   busy s   missed\n");
     for id in order {
         if let Some(st) = outcome.stats.get(id) {
             s.push_str(&format!(
-                "{id:<20} {:>9}  {:>9}  {:>7}  {:>7}  {:>7.2}\n",
-                st.processed, st.published, st.dropped, st.refused, st.busy_s
+                "{id:<20} {:>9}  {:>9}  {:>7}  {:>7}  {:>7.2}  {:>7}\n",
+                st.processed, st.published, st.dropped, st.refused, st.busy_s, st.missed
             ));
         }
     }

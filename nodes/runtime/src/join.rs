@@ -132,9 +132,17 @@ impl Joiner {
         match frame.envelope.kind {
             FrameKind::End => p.end = Some(frame.envelope.seq),
             FrameKind::Data => {
-                // A frame older than what was already handed out can only be a duplicate.
+                // A frame older than what was already handed out can only be a duplicate: in
+                // lock-step mode a frame published again after a stall (not a loss), in live
+                // mode one that came too late (counted).
                 if !p.feedback && frame.envelope.seq < self.next {
-                    self.dropped += 1;
+                    if self.live {
+                        self.dropped += 1;
+                    }
+                    return;
+                }
+                // A feedback frame older than the previous slice's is no longer needed.
+                if p.feedback && self.started && frame.envelope.seq.saturating_add(1) < self.next {
                     return;
                 }
                 p.pending.insert(frame.envelope.seq, frame);
@@ -315,6 +323,22 @@ mod tests {
             JoinState::Ready(x) => x,
             other => panic!("expected ready, got {other:?}"),
         }
+    }
+
+    #[test]
+    fn lockstep_ignores_frames_published_again() {
+        let mut j = Joiner::new(&[("a".into(), false), ("prev".into(), true)], false);
+        j.push(0, frame(0, FrameKind::Data));
+        assert_eq!(ready(&mut j).seq, 0);
+        // Published again after a stall: already handed out, not a drop.
+        j.push(0, frame(0, FrameKind::Data));
+        assert!(matches!(j.poll().unwrap(), JoinState::Waiting));
+        j.push(1, frame(0, FrameKind::Data));
+        j.push(0, frame(1, FrameKind::Data));
+        j.push(0, frame(1, FrameKind::Data));
+        assert_eq!(ready(&mut j).seq, 1);
+        assert!(matches!(j.poll().unwrap(), JoinState::Waiting));
+        assert_eq!(j.dropped(), 0);
     }
 
     #[test]

@@ -22,11 +22,19 @@ use crate::join::{JoinState, Joined, Joiner, RawFrame};
 use crate::progress::{DONE, Progress, Stats};
 use crate::signals;
 use crate::transport::{
-    CreditBook, Inbox, POLL, ShmPool, encode_payload, open_session, shm_pool, subscribe_inputs,
+    CreditBook, Inbox, POLL, SeqGaps, ShmPool, encode_payload, open_session, shm_pool, subscribe_inputs,
 };
 
 /// How long a producer waits at start-up for its consumers to appear before failing.
 pub const STARTUP_TIMEOUT: Duration = Duration::from_secs(60);
+/// Lock-step: a producer waiting this long for credit publishes the unconsumed frames again,
+/// and an idle consumer repeats its last progress this often (a lost message must not stop
+/// the graph). Long against a normal slice (tens of ms), short against a test's patience.
+pub const RESEND_AFTER: Duration = Duration::from_secs(1);
+/// A finished node repeats its final progress this often while its producers are still there.
+pub const DONE_REPEAT: Duration = Duration::from_millis(200);
+/// How long a finished node waits at most for its producers to leave (see `Running::finish`).
+pub const LINGER_TIMEOUT: Duration = Duration::from_secs(30);
 /// How long a finished node waits for its consumers to finish before leaving anyway.
 pub const DRAIN_TIMEOUT: Duration = Duration::from_secs(600);
 
@@ -122,6 +130,11 @@ struct OutPort {
     end_publisher: Option<zenoh::pubsub::Publisher<'static>>,
     /// (consumer node, consumer port, feedback)
     consumers: Vec<(String, String, bool)>,
+    /// Lock-step only: the last `window` frames published (sequence number, payload), to be
+    /// published again if the consumers stall (a lost frame).
+    recent: std::collections::VecDeque<(u64, ZBytes)>,
+    /// The end-of-stream frame once published (published again while consumers stall).
+    end_frame: Option<Vec<u8>>,
     sent: u64,
     t_end: f64,
 }
@@ -242,9 +255,42 @@ impl Outputs {
         let p = self.port_mut(port)?;
         if mode == Mode::Lockstep {
             let consumers = p.consumers.clone();
-            book.wait_until(&node, &watch, None, |consumed, _| {
+            // A frame or a progress message lost in transit would stop a lock-step graph for
+            // good (every producer waiting for credit, every consumer for input): when no
+            // credit comes for RESEND_AFTER, the frames the slowest consumer has not consumed
+            // are published again (consumers drop the duplicates, and repeat their progress
+            // while idle, see `stage_loop`).
+            while !book.wait_until(&node, &watch, Some(RESEND_AFTER), |consumed, _| {
                 has_credit(consumed, &consumers, seq, window)
-            })?;
+            })? {
+                let from = book.check_min(&consumers);
+                let again: Vec<&(u64, ZBytes)> = p.recent.iter().filter(|(s, _)| *s >= from).collect();
+                if !again.is_empty() {
+                    let consumed: Vec<String> = consumers
+                        .iter()
+                        .map(|(c, cp, _)| format!("{c}/{cp}={}", book.consumed(c, cp)))
+                        .collect();
+                    tracing::warn!(
+                        node = %node,
+                        port,
+                        from,
+                        frames = again.len(),
+                        ?consumed,
+                        "no credit for {:?}: publishing the unconsumed frames again",
+                        RESEND_AFTER
+                    );
+                }
+                for (_, bytes) in again {
+                    p.publisher
+                        .put(fresh_copy(bytes))
+                        .wait()
+                        .map_err(|e| RuntimeError::Zenoh(e.to_string()))?;
+                }
+            }
+            p.recent.push_back((seq, payload.clone()));
+            while p.recent.len() as u64 > window {
+                p.recent.pop_front();
+            }
         }
         let waited = waiting.elapsed().as_nanos() as u64;
         p.publisher
@@ -302,9 +348,45 @@ impl Outputs {
             p.end_publisher
                 .as_ref()
                 .unwrap_or(&p.publisher)
-                .put(bytes)
+                .put(bytes.clone())
                 .wait()
                 .map_err(|e| RuntimeError::Zenoh(e.to_string()))?;
+            p.end_frame = Some(bytes);
+        }
+        Ok(())
+    }
+
+    /// Publishes again, on every port with an unfinished consumer, the frames its slowest
+    /// unfinished consumer has not consumed (lock-step) and the end-of-stream frame: called
+    /// while the consumers stay silent for [`RESEND_AFTER`] after the end, since a lost end
+    /// frame (or a lost last progress) would otherwise keep both sides waiting.
+    fn publish_unfinished_again(&self) -> Result<(), RuntimeError> {
+        for (name, p) in &self.ports {
+            let from = self.book.check_min(&p.consumers);
+            if from == u64::MAX {
+                continue;
+            }
+            tracing::warn!(
+                node = %self.node,
+                port = %name,
+                from,
+                "consumers silent for {:?} after the end: publishing the unconsumed frames and the end again",
+                RESEND_AFTER
+            );
+            for (_, bytes) in p.recent.iter().filter(|(s, _)| *s >= from) {
+                p.publisher
+                    .put(fresh_copy(bytes))
+                    .wait()
+                    .map_err(|e| RuntimeError::Zenoh(e.to_string()))?;
+            }
+            if let Some(end) = &p.end_frame {
+                p.end_publisher
+                    .as_ref()
+                    .unwrap_or(&p.publisher)
+                    .put(end.clone())
+                    .wait()
+                    .map_err(|e| RuntimeError::Zenoh(e.to_string()))?;
+            }
         }
         Ok(())
     }
@@ -317,16 +399,34 @@ impl Outputs {
             .flat_map(|(_, p)| p.consumers.iter().map(|(c, cp, _)| (c.clone(), cp.clone())))
             .collect();
         let watch = self.watch_list();
-        let ok = self
-            .book
-            .wait_until(&self.node, &watch, Some(DRAIN_TIMEOUT), |consumed, _| {
-                list.iter().all(|k| consumed.get(k).copied() == Some(DONE))
-            })?;
+        let start = Instant::now();
+        let mut ok = false;
+        while start.elapsed() < DRAIN_TIMEOUT {
+            ok = self
+                .book
+                .wait_until(&self.node, &watch, Some(RESEND_AFTER), |consumed, _| {
+                    list.iter().all(|k| consumed.get(k).copied() == Some(DONE))
+                })?;
+            if ok {
+                break;
+            }
+            self.publish_unfinished_again()?;
+        }
         if !ok {
             tracing::warn!(node = %self.node, "consumers did not finish within {}s", DRAIN_TIMEOUT.as_secs());
         }
         Ok(())
     }
+}
+
+/// A heap copy of a frame to publish again. Never the same buffer: a frame in shared memory
+/// that a consumer could not read once stays unreadable. Zenoh's shared-memory watchdog marks
+/// a buffer invalid for good when a process misses its 100 ms confirmation deadline (a starved
+/// process on a loaded machine), and the receiving transport then drops the message with only
+/// a debug log; publishing that buffer again would be dropped again every time (seen: a
+/// lock-step graph stalled for minutes). A copy is placed in a fresh buffer.
+fn fresh_copy(bytes: &ZBytes) -> ZBytes {
+    ZBytes::from(bytes.to_bytes().into_owned())
 }
 
 /// Lock-step credit rule: frame `seq` may go out when every consumer has consumed more than
@@ -380,6 +480,7 @@ pub(crate) struct Counters {
     pub(crate) processed: AtomicU64,
     pub(crate) refused: AtomicU64,
     pub(crate) dropped: AtomicU64,
+    pub(crate) missed: AtomicU64,
     pub(crate) last_seq: AtomicU64,
     pub(crate) busy_ns: AtomicU64,
 }
@@ -405,6 +506,7 @@ impl Running {
             published: self.outputs.published.load(Ordering::Relaxed),
             processed: c.processed.load(Ordering::Relaxed),
             dropped: c.dropped.load(Ordering::Relaxed),
+            missed: c.missed.load(Ordering::Relaxed),
             refused: c.refused.load(Ordering::Relaxed),
             last_seq: if last == u64::MAX { None } else { Some(last) },
             busy_s: c.busy_ns.load(Ordering::Relaxed) as f64 * 1e-9,
@@ -467,13 +569,50 @@ impl Running {
 
     pub(crate) fn finish(mut self) -> Result<(), RuntimeError> {
         self.outputs.end_all(&self.schemas)?;
-        let done = self.cfg.inputs.iter().map(|i| (i.port.clone(), DONE)).collect();
-        self.publish_progress(done)?;
+        let done: Vec<(String, u64)> = self.cfg.inputs.iter().map(|i| (i.port.clone(), DONE)).collect();
+        self.publish_progress(done.clone())?;
         self.publish_stats(true);
         self.outputs.wait_consumers_done()?;
         self.publish_final_stats();
+        self.linger_until_producers_left(done);
         let _ = self.session.close().wait();
         Ok(())
+    }
+
+    /// Stays until the producers of the node's (non-feedback) inputs have left, repeating the
+    /// final progress every [`DONE_REPEAT`], at most [`LINGER_TIMEOUT`]: a producer leaves only
+    /// once it knows every consumer finished, and a single progress message sent just before
+    /// the session closes can be lost (seen under load while Zenoh peers were still linking
+    /// up: the producer then waited for a consumer that had finished). Feedback producers are
+    /// left out: they are downstream and wait for this node themselves.
+    fn linger_until_producers_left(&self, done: Vec<(String, u64)>) {
+        let mut producers: Vec<&str> = self
+            .cfg
+            .inputs
+            .iter()
+            .filter(|i| !i.feedback)
+            .map(|i| i.producer.as_str())
+            .collect();
+        producers.sort_unstable();
+        producers.dedup();
+        let start = Instant::now();
+        loop {
+            let gone = self
+                .outputs
+                .book
+                .wait_until(&self.cfg.node, &[], Some(DONE_REPEAT), |_, alive| {
+                    producers.iter().all(|p| !alive.contains(*p))
+                })
+                .unwrap_or(true);
+            if gone {
+                return;
+            }
+            if start.elapsed() >= LINGER_TIMEOUT {
+                tracing::warn!(node = %self.cfg.node, ?producers, "producers still running {}s after this node finished; leaving", LINGER_TIMEOUT.as_secs());
+                return;
+            }
+            let _ = self.publish_progress(done.clone());
+        }
     }
 }
 
@@ -547,6 +686,8 @@ pub(crate) fn start(
                 publisher,
                 end_publisher,
                 consumers,
+                recent: std::collections::VecDeque::new(),
+                end_frame: None,
                 sent: 0,
                 t_end: 0.0,
             },
@@ -730,10 +871,20 @@ fn stage_loop<S: Stage>(mut run: Running, stage: &mut S) -> Result<(), RuntimeEr
         .map(|i| (i.port.clone(), i.feedback))
         .collect();
     let mut joiner = Joiner::new(&ports, run.cfg.mode == Mode::Live);
+    let mut gaps = SeqGaps::new(ports.len());
     let mut last_stats = Instant::now();
+    // The last progress published and when (repeated while idle in lock-step mode).
+    let mut last_progress: Option<(Vec<(String, u64)>, Instant)> = None;
     loop {
         if signals::stop_requested() {
             return Err(RuntimeError::Stopped);
+        }
+        if run.cfg.mode == Mode::Lockstep
+            && let Some((consumed, at)) = &mut last_progress
+            && at.elapsed() >= RESEND_AFTER
+        {
+            run.publish_progress(consumed.clone())?;
+            *at = Instant::now();
         }
         for arrival in inbox.drain(POLL) {
             let binding = &run.cfg.inputs[arrival.port];
@@ -745,6 +896,9 @@ fn stage_loop<S: Stage>(mut run: Running, stage: &mut S) -> Result<(), RuntimeEr
                 {
                     if envelope.kind == evseg_schemas::FrameKind::Data {
                         run.counters.received.fetch_add(1, Ordering::Relaxed);
+                        gaps.data(arrival.port, envelope.seq);
+                    } else {
+                        gaps.end(arrival.port, envelope.seq);
                     }
                     joiner.push(
                         arrival.port,
@@ -802,9 +956,7 @@ fn stage_loop<S: Stage>(mut run: Running, stage: &mut S) -> Result<(), RuntimeEr
                         (t0.elapsed().as_nanos() as u64).saturating_sub(waited),
                         Ordering::Relaxed,
                     );
-                    run.counters
-                        .dropped
-                        .store(inbox.dropped() + joiner.dropped(), Ordering::Relaxed);
+                    note_losses(&run, &inbox, joiner.dropped(), &gaps);
                     return run.finish();
                 }
                 JoinState::Ready(joined) => {
@@ -833,15 +985,30 @@ fn stage_loop<S: Stage>(mut run: Running, stage: &mut S) -> Result<(), RuntimeEr
                                 if i.feedback { joined.seq } else { joined.seq + 1 },
                             )
                         })
-                        .collect();
-                    run.publish_progress(consumed)?;
+                        .collect::<Vec<_>>();
+                    run.publish_progress(consumed.clone())?;
+                    last_progress = Some((consumed, Instant::now()));
                 }
             }
         }
-        run.counters
-            .dropped
-            .store(inbox.dropped() + joiner.dropped(), Ordering::Relaxed);
+        note_losses(&run, &inbox, joiner.dropped(), &gaps);
         maybe_stats(&run, &mut last_stats);
+    }
+}
+
+/// Stores the node's loss counters: `dropped` = its own queue overflows plus `joins_dropped`,
+/// `missed` = the input messages that never reached its queue (live mode only: in lock-step
+/// mode nothing is lost, and a frame published again after a stall arrives out of order). The
+/// gaps the loop sees include the queue's own drops, which are therefore taken off.
+pub(crate) fn note_losses(run: &Running, inbox: &Inbox, joins_dropped: u64, gaps: &SeqGaps) {
+    let queue = inbox.dropped();
+    run.counters
+        .dropped
+        .store(queue + joins_dropped, Ordering::Relaxed);
+    if run.cfg.mode == Mode::Live {
+        run.counters
+            .missed
+            .store(gaps.missing().saturating_sub(queue), Ordering::Relaxed);
     }
 }
 

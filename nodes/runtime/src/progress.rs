@@ -30,6 +30,12 @@ pub struct Stats {
     pub processed: u64,
     /// Inputs dropped (live mode: queue overflow or incomplete joins).
     pub dropped: u64,
+    /// Inputs that never arrived (live mode: gaps in an input's sequence numbers, i.e. dropped
+    /// by the transport under congestion or already dropped by the producer; see
+    /// [`crate::transport::SeqGaps`]). Not part of `dropped`, so a loss is not counted twice
+    /// at the same node.
+    #[serde(default)]
+    pub missed: u64,
     /// Messages refused (wrong schema or version, undecodable).
     pub refused: u64,
     /// Last sequence number processed.

@@ -16,10 +16,10 @@ use evseg_schemas::{Envelope, FrameKind, codec};
 
 use crate::config::{Mode, NodeConfig};
 use crate::error::{BoxError, RuntimeError};
-use crate::node::{Running, main_wrapper, maybe_stats};
+use crate::node::{RESEND_AFTER, Running, main_wrapper, maybe_stats, note_losses};
 use crate::progress::DONE;
 use crate::signals;
-use crate::transport::POLL;
+use crate::transport::{POLL, SeqGaps};
 
 /// A node that takes each input frame as it comes, undecoded.
 pub trait RawConsumer {
@@ -40,7 +40,14 @@ pub struct PortProgress {
     consumed: Vec<u64>,
     ended: Vec<bool>,
     changed: Vec<bool>,
+    /// Per port, the sequence numbers seen lately (frames published again after a lock-step
+    /// stall arrive twice; see [`PortProgress::first_time`]).
+    seen: Vec<std::collections::BTreeSet<u64>>,
 }
+
+/// How many sequence numbers below the newest one [`PortProgress`] remembers per port (far
+/// more than any lock-step window).
+const SEEN_SPAN: u64 = 4096;
 
 impl PortProgress {
     /// Progress of `ports` inputs, nothing consumed.
@@ -49,7 +56,27 @@ impl PortProgress {
             consumed: vec![0; ports],
             ended: vec![false; ports],
             changed: vec![false; ports],
+            seen: vec![std::collections::BTreeSet::new(); ports],
         }
+    }
+
+    /// True the first time data frame `seq` arrives on `port`; false for a repeat (a frame
+    /// published again by a producer whose consumers stalled), which must not be handed on.
+    pub fn first_time(&mut self, port: usize, seq: u64) -> bool {
+        let Some(seen) = self.seen.get_mut(port) else {
+            return true;
+        };
+        if !seen.insert(seq) {
+            return false;
+        }
+        let newest = seen.last().copied().unwrap_or(seq);
+        while seen
+            .first()
+            .is_some_and(|&s| s.saturating_add(SEEN_SPAN) < newest)
+        {
+            seen.pop_first();
+        }
+        true
     }
 
     /// Notes a data frame with sequence number `seq` on `port`: consumed becomes `seq + 1`
@@ -76,6 +103,11 @@ impl PortProgress {
     /// True when every port has ended.
     pub fn all_ended(&self) -> bool {
         self.ended.iter().all(|&e| e)
+    }
+
+    /// `(port index, consumed)` of every port.
+    pub fn all(&self) -> Vec<(usize, u64)> {
+        self.consumed.iter().copied().enumerate().collect()
     }
 
     /// `(port index, consumed)` of the ports that changed since the last call.
@@ -108,7 +140,9 @@ pub fn run_raw_consumer<C: RawConsumer>(
 fn raw_loop<C: RawConsumer>(run: Running, consumer: &mut C) -> Result<(), RuntimeError> {
     let inbox = run.inbox.clone();
     let mut progress = PortProgress::new(run.cfg.inputs.len());
+    let mut gaps = SeqGaps::new(run.cfg.inputs.len());
     let mut last_stats = Instant::now();
+    let mut last_progress = Instant::now();
     let counters = run.counters.clone();
     while !progress.all_ended() {
         if signals::stop_requested() {
@@ -119,11 +153,20 @@ fn raw_loop<C: RawConsumer>(run: Running, consumer: &mut C) -> Result<(), Runtim
             let bytes = arrival.bytes.as_slice();
             let problem = match codec::decode_header(&bytes) {
                 Ok((envelope, _)) if envelope.kind == FrameKind::End => {
+                    gaps.end(arrival.port, envelope.seq);
                     progress.end(arrival.port);
+                    None
+                }
+                Ok((envelope, _))
+                    if (binding.schema.is_empty() || envelope.schema == binding.schema)
+                        && !progress.first_time(arrival.port, envelope.seq) =>
+                {
+                    // A repeat of a frame already handed on.
                     None
                 }
                 Ok((envelope, _)) if binding.schema.is_empty() || envelope.schema == binding.schema => {
                     counters.received.fetch_add(1, Ordering::Relaxed);
+                    gaps.data(arrival.port, envelope.seq);
                     let t0 = Instant::now();
                     consumer
                         .frame(arrival.port, &envelope, &bytes)
@@ -172,8 +215,19 @@ fn raw_loop<C: RawConsumer>(run: Running, consumer: &mut C) -> Result<(), Runtim
             .collect();
         if !changes.is_empty() {
             run.publish_progress(changes)?;
+            last_progress = Instant::now();
+        } else if run.cfg.mode == Mode::Lockstep && last_progress.elapsed() >= RESEND_AFTER {
+            // Idle: repeat the whole progress (a lost progress message must not stall the
+            // producers; they publish their unconsumed frames again after the same time).
+            let all = progress
+                .all()
+                .into_iter()
+                .map(|(i, n)| (run.cfg.inputs[i].port.clone(), n))
+                .collect();
+            run.publish_progress(all)?;
+            last_progress = Instant::now();
         }
-        counters.dropped.store(inbox.dropped(), Ordering::Relaxed);
+        note_losses(&run, &inbox, 0, &gaps);
         maybe_stats(&run, &mut last_stats);
     }
     let t0 = Instant::now();
@@ -191,6 +245,15 @@ fn raw_loop<C: RawConsumer>(run: Running, consumer: &mut C) -> Result<(), Runtim
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_repeated_frame_is_seen_once() {
+        let mut p = PortProgress::new(2);
+        assert!(p.first_time(0, 0) && p.first_time(0, 2) && p.first_time(1, 0));
+        assert!(!p.first_time(0, 0) && !p.first_time(0, 2));
+        // Out of order after a loss: the missing one is still new.
+        assert!(p.first_time(0, 1));
+    }
 
     #[test]
     fn each_port_counts_on_its_own_and_ends_with_done() {

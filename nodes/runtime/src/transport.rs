@@ -143,6 +143,52 @@ impl Inbox {
     }
 }
 
+/// Live mode: counts input messages that never arrived, from gaps in each input port's
+/// sequence numbers. Every producer numbers a port's data frames in increasing order from 0 and
+/// its end frame carries the count, so a jump from `k` to `k + n` means `n - 1` messages went
+/// missing: dropped by the transport under congestion (live-mode publishers never wait), or by
+/// the producer itself (a slice it dropped is also missing downstream).
+#[derive(Debug, Clone)]
+pub struct SeqGaps {
+    next: Vec<u64>,
+    missing: u64,
+}
+
+impl SeqGaps {
+    /// Gap counts of `ports` inputs, nothing seen.
+    pub fn new(ports: usize) -> Self {
+        Self {
+            next: vec![0; ports],
+            missing: 0,
+        }
+    }
+
+    /// Notes data frame `seq` on `port` (a late or repeated frame counts nothing).
+    pub fn data(&mut self, port: usize, seq: u64) {
+        if let Some(next) = self.next.get_mut(port)
+            && seq >= *next
+        {
+            self.missing += seq - *next;
+            *next = seq.saturating_add(1);
+        }
+    }
+
+    /// Notes the end frame on `port`, which says `count` data frames were published.
+    pub fn end(&mut self, port: usize, count: u64) {
+        if let Some(next) = self.next.get_mut(port)
+            && count > *next
+        {
+            self.missing += count - *next;
+            *next = count;
+        }
+    }
+
+    /// Messages missing so far, all ports.
+    pub fn missing(&self) -> u64 {
+        self.missing
+    }
+}
+
 /// Declares one subscriber per input port, each feeding `inbox`.
 pub fn subscribe_inputs(
     session: &zenoh::Session,
@@ -265,6 +311,18 @@ impl CreditBook {
             .get(&(node.to_string(), port.to_string()))
             .copied()
             .unwrap_or(0)
+    }
+
+    /// The fewest messages consumed by any of `consumers` ((node, port, feedback); 0 when
+    /// unknown, finished ones left out; `u64::MAX` when all have finished).
+    pub fn check_min(&self, consumers: &[(String, String, bool)]) -> u64 {
+        let s = lock(&self.state);
+        consumers
+            .iter()
+            .map(|(c, p, _)| s.consumed.get(&(c.clone(), p.clone())).copied().unwrap_or(0))
+            .filter(|&n| n != DONE)
+            .min()
+            .unwrap_or(u64::MAX)
     }
 
     /// Evaluates `pred` on the consumption counts now, without waiting.
@@ -392,6 +450,21 @@ pub fn encode_payload<T: evseg_schemas::Message>(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn gaps_count_what_never_arrived_including_a_lost_start_and_end() {
+        let mut g = SeqGaps::new(2);
+        g.data(0, 2); // 0 and 1 lost
+        g.data(0, 3);
+        g.data(0, 3); // a repeat counts nothing
+        g.data(0, 6); // 4 and 5 lost
+        g.data(0, 5); // late: nothing
+        g.data(1, 0);
+        g.end(1, 1);
+        assert_eq!(g.missing(), 4);
+        g.end(0, 9); // 7 and 8 never came
+        assert_eq!(g.missing(), 6);
+    }
     use evseg_schemas::codec;
     use evseg_schemas::{EventPacket, Events};
 
