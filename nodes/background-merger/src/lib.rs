@@ -36,7 +36,9 @@ pub mod map;
 pub mod params;
 pub mod warp;
 
-use evseg_geometry::{FlowSample, TableCache, estimate_translation, flow_direction, flow_samples};
+use evseg_geometry::{
+    FlowSample, TableCache, clear_of_foreground, estimate_translation, flow_direction, flow_samples,
+};
 use evseg_schemas::align::AlignError;
 use evseg_schemas::{CameraInfo, Clusters, CoarseSegmentation, Egomotion, Events, NormalFlow, Residuals};
 
@@ -267,6 +269,15 @@ impl BackgroundMerger {
                 .filter(|(c, _)| in_svm[*c])
                 .flat_map(|(_, m)| m.iter().copied())
                 .collect();
+            let chosen = clear_of_foreground(
+                &chosen,
+                &events.x,
+                &events.y,
+                (input.camera.width, input.camera.height),
+                p.egomotion.clear_px,
+                p.egomotion.min_samples,
+                |i| cluster_of(input.clusters, i).is_some_and(|c| !in_svm[c]),
+            );
             let estimate = estimate_translation(
                 &chosen,
                 &events.x,

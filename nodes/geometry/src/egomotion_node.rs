@@ -51,6 +51,11 @@ pub fn describe_egomotion(d: Describe, defaults: &EgomotionParams) -> Describe {
             defaults.magnitude_weighting,
             "weight egomotion samples by 1 / (n^2 + median n^2) (normal-flow error grows with its length)",
         )
+        .param(
+            "egomotion_clear_px",
+            defaults.clear_px,
+            "leave background events within about this many pixels of a non-background event out of the egomotion (0 = keep all)",
+        )
 }
 
 /// Reads the parameters declared by [`describe_egomotion`] from the node's config (the
@@ -69,6 +74,7 @@ pub fn egomotion_from_config(cfg: &NodeConfig) -> Result<EgomotionParams, Runtim
         density_cell_px: cfg.param("egomotion_density_cell_px")?,
         huber_k: cfg.param("refine_huber_k")?,
         magnitude_weighting: cfg.param("egomotion_magnitude_weighting")?,
+        clear_px: cfg.param("egomotion_clear_px")?,
     })
 }
 
@@ -106,6 +112,7 @@ mod tests {
             refine_iterations: 7,
             huber_k: 2.0,
             magnitude_weighting: false,
+            clear_px: 12,
             ..EgomotionParams::default()
         };
         let description = describe_egomotion(Describe::new("evseg-test", "test"), &custom).build();

@@ -129,9 +129,15 @@ fn radius_one_window_works_too() {
 fn surfaces_persist_across_slices() {
     let events = edge_events(30.0, 400.0, 0);
     let camera = camera();
-    let mut whole = PlaneFitEstimator::new(&camera, PlaneFitParams::default()).expect("valid");
+    // Causal: the look-ahead stays inside a slice, so only the causal fit is independent of
+    // where the slices are cut.
+    let causal = PlaneFitParams {
+        lookahead_s: 0.0,
+        ..PlaneFitParams::default()
+    };
+    let mut whole = PlaneFitEstimator::new(&camera, causal).expect("valid");
     let all = whole.process(&events).expect("consistent");
-    let mut split = PlaneFitEstimator::new(&camera, PlaneFitParams::default()).expect("valid");
+    let mut split = PlaneFitEstimator::new(&camera, causal).expect("valid");
     let mid = events.len() / 2;
     let mut first = Events::default();
     first.extend_from(&events, 0..mid);
@@ -148,7 +154,7 @@ fn surfaces_persist_across_slices() {
     );
     assert_eq!(whole.stats(), split.stats());
     // A fresh estimator on the second half alone lacks the history for its first events.
-    let mut fresh = PlaneFitEstimator::new(&camera, PlaneFitParams::default()).expect("valid");
+    let mut fresh = PlaneFitEstimator::new(&camera, causal).expect("valid");
     let c = fresh.process(&second).expect("consistent");
     assert!(
         fresh.stats().valid < valid_second,
@@ -329,7 +335,11 @@ fn causal_fit_overestimates_jittered_speed_and_lookahead_removes_it() {
     // edge front, so the surface looks compressed along the motion.
     let speed = 150.0;
     let events = jittered_edge_events(speed, 0.4);
-    let causal = median_speed_ratio(&events, PlaneFitParams::default(), speed);
+    let causal_params = PlaneFitParams {
+        lookahead_s: 0.0,
+        ..PlaneFitParams::default()
+    };
+    let causal = median_speed_ratio(&events, causal_params, speed);
     let lookahead = PlaneFitParams {
         lookahead_s: 0.03,
         ..PlaneFitParams::default()
