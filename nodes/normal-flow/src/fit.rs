@@ -133,28 +133,12 @@ impl Sums {
         self.syt += sign * y * t;
     }
 
-    /// Solves `[sxx sxy sx; sxy syy sy; sx sy n] [gx gy c] = [sxt syt st]` by the adjugate.
-    /// The matrix has integer entries (pixel offsets), so a non-singular one has `|det| >= 1`;
-    /// below 0.5 the points are collinear (or fewer than 3) and there is no plane.
-    /// The upper-left 2 x 2 block of the inverse matrix (the covariance of `(gx, gy)` per unit
-    /// residual variance) as `[cxx, cxy, cyy]`; `None` when singular.
-    fn gradient_covariance(&self) -> Option<[f64; 3]> {
-        let (a, b, c) = (self.sxx, self.sxy, self.sx);
-        let (d, e) = (self.syy, self.sy);
-        let f = self.n;
-        let c00 = d * f - e * e;
-        let c01 = c * e - b * f;
-        let c02 = b * e - c * d;
-        let c11 = a * f - c * c;
-        let det = a * c00 + b * c01 + c * c02;
-        if det.abs() < 0.5 {
-            return None;
-        }
-        Some([c00 / det, c01 / det, c11 / det])
-    }
-
+    /// The adjugate of the symmetric normal matrix `[sxx sxy sx; sxy syy sy; sx sy n]` as its
+    /// cofactors `[c00, c01, c02, c11, c12, c22]`, and its determinant. The matrix has integer
+    /// entries (pixel offsets), so a non-singular one has `|det| >= 1`; below 0.5 the points are
+    /// collinear (or fewer than 3), there is no plane, and the answer is `None`.
     #[inline]
-    fn solve(&self) -> Option<[f64; 3]> {
+    fn adjugate(&self) -> Option<([f64; 6], f64)> {
         let (a, b, c) = (self.sxx, self.sxy, self.sx);
         let (d, e) = (self.syy, self.sy);
         let f = self.n;
@@ -169,6 +153,21 @@ impl Sums {
         if det.abs() < 0.5 {
             return None;
         }
+        Some(([c00, c01, c02, c11, c12, c22], det))
+    }
+
+    /// The upper-left 2 x 2 block of the inverse matrix (the covariance of `(gx, gy)` per unit
+    /// residual variance) as `[cxx, cxy, cyy]`; `None` when singular.
+    fn gradient_covariance(&self) -> Option<[f64; 3]> {
+        let ([c00, c01, _, c11, _, _], det) = self.adjugate()?;
+        Some([c00 / det, c01 / det, c11 / det])
+    }
+
+    /// Solves `[sxx sxy sx; sxy syy sy; sx sy n] [gx gy c] = [sxt syt st]` by the adjugate;
+    /// `None` when singular.
+    #[inline]
+    fn solve(&self) -> Option<[f64; 3]> {
+        let ([c00, c01, c02, c11, c12, c22], det) = self.adjugate()?;
         let (r0, r1, r2) = (self.sxt, self.syt, self.st);
         let inv = 1.0 / det;
         Some([
