@@ -78,6 +78,16 @@ pub struct Located {
     pub z: f32,
 }
 
+impl Located {
+    /// A ray that hits no surface.
+    pub const NOTHING: Self = Self {
+        surface: Surface::Nothing,
+        key: u16::MAX,
+        id: 0,
+        z: f32::INFINITY,
+    };
+}
+
 #[derive(Debug, Clone)]
 struct PlaneGeom {
     /// Camera-frame normal divided by the signed plane offset: inverse depth = a . d.
@@ -289,12 +299,7 @@ impl FrameGeom {
                 z: s,
             }
         } else if best_plane == usize::MAX {
-            Located {
-                surface: Surface::Nothing,
-                key: u16::MAX,
-                id: 0,
-                z: f32::INFINITY,
-            }
+            Located::NOTHING
         } else {
             Located {
                 surface: Surface::Plane(best_plane),
@@ -392,12 +397,7 @@ impl FrameGeom {
                     z: s[l],
                 }
             } else if best_plane[l] == u32::MAX {
-                Located {
-                    surface: Surface::Nothing,
-                    key: u16::MAX,
-                    id: 0,
-                    z: f32::INFINITY,
-                }
+                Located::NOTHING
             } else {
                 let p = &self.planes[best_plane[l] as usize];
                 Located {
