@@ -34,6 +34,16 @@ impl TrackState {
         let o = self.box_offsets;
         [x + o[0], y + o[1], x + o[2], y + o[3]]
     }
+
+    /// Corrects the track with segment `s` seen in the slice centred at `t` seconds: the filter
+    /// update with the segment's centroid, its box, one more hit.
+    fn take(&mut self, s: &Segment, t: f64, params: &TrackerParams) {
+        self.kf
+            .update(s.centroid, params.measurement_std(bbox_f64(s.bbox)));
+        self.box_offsets = box_offsets(s);
+        self.hits = self.hits.saturating_add(1);
+        self.last_match_t = t;
+    }
 }
 
 /// Maps a segment label to its index in `Segmentation::segments`.
@@ -244,12 +254,7 @@ impl Tracker {
             if let Some(ci) = *m {
                 let k = candidates[ci];
                 let s = &segments[k];
-                let tr = &mut self.tracks[ti];
-                tr.kf
-                    .update(s.centroid, self.params.measurement_std(bbox_f64(s.bbox)));
-                tr.box_offsets = box_offsets(s);
-                tr.hits = tr.hits.saturating_add(1);
-                tr.last_match_t = t;
+                self.tracks[ti].take(s, t, &self.params);
                 matched_track[ti] = true;
                 track_of_segment[k] = Some(ti);
             }
@@ -271,13 +276,8 @@ impl Tracker {
                     .max_by(|a, b| a.1.total_cmp(&b.1));
                 if let Some((ti, _)) = best {
                     let s = &segments[k];
-                    let tr = &mut self.tracks[ti];
                     if !matched_track[ti] {
-                        tr.kf
-                            .update(s.centroid, self.params.measurement_std(bbox_f64(s.bbox)));
-                        tr.box_offsets = box_offsets(s);
-                        tr.hits = tr.hits.saturating_add(1);
-                        tr.last_match_t = t;
+                        self.tracks[ti].take(s, t, &self.params);
                         matched_track[ti] = true;
                     } else {
                         absorbed[k] = true;
