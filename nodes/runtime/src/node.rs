@@ -264,8 +264,8 @@ impl Outputs {
                 has_credit(consumed, &consumers, seq, window)
             })? {
                 let from = book.check_min(&consumers);
-                let again: Vec<&(u64, ZBytes)> = p.recent.iter().filter(|(s, _)| *s >= from).collect();
-                if !again.is_empty() {
+                let frames = p.publish_recent_again(from)?;
+                if frames > 0 {
                     let consumed: Vec<String> = consumers
                         .iter()
                         .map(|(c, cp, _)| format!("{c}/{cp}={}", book.consumed(c, cp)))
@@ -274,17 +274,11 @@ impl Outputs {
                         node = %node,
                         port,
                         from,
-                        frames = again.len(),
+                        frames,
                         ?consumed,
-                        "no credit for {:?}: publishing the unconsumed frames again",
+                        "no credit for {:?}: published the unconsumed frames again",
                         RESEND_AFTER
                     );
-                }
-                for (_, bytes) in again {
-                    p.publisher
-                        .put(fresh_copy(bytes))
-                        .wait()
-                        .map_err(|e| RuntimeError::Zenoh(e.to_string()))?;
                 }
             }
             p.recent.push_back((seq, payload.clone()));
@@ -345,12 +339,7 @@ impl Outputs {
                     port: name.clone(),
                     source,
                 })?;
-            p.end_publisher
-                .as_ref()
-                .unwrap_or(&p.publisher)
-                .put(bytes.clone())
-                .wait()
-                .map_err(|e| RuntimeError::Zenoh(e.to_string()))?;
+            p.put_end(bytes.clone())?;
             p.end_frame = Some(bytes);
         }
         Ok(())
@@ -373,19 +362,9 @@ impl Outputs {
                 "consumers silent for {:?} after the end: publishing the unconsumed frames and the end again",
                 RESEND_AFTER
             );
-            for (_, bytes) in p.recent.iter().filter(|(s, _)| *s >= from) {
-                p.publisher
-                    .put(fresh_copy(bytes))
-                    .wait()
-                    .map_err(|e| RuntimeError::Zenoh(e.to_string()))?;
-            }
+            p.publish_recent_again(from)?;
             if let Some(end) = &p.end_frame {
-                p.end_publisher
-                    .as_ref()
-                    .unwrap_or(&p.publisher)
-                    .put(end.clone())
-                    .wait()
-                    .map_err(|e| RuntimeError::Zenoh(e.to_string()))?;
+                p.put_end(end.clone())?;
             }
         }
         Ok(())
@@ -416,6 +395,33 @@ impl Outputs {
             tracing::warn!(node = %self.node, "consumers did not finish within {}s", DRAIN_TIMEOUT.as_secs());
         }
         Ok(())
+    }
+}
+
+impl OutPort {
+    /// Publishes again the remembered frames numbered `from` or later (as fresh copies, see
+    /// [`fresh_copy`]); returns how many.
+    fn publish_recent_again(&self, from: u64) -> Result<usize, RuntimeError> {
+        let mut n = 0;
+        for (_, bytes) in self.recent.iter().filter(|(s, _)| *s >= from) {
+            self.publisher
+                .put(fresh_copy(bytes))
+                .wait()
+                .map_err(|e| RuntimeError::Zenoh(e.to_string()))?;
+            n += 1;
+        }
+        Ok(n)
+    }
+
+    /// Publishes an end-of-stream frame (on the blocking publisher in live mode: a dropped end
+    /// would leave consumers waiting).
+    fn put_end(&self, bytes: Vec<u8>) -> Result<(), RuntimeError> {
+        self.end_publisher
+            .as_ref()
+            .unwrap_or(&self.publisher)
+            .put(bytes)
+            .wait()
+            .map_err(|e| RuntimeError::Zenoh(e.to_string()))
     }
 }
 
