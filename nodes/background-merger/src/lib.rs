@@ -37,7 +37,8 @@ pub mod params;
 pub mod warp;
 
 use evseg_geometry::{
-    FlowSample, TableCache, clear_of_foreground, estimate_translation, flow_direction, flow_samples,
+    FlowSample, RotationRate, TableCache, clear_of_foreground, estimate_translation, flow_direction,
+    flow_samples,
 };
 use evseg_schemas::align::AlignError;
 use evseg_schemas::{CameraInfo, Clusters, CoarseSegmentation, Egomotion, Events, NormalFlow, Residuals};
@@ -74,8 +75,8 @@ pub enum MergeError {
         count: u16,
     },
     /// The rotation rate is not finite.
-    #[error("rotation rate {0:?} rad/s is not finite")]
-    Omega([f64; 3]),
+    #[error("rotation rate {0:?} (rad/s, rad/s^2) is not finite")]
+    Omega(RotationRate),
 }
 
 /// One slice's inputs.
@@ -87,8 +88,8 @@ pub struct SliceInput<'a> {
     pub events: &'a Events,
     /// The slice's window `[t_start, t_end)`, seconds.
     pub span: (f64, f64),
-    /// IMU rotation rate, rad/s, camera frame.
-    pub omega: Option<[f64; 3]>,
+    /// IMU rotation rate over the slice (camera frame); `None` without IMU.
+    pub rate: Option<RotationRate>,
     /// Per-event normal flow.
     pub flow: &'a NormalFlow,
     /// Over-segmentation.
@@ -169,21 +170,23 @@ impl BackgroundMerger {
         let events = input.events;
         let n = events.len();
         check_lengths(input)?;
-        if let Some(w) = input.omega
-            && !w.iter().all(|v| v.is_finite())
+        if let Some(r) = input.rate
+            && !r.is_finite()
         {
-            return Err(MergeError::Omega(w));
+            return Err(MergeError::Omega(r));
         }
-        let omega = input.omega.filter(|_| p.derotate);
+        let rate = input.rate.filter(|_| p.derotate);
         let samples = flow_samples(
             self.table.get(input.camera),
             events,
             input.flow,
-            omega,
+            rate.as_ref(),
             p.min_confidence,
         )?;
         let k = usize::from(input.clusters.count);
         let t_mid = 0.5 * (input.span.0 + input.span.1);
+        // The warp moves the slice's events by its mean rate.
+        let omega = rate.map(|r| r.mean);
 
         // 1. Background prior per cluster.
         let warped = match (&self.previous, input.previous_labels) {
@@ -365,7 +368,7 @@ impl BackgroundMerger {
                 map_overlap,
                 egomotion: Egomotion {
                     direction: direction.unwrap_or([0.0; 3]),
-                    omega: input.omega.unwrap_or([0.0; 3]),
+                    omega: input.rate.map_or([0.0; 3], |r| r.mean),
                     valid: direction.is_some(),
                 },
             },

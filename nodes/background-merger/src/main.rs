@@ -6,12 +6,18 @@
 use std::process::ExitCode;
 
 use evseg_background_merger::{BackgroundMerger, BackgroundParams, SliceInput};
+use evseg_geometry::RotationRate;
 use evseg_geometry::egomotion_node::{describe_egomotion, egomotion_from_config};
+use evseg_geometry::rotation::{SLOPE_DEFAULT, SLOPE_PARAM, SLOPE_PARAM_DOC};
 use evseg_runtime::describe::Describe;
 use evseg_runtime::{BoxError, Inputs, NodeConfig, Outputs, Stage, run_stage};
 use evseg_schemas::{Clusters, CoarseSegmentation, NormalFlow, Residuals, Slice, Tracks};
 
-struct Node(BackgroundMerger);
+struct Node {
+    merger: BackgroundMerger,
+    /// [`evseg_geometry::rotation::SLOPE_PARAM`].
+    rate_slope: bool,
+}
 
 impl Stage for Node {
     fn process(&mut self, input: &Inputs, out: &mut Outputs) -> Result<(), BoxError> {
@@ -21,11 +27,11 @@ impl Stage for Node {
         let residuals: Residuals = input.get("residuals")?;
         let previous: Option<Tracks> = input.get_opt("previous")?;
         let span = input.span();
-        let r = self.0.merge(&SliceInput {
+        let r = self.merger.merge(&SliceInput {
             camera: &slice.camera,
             events: &slice.events,
             span,
-            omega: slice.omega,
+            rate: RotationRate::of_slice(&slice, span, self.rate_slope),
             flow: &flow,
             clusters: &clusters,
             residuals: &residuals,
@@ -71,6 +77,7 @@ fn main() -> ExitCode {
         "flow at or below this confidence is invalid",
     )
     .param("derotate", d.derotate, "subtract the IMU rotational flow")
+    .param(SLOPE_PARAM, SLOPE_DEFAULT, SLOPE_PARAM_DOC)
     .param(
         "hypotheses",
         d.hypotheses,
@@ -180,6 +187,9 @@ fn main() -> ExitCode {
             alpha_max: cfg.param("alpha_max")?,
             map_threshold: cfg.param("map_threshold")?,
         };
-        Ok(Node(BackgroundMerger::new(params)?))
+        Ok(Node {
+            merger: BackgroundMerger::new(params)?,
+            rate_slope: cfg.param(SLOPE_PARAM)?,
+        })
     })
 }

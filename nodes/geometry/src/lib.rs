@@ -4,6 +4,8 @@
 //!   equidistant), and a per-pixel undistortion table for the hot loops;
 //! - [`motion`]: the motion-field matrices `A(x)`, `B(x)` (translation and rotation) and the
 //!   planar-scene matrix `C(x)`, with the flows they give;
+//! - [`rotation`]: the camera's rotation rate over a slice as a line in time, from its gyro
+//!   samples;
 //! - [`lsq`]: small dense least squares (normal equations with Tikhonov regularization);
 //! - [`assignment`]: optimal one-to-one assignment (Hungarian), for matching labels to objects
 //!   (evaluator) and segments to tracks (tracker).
@@ -22,6 +24,7 @@ pub mod egomotion_node;
 pub mod lsq;
 pub mod motion;
 pub mod refine;
+pub mod rotation;
 pub mod samples;
 pub mod svm;
 pub mod translation;
@@ -32,6 +35,7 @@ pub use direction::{FlowDirection, flow_direction};
 pub use egomotion::{EgomotionParams, clear_of_foreground, estimate_translation};
 pub use motion::{a_matrix, b_matrix, c_matrix, planar_flow, rotational_flow, translational_flow};
 pub use refine::{grid_regions, refine_direction, refine_direction_robust};
+pub use rotation::RotationRate;
 pub use samples::{FlowSample, flow_samples};
 pub use svm::{SvmDirection, SvmParams, translation_direction};
 pub use translation::TranslationFit;

@@ -7,6 +7,7 @@ use evseg_schemas::{Events, NormalFlow};
 
 use crate::camera::UndistortTable;
 use crate::motion::{a_matrix, rotational_flow};
+use crate::rotation::RotationRate;
 
 /// One event with a valid normal flow.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -42,14 +43,14 @@ impl FlowSample {
 }
 
 /// The samples of a slice: every event whose flow has confidence above `min_confidence` and a
-/// finite non-zero length, derotated with `omega` (rad/s, camera frame) when given.
+/// finite non-zero length, derotated with the rotation `rate` at each event's time when given.
 ///
 /// Errors when the flow does not fit the events or an event lies outside the table's sensor.
 pub fn flow_samples(
     table: &UndistortTable,
     events: &Events,
     flow: &NormalFlow,
-    omega: Option<[f64; 3]>,
+    rate: Option<&RotationRate>,
     min_confidence: f32,
 ) -> Result<Vec<FlowSample>, AlignError> {
     check_flow(events, flow)?;
@@ -64,9 +65,9 @@ pub fn flow_samples(
         }
         let n0 = [fx / n, fy / n];
         let (x, y) = (f64::from(x), f64::from(y));
-        let n_derot = match omega {
-            Some(w) => {
-                let r = rotational_flow(x, y, w);
+        let n_derot = match rate {
+            Some(rate) => {
+                let r = rotational_flow(x, y, rate.at(events.t[i]));
                 n - (r[0] * n0[0] + r[1] * n0[1])
             }
             None => n,

@@ -254,18 +254,20 @@ fn main() -> anyhow::Result<()> {
             let (mut inter_all, mut union_all) = (0usize, 0usize);
             for (dump_k, (((s, truth, span), f), c)) in slices.iter().zip(&flows).zip(&clusters).enumerate() {
                 let clusters_k = c.clone();
-                let r = planar.segment(&s.camera, &s.events, f, s.omega)?;
+                let rate =
+                    evseg_geometry::RotationRate::of_slice(s, *span, evseg_geometry::rotation::SLOPE_DEFAULT);
+                let r = planar.segment(&s.camera, &s.events, f, rate)?;
                 let m = bg.merge(&SliceInput {
                     camera: &s.camera,
                     events: &s.events,
                     span: *span,
-                    omega: s.omega,
+                    rate,
                     flow: f,
                     clusters: c,
                     residuals: &r.residuals,
                     previous_labels: prev.as_deref(),
                 })?;
-                let h = hier.merge(&s.camera, &s.events, f, s.omega, &m.coarse)?;
+                let h = hier.merge(&s.camera, &s.events, f, rate, &m.coarse)?;
                 let mut oracle_label;
                 let mut label = &h.segmentation.label;
                 if std::env::var("ORACLE_CLUSTERS").is_ok() {
@@ -305,7 +307,7 @@ fn main() -> anyhow::Result<()> {
                     // explains it with a positive depth of its own.
                     let mut table = evseg_geometry::TableCache::default();
                     let samples =
-                        evseg_geometry::flow_samples(table.get(&s.camera), &s.events, f, s.omega, 0.0)?;
+                        evseg_geometry::flow_samples(table.get(&s.camera), &s.events, f, rate.as_ref(), 0.0)?;
                     let k = usize::from(c.count);
                     let mut per: Vec<Vec<&evseg_geometry::FlowSample>> = vec![Vec::new(); k];
                     for sm in &samples {

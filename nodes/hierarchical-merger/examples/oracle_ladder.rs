@@ -14,7 +14,8 @@
 //! - R0: `|omega_slicer - w|` (the IMU path: axes, sign, time alignment);
 //! - R1: full true flow, per event: derotated flow `d = u - B(x) w` against `A(x) t`; an event is
 //!   foreground when the part of `d` not explained by `rho A(x) t` (rho >= 0 fitted per event)
-//!   exceeds TAU |d|. With the slicer's omega as well (R1i);
+//!   exceeds TAU |d|. With the slicer's rate as well (R1i: the line fitted to the slice's gyro
+//!   samples, `evseg_geometry::RotationRate`, at each event's time);
 //! - R2: true normal flow along the estimated `n0`, `n_t = u . n0`; sign and magnitude agreement
 //!   of the estimate with it;
 //! - R3: per k-means cluster one inverse depth, true twist; cluster background when it is
@@ -308,6 +309,12 @@ fn main() -> anyhow::Result<()> {
         let mut sweep_vw: Vec<Iou> = ANGLES.iter().map(|_| Iou::default()).collect();
         let (mut ang_bg, mut ang_obj) = (Vec::new(), Vec::new());
         let (mut sign_ok, mut sign_n, mut mag_err) = (0usize, 0usize, Vec::new());
+        let mut bg_rel: Vec<f64> = Vec::new();
+        let mut err_fit = (
+            evseg_geometry::lsq::NormalEquations::<5>::default(),
+            0.0f64,
+            Vec::<([f64; 5], f64)>::new(),
+        );
         let (mut mag_signed, mut trans_share) = (Vec::new(), Vec::new());
         let (mut rot_share, mut covered, mut total) = (Vec::new(), 0usize, 0usize);
         for (s, truth) in &slices {
@@ -334,6 +341,13 @@ fn main() -> anyhow::Result<()> {
                 continue;
             };
             let w_imu = s.omega.unwrap_or([0.0; 3]);
+            // The slicer's rate as a line in time (what the stages derotate with).
+            let span = (
+                s.events.t.first().copied().unwrap_or(0.0),
+                s.events.t.last().copied().unwrap_or(0.0),
+            );
+            let rate =
+                evseg_geometry::RotationRate::of_slice(s, span, true).unwrap_or_else(|| [0.0; 3].into());
             omega_err.push(
                 ((w_imu[0] - w_true[0]).powi(2)
                     + (w_imu[1] - w_true[1]).powi(2)
@@ -349,7 +363,7 @@ fn main() -> anyhow::Result<()> {
             // R6: the egomotion estimate on the true background only (slicer omega), with the
             // estimated normal flow and with the true normal flow along the estimated n0.
             {
-                let samples = evseg_geometry::flow_samples(&table, &s.events, &flow, s.omega, 0.0)?;
+                let samples = evseg_geometry::flow_samples(&table, &s.events, &flow, Some(&rate), 0.0)?;
                 // R6_BOUNDARY_PX=k (default 0 = keep all): leave out background events within k
                 // px (Chebyshev) of an object event of the slice.
                 let margin: usize = env_or("R6_BOUNDARY_PX", 0usize)?;
@@ -512,7 +526,7 @@ fn main() -> anyhow::Result<()> {
                 let uf = [j[0] * fu + j[1] * fv, j[2] * fu + j[3] * fv];
                 let is_obj = truth.event_object[i] != 0;
                 let rot = mul2x3(&b_matrix(x, y), w_true);
-                let rot_i = mul2x3(&b_matrix(x, y), w_imu);
+                let rot_i = mul2x3(&b_matrix(x, y), rate.at(s.events.t[i]));
                 let tr = mul2x3(&a_matrix(x, y), t_true);
                 let d = [uf[0] - rot[0], uf[1] - rot[1]];
                 let di = [uf[0] - rot_i[0], uf[1] - rot_i[1]];
@@ -559,6 +573,21 @@ fn main() -> anyhow::Result<()> {
                 sign_ok += usize::from(n_t > 0.0);
                 mag_err.push((n - n_t).abs() / n_t.abs().max(1e-9));
                 mag_signed.push((n - n_t) / n_t.abs().max(1e-9));
+                if !is_obj {
+                    // R2b: the estimate's error explained by its scale, its direction and the
+                    // change of the rotational flow over time (a time offset).
+                    let rdot = dot2(n0, mul2x3(&b_matrix(x, y), rate.slope));
+                    let c2 = n0[0] * n0[0] - n0[1] * n0[1];
+                    let s2 = 2.0 * n0[0] * n0[1];
+                    let f = [n_t, n_t * c2, n_t * s2, rdot, 1.0];
+                    let e = n - n_t;
+                    err_fit.0.add(&f, e, 1.0);
+                    err_fit.1 += e * e;
+                    err_fit.2.push((f, e));
+                    if flow.confidence[i] > 0.5 {
+                        bg_rel.push((e / n_t.abs().max(1e-9)).abs());
+                    }
+                }
                 trans_share.push((n_t - dot2(n0, rot)).abs() / n_t.abs().max(1e-9));
                 let q = dot2(n0, tr);
                 let r_true = n_t - dot2(n0, rot);
@@ -682,8 +711,51 @@ fn main() -> anyhow::Result<()> {
             median(&mut t_norm),
             median(&mut rot_share),
         );
+        {
+            let (eqs, ee, rows) = &err_fit;
+            let cnt = rows.len() as f64;
+            if let Some(sol) = eqs.solve(0.0) {
+                let left: f64 = rows
+                    .iter()
+                    .map(|(f, e)| {
+                        let p: f64 = f.iter().zip(&sol).map(|(a, b)| a * b).sum();
+                        (e - p).powi(2)
+                    })
+                    .sum();
+                let explained = ee - left;
+                bg_rel.sort_by(f64::total_cmp);
+                let q = |p: f64| {
+                    bg_rel
+                        .get(((bg_rel.len() as f64 - 1.0) * p) as usize)
+                        .copied()
+                        .unwrap_or(f64::NAN)
+                };
+                let frac =
+                    |k: f64| bg_rel.iter().filter(|&&r| r > k).count() as f64 / bg_rel.len().max(1) as f64;
+                println!(
+                    "  R2c background, confidence > 0.5: |n - n_t| / |n_t| quantiles 50 % {:.3}, 75 % {:.3}, 90 % {:.3}, 95 % {:.3}, 99 % {:.3}; above 0.3: {:.3}, above 1: {:.3}",
+                    q(0.5),
+                    q(0.75),
+                    q(0.9),
+                    q(0.95),
+                    q(0.99),
+                    frac(0.3),
+                    frac(1.0)
+                );
+                println!(
+                    "  R2b background error n - n_t = {:.4} n_t + {:.4} n_t cos2th + {:.4} n_t sin2th + {:.4} s * n0.B(x)dw/dt + {:.4}; rms {:.4}, explained {:.1} %",
+                    sol[0],
+                    sol[1],
+                    sol[2],
+                    sol[3],
+                    sol[4],
+                    (ee / cnt.max(1.0)).sqrt(),
+                    100.0 * explained / ee.max(1e-300)
+                );
+            }
+        }
         println!(
-            "  R1 full flow angle(d, A t) median: background {:.1} deg, objects {:.1} deg; IoU true w {}, slicer w {}",
+            "  R1 full flow angle(d, A t) median: background {:.1} deg, objects {:.1} deg; IoU true w {}, slicer w(t) {}",
             median(&mut ang_bg),
             median(&mut ang_obj),
             r1,

@@ -26,7 +26,8 @@ pub mod fill;
 pub mod params;
 
 use evseg_geometry::{
-    FlowSample, TableCache, TranslationFit, clear_of_foreground, estimate_translation, flow_samples,
+    FlowSample, RotationRate, TableCache, TranslationFit, clear_of_foreground, estimate_translation,
+    flow_samples,
 };
 use evseg_schemas::align::AlignError;
 use evseg_schemas::{CameraInfo, CoarseSegmentation, Egomotion, Events, NormalFlow, Segment, Segmentation};
@@ -60,8 +61,8 @@ pub enum HierError {
         groups: usize,
     },
     /// The rotation rate is not finite.
-    #[error("rotation rate {0:?} rad/s is not finite")]
-    Omega([f64; 3]),
+    #[error("rotation rate {0:?} (rad/s, rad/s^2) is not finite")]
+    Omega(RotationRate),
 }
 
 /// One segment while merging.
@@ -195,22 +196,22 @@ impl HierarchicalMerger {
         &self.params
     }
 
-    /// Merges one slice: `events` seen by `camera`, their `flow`, the slice's rotation rate
-    /// `omega` (rad/s, camera frame) and the background merger's `coarse` groups.
+    /// Merges one slice: `events` seen by `camera`, their `flow`, the slice's rotation `rate`
+    /// (camera frame) and the background merger's `coarse` groups.
     pub fn merge(
         &mut self,
         camera: &CameraInfo,
         events: &Events,
         flow: &NormalFlow,
-        omega: Option<[f64; 3]>,
+        rate: Option<RotationRate>,
         coarse: &CoarseSegmentation,
     ) -> Result<HierResult, HierError> {
         let p = self.params;
         let n = events.len();
-        if let Some(w) = omega
-            && !w.iter().all(|v| v.is_finite())
+        if let Some(r) = rate
+            && !r.is_finite()
         {
-            return Err(HierError::Omega(w));
+            return Err(HierError::Omega(r));
         }
         for (what, got) in [
             ("coarse.group", coarse.group.len()),
@@ -230,8 +231,8 @@ impl HierarchicalMerger {
                 });
             }
         }
-        let w = omega.filter(|_| p.derotate);
-        let samples = flow_samples(self.table.get(camera), events, flow, w, p.min_confidence)?;
+        let w = rate.filter(|_| p.derotate);
+        let samples = flow_samples(self.table.get(camera), events, flow, w.as_ref(), p.min_confidence)?;
 
         // 1. Per-group statistics.
         let mut nodes: Vec<Node> = (0..groups).map(|_| Node::new()).collect();
@@ -416,7 +417,7 @@ impl HierarchicalMerger {
         let egomotion = match estimate {
             Some(direction) => Egomotion {
                 direction,
-                omega: omega.unwrap_or([0.0; 3]),
+                omega: rate.map_or([0.0; 3], |r| r.mean),
                 valid: true,
             },
             None => coarse.egomotion,

@@ -3,22 +3,29 @@
 
 use std::process::ExitCode;
 
+use evseg_geometry::RotationRate;
 use evseg_geometry::egomotion_node::{describe_egomotion, egomotion_from_config};
+use evseg_geometry::rotation::{SLOPE_DEFAULT, SLOPE_PARAM, SLOPE_PARAM_DOC};
 use evseg_hierarchical_merger::{HierParams, HierarchicalMerger};
 use evseg_runtime::describe::Describe;
 use evseg_runtime::{BoxError, Inputs, NodeConfig, Outputs, Stage, run_stage};
 use evseg_schemas::{CoarseSegmentation, NormalFlow, Segmentation, Slice};
 
-struct Node(HierarchicalMerger);
+struct Node {
+    merger: HierarchicalMerger,
+    /// [`evseg_geometry::rotation::SLOPE_PARAM`].
+    rate_slope: bool,
+}
 
 impl Stage for Node {
     fn process(&mut self, input: &Inputs, out: &mut Outputs) -> Result<(), BoxError> {
         let slice: Slice = input.get("slices")?;
         let flow: NormalFlow = input.get("flow")?;
         let coarse: CoarseSegmentation = input.get("coarse")?;
+        let rate = RotationRate::of_slice(&slice, input.span(), self.rate_slope);
         let r = self
-            .0
-            .merge(&slice.camera, &slice.events, &flow, slice.omega, &coarse)?;
+            .merger
+            .merge(&slice.camera, &slice.events, &flow, rate, &coarse)?;
         tracing::debug!(
             slice = input.seq(),
             initial = r.initial_segments,
@@ -53,6 +60,7 @@ fn main() -> ExitCode {
         "flow at or below this confidence is invalid",
     )
     .param("derotate", d.derotate, "subtract the IMU rotational flow")
+    .param(SLOPE_PARAM, SLOPE_DEFAULT, SLOPE_PARAM_DOC)
     .param(
         "lambda",
         d.lambda,
@@ -110,6 +118,9 @@ fn main() -> ExitCode {
             fill_cell_px: cfg.param("fill_cell_px")?,
             egomotion: egomotion_from_config(cfg)?,
         };
-        Ok(Node(HierarchicalMerger::new(params)?))
+        Ok(Node {
+            merger: HierarchicalMerger::new(params)?,
+            rate_slope: cfg.param(SLOPE_PARAM)?,
+        })
     })
 }

@@ -49,7 +49,8 @@ fn build(blocks: &[Block], groups: usize) -> (Events, NormalFlow, CoarseSegmenta
 fn merge(blocks: &[Block], groups: usize) -> HierResult {
     let (ev, flow, coarse) = build(blocks, groups);
     let mut m = HierarchicalMerger::new(HierParams::default()).unwrap();
-    m.merge(&camera(), &ev, &flow, Some([0.0; 3]), &coarse).unwrap()
+    m.merge(&camera(), &ev, &flow, Some([0.0; 3].into()), &coarse)
+        .unwrap()
 }
 
 const BG: [f64; 3] = [0.3, 0.0, 0.1];
@@ -164,7 +165,13 @@ fn malformed_input_is_an_error() {
         "{e}"
     );
     let e = m
-        .merge(&camera(), &ev, &flow, Some([f64::INFINITY, 0.0, 0.0]), &coarse)
+        .merge(
+            &camera(),
+            &ev,
+            &flow,
+            Some([f64::INFINITY, 0.0, 0.0].into()),
+            &coarse,
+        )
         .unwrap_err();
     assert!(matches!(e, HierError::Omega(_)), "{e}");
     let mut short = flow.clone();

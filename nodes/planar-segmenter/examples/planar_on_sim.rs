@@ -109,7 +109,7 @@ fn main() -> anyhow::Result<()> {
             }
             let w = omega(&info, &chunk);
             for (seg, score) in segs.iter_mut().zip(scores.iter_mut()) {
-                let r = seg.segment(&info, ev, &flow, w)?;
+                let r = seg.segment(&info, ev, &flow, w.map(Into::into))?;
                 let (mut inter, mut union) = (0, 0);
                 for (bg, obj) in r.residuals.background.iter().zip(&truth.event_object) {
                     let (p, t) = (!bg, *obj != 0);

@@ -37,7 +37,7 @@ pub mod fit;
 pub mod smooth;
 pub mod two_means;
 
-use evseg_geometry::{TableCache, density_weights, flow_samples};
+use evseg_geometry::{RotationRate, TableCache, density_weights, flow_samples};
 use evseg_schemas::align::AlignError;
 use evseg_schemas::{CameraInfo, Events, NormalFlow, Residuals};
 
@@ -111,8 +111,8 @@ pub enum PlanarError {
     #[error(transparent)]
     Input(#[from] AlignError),
     /// The slice's rotation rate is not finite.
-    #[error("rotation rate {0:?} rad/s is not finite")]
-    Omega([f64; 3]),
+    #[error("rotation rate {0:?} (rad/s, rad/s^2) is not finite")]
+    Omega(RotationRate),
 }
 
 /// Everything the segmenter computed for one slice.
@@ -187,27 +187,27 @@ impl PlanarSegmenter {
         &self.params
     }
 
-    /// Segments one slice: `events` seen by `camera`, their normal `flow`, and the slice's mean
-    /// rotation rate `omega` (rad/s, camera frame; `None` without IMU).
+    /// Segments one slice: `events` seen by `camera`, their normal `flow`, and the slice's
+    /// rotation `rate` (camera frame; `None` without IMU).
     pub fn segment(
         &mut self,
         camera: &CameraInfo,
         events: &Events,
         flow: &NormalFlow,
-        omega: Option<[f64; 3]>,
+        rate: Option<RotationRate>,
     ) -> Result<PlanarResult, PlanarError> {
-        if let Some(w) = omega
-            && !w.iter().all(|v| v.is_finite())
+        if let Some(r) = rate
+            && !r.is_finite()
         {
-            return Err(PlanarError::Omega(w));
+            return Err(PlanarError::Omega(r));
         }
         let p = self.params;
-        let w = omega.filter(|_| p.derotate);
+        let w = rate.filter(|_| p.derotate);
         let table = self.table.get(camera);
         let n = events.len();
 
         // Equations of the events with valid flow.
-        let samples = flow_samples(table, events, flow, w, p.min_confidence)?;
+        let samples = flow_samples(table, events, flow, w.as_ref(), p.min_confidence)?;
         let eqs: Vec<Equation> = samples
             .iter()
             .map(|s| Equation::new(s.x, s.y, s.n0, s.n_derot))

@@ -3,18 +3,27 @@
 
 use std::process::ExitCode;
 
+use evseg_geometry::RotationRate;
+use evseg_geometry::rotation::{SLOPE_DEFAULT, SLOPE_PARAM, SLOPE_PARAM_DOC};
 use evseg_planar_segmenter::{FitParams, PlanarParams, PlanarSegmenter, Robust};
 use evseg_runtime::describe::Describe;
 use evseg_runtime::{BoxError, Inputs, NodeConfig, Outputs, Stage, run_stage};
 use evseg_schemas::{NormalFlow, Residuals, Slice};
 
-struct Node(PlanarSegmenter);
+struct Node {
+    segmenter: PlanarSegmenter,
+    /// [`evseg_geometry::rotation::SLOPE_PARAM`].
+    rate_slope: bool,
+}
 
 impl Stage for Node {
     fn process(&mut self, input: &Inputs, out: &mut Outputs) -> Result<(), BoxError> {
         let slice: Slice = input.get("slices")?;
         let flow: NormalFlow = input.get("flow")?;
-        let r = self.0.segment(&slice.camera, &slice.events, &flow, slice.omega)?;
+        let rate = RotationRate::of_slice(&slice, input.span(), self.rate_slope);
+        let r = self
+            .segmenter
+            .segment(&slice.camera, &slice.events, &flow, rate)?;
         tracing::debug!(
             slice = input.seq(),
             fitted = r.fitted_events,
@@ -77,6 +86,7 @@ fn main() -> ExitCode {
         serde_json::Value::Null,
         "weight threshold in robust standard deviations (default huber 1.345, tukey 4.685)",
     )
+    .param(SLOPE_PARAM, SLOPE_DEFAULT, SLOPE_PARAM_DOC)
     .param("robust_iterations", d.fit.iterations, "reweighting rounds")
     .param("ridge", d.fit.ridge, "Tikhonov regularization per equation")
     .param("cell_px", d.cell_px, "smoothing grid cell, pixels")
@@ -125,6 +135,9 @@ fn main() -> ExitCode {
             min_support: cfg.param("min_support")?,
             density_cell_px: cfg.param("density_cell_px")?,
         };
-        Ok(Node(PlanarSegmenter::new(params)?))
+        Ok(Node {
+            segmenter: PlanarSegmenter::new(params)?,
+            rate_slope: cfg.param(SLOPE_PARAM)?,
+        })
     })
 }

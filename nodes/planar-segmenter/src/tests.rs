@@ -117,7 +117,7 @@ fn plane_gives_zero_residuals_the_expected_model_and_all_background() {
     let (ev, fl, _) = scene(3000, false, 0.0, camera_flow);
     for params in [ls(), huber()] {
         let mut s = PlanarSegmenter::new(params).unwrap();
-        let r = s.segment(&camera(), &ev, &fl, Some(W)).unwrap();
+        let r = s.segment(&camera(), &ev, &fl, Some(W.into())).unwrap();
         assert!(r.derotated);
         assert_eq!(r.fitted_events, 3000);
         let max_r = r.residuals.residual.iter().fold(0f32, |m, v| m.max(v.abs()));
@@ -141,7 +141,7 @@ fn noisy_plane_is_still_all_background() {
     let (ev, fl, _) = scene(3000, false, 0.005, camera_flow);
     let r = PlanarSegmenter::new(PlanarParams::default())
         .unwrap()
-        .segment(&camera(), &ev, &fl, Some(W))
+        .segment(&camera(), &ev, &fl, Some(W.into()))
         .unwrap();
     let bg = r.residuals.background.iter().filter(|&&b| b).count();
     assert_eq!(bg, 3000, "split {:?}", r.split);
@@ -151,7 +151,7 @@ fn check_object_found(params: PlanarParams, noise: f64) {
     let (ev, fl, truth) = scene(6000, true, noise, flow_with_object);
     let r = PlanarSegmenter::new(params)
         .unwrap()
-        .segment(&camera(), &ev, &fl, Some(W))
+        .segment(&camera(), &ev, &fl, Some(W.into()))
         .unwrap();
     let obj = truth.iter().filter(|&&t| t).count();
     let fg_hit = (0..ev.len())
@@ -199,7 +199,7 @@ fn robust_fit_recovers_the_background_model_despite_the_object() {
     let (ev, fl, _) = scene(6000, true, 0.0, flow_with_object);
     let r = PlanarSegmenter::new(huber())
         .unwrap()
-        .segment(&camera(), &ev, &fl, Some(W))
+        .segment(&camera(), &ev, &fl, Some(W.into()))
         .unwrap();
     let a = &r.residuals.model;
     let err: f64 = a
@@ -216,7 +216,7 @@ fn rotation_is_removed_with_omega_and_absorbed_without() {
     let rot = |x: f64, y: f64, _: bool| rotational_flow(x, y, W);
     let (ev, fl, _) = scene(2000, false, 0.0, rot);
     let mut s = PlanarSegmenter::new(ls()).unwrap();
-    let r = s.segment(&camera(), &ev, &fl, Some(W)).unwrap();
+    let r = s.segment(&camera(), &ev, &fl, Some(W.into())).unwrap();
     assert!(r.residuals.residual.iter().all(|v| v.abs() < 1e-5));
     assert!(
         r.residuals.model.iter().all(|v| v.abs() < 1e-5),
@@ -243,7 +243,7 @@ fn invalid_flow_gives_nan_and_too_few_events_give_no_model() {
         fl.confidence[i] = 0.0;
     }
     let mut s = PlanarSegmenter::new(PlanarParams::default()).unwrap();
-    let r = s.segment(&camera(), &ev, &fl, Some(W)).unwrap();
+    let r = s.segment(&camera(), &ev, &fl, Some(W.into())).unwrap();
     assert_eq!(r.fitted_events, 250);
     for i in 0..500 {
         assert_eq!(r.residuals.residual[i].is_nan(), i % 2 == 0);
@@ -257,7 +257,7 @@ fn invalid_flow_gives_nan_and_too_few_events_give_no_model() {
         ny: fl.ny[..few].to_vec(),
         confidence: vec![1.0; few],
     };
-    let r = s.segment(&camera(), &ev5, &fl5, Some(W)).unwrap();
+    let r = s.segment(&camera(), &ev5, &fl5, Some(W.into())).unwrap();
     assert!(r.residuals.model.is_empty());
     assert!(r.residuals.background.iter().all(|&b| b));
     let r = s
@@ -271,7 +271,7 @@ fn malformed_input_is_an_error() {
     let (mut ev, mut fl, _) = scene(20, false, 0.0, camera_flow);
     let mut s = PlanarSegmenter::new(PlanarParams::default()).unwrap();
     assert!(matches!(
-        s.segment(&camera(), &ev, &fl, Some([f64::NAN, 0.0, 0.0])),
+        s.segment(&camera(), &ev, &fl, Some([f64::NAN, 0.0, 0.0].into())),
         Err(PlanarError::Omega(_))
     ));
     fl.nx.push(0.0);
