@@ -61,20 +61,27 @@ pub struct TrackerParams {
     /// fraction (intersection over the segment box's area) inside a live track's predicted box
     /// is a fragment of that object and takes its id instead of opening a new track (the
     /// track's filter is corrected with it only when nothing else matched the track). 0 = off.
-    /// Default 0.5 (most of the fragment inside the object's box; not tuned): the hierarchical
-    /// merger does not always join an object's clusters, and each piece opening a track of its
-    /// own was most of the id switches the evaluator counted on the simulator.
+    /// The hierarchical merger does not always join an object's clusters, and each piece
+    /// opening a track of its own was most of the id switches the evaluator counted on the
+    /// simulator. Default 0.3 (a fragment need not lie mostly inside: the box is predicted from
+    /// pieces that change from slice to slice). Chosen together with `merge_velocity_px_s` on
+    /// `evseg bench` (evseg-bench-v1, fdbc78d; mean per-object IoU %, mean of the worst
+    /// object's id switches): 0.5 and 30 px/s 29.15 / 59.3; 0.3 and 30 30.83 / 51.8; 0.2 and 30
+    /// 31.01 / 49.8; 0.5 and 60 29.30 / 50.7; 0.3 and 60 31.89 / 36.8.
     pub absorb_overlap: f64,
     /// Two tracks matched in the same slice, each matched at least `min_hits_to_merge` times,
     /// whose segments' boxes lie within `merge_gap_px` of each other and whose filtered image
     /// velocities differ by at most this (px/s), are one object seen in pieces: the younger
     /// track's segments take the older one's id, the older track's box grows to cover both, and
-    /// the younger track ends. 0 = off. Default 30 px/s (1 px per 30 ms slice; the objects of
-    /// EVIMO2 and of the simulator move at hundreds of px/s relative to the background). 60 px/s
-    /// merged the two objects of `graph.yaml`'s two-objects sequence while they crossed
-    /// (per-object IoU 29.6 -> 21.0 %); on `evseg bench` 0 / 30 / 60 px/s gave per-object IoU
-    /// 26.27 / 26.20 / 26.09 % and worst-object id switches 48.7 / 39.5 / 35.8 (mean of six
-    /// scenes), so 30 keeps most of the fewer switches without the risk.
+    /// the younger track ends. 0 = off. Default 60 px/s (2 px per 30 ms slice; the objects of
+    /// EVIMO2 and of the simulator move at hundreds of px/s relative to the background, and a
+    /// fragment's filtered velocity is noisy because its centroid jumps with the pieces). The
+    /// risk is merging two objects that cross: on `graph.yaml`'s 1 s of two-objects, with
+    /// `absorb_overlap` 0.3, per-object IoU 25.4 -> 24.2 % against 30 px/s (and, with the
+    /// segmentation of 906957c, 29.6 -> 21.0 %); on `evseg bench` (see `absorb_overlap`) 0.3 and
+    /// 60 px/s cut the worst object's id switches from 59.3 to 36.8 and raised per-object IoU
+    /// from 29.15 to 31.89 %. Earlier (906957c's segmentation) 0 / 30 / 60 px/s gave 26.27 /
+    /// 26.20 / 26.09 % and 48.7 / 39.5 / 35.8 switches.
     pub merge_velocity_px_s: f64,
     /// See `merge_velocity_px_s`: largest gap between the two boxes, pixels (default 4: touching
     /// or overlapping, as the hierarchical merger's `touch_px`).
@@ -97,8 +104,8 @@ impl Default for TrackerParams {
             min_events: 30,
             max_missing_s: 0.5,
             min_hits: 1,
-            absorb_overlap: 0.5,
-            merge_velocity_px_s: 30.0,
+            absorb_overlap: 0.3,
+            merge_velocity_px_s: 60.0,
             merge_gap_px: 4.0,
             min_hits_to_merge: 3,
         }
