@@ -31,6 +31,7 @@ use crate::local_speed::{self, LocalSpeed};
 use crate::math::{fmax, fmin};
 use crate::render::FrameGeom;
 use crate::scene::{self, Scene};
+use crate::texture::Texture;
 use crate::unstable::{PixelState, UnstableList};
 use crate::{SimStats, math};
 
@@ -118,6 +119,10 @@ const SAMPLE_EPS_LOG: f32 = 1e-4;
 /// cost choice: up to 64 texel reads cost less than the samples they usually save; 4 -> 8
 /// cut interpolated samples by about a fifth, larger spans gain little).
 const PATH_RANGE_TEXELS: u32 = 8;
+/// Most neighbouring stable pixels whose paths are bounded together (see `run_range`).
+const RUN_PIXELS: usize = 8;
+/// Largest texel span per axis of the union of a run's paths (see `run_range`).
+const RUN_RANGE_TEXELS: u32 = 12;
 /// Factor on a stable pixel's displacement from its texture Jacobian: covers the change of
 /// the Jacobian along the path (perspective) and its finite-difference estimate.
 const DISPLACEMENT_SAFETY: f32 = 1.1;
@@ -544,7 +549,10 @@ impl Engine {
         let mut path: Vec<f32> = Vec::new();
         let w_img = self.rays.width;
         let work = std::mem::take(&mut self.work);
-        for &p in &work {
+        // Texel bound shared by a run of neighbouring stable pixels on one surface (see
+        // `run_range`): the work-list index where the run ends and its bound.
+        let mut run: (usize, Option<(f32, f32)>) = (0, None);
+        for (wi, &p) in work.iter().enumerate() {
             let i = p as usize;
             let (kf0, kf1) = (&self.kf0, &self.kf1);
             let (c_on, c_off) = (self.thresholds.on[i], self.thresholds.off[i]);
@@ -587,17 +595,28 @@ impl Engine {
                     let r = self.reference[i];
                     // Exact shortcut: when the texels under the whole path keep every sample
                     // strictly inside the thresholds, none can fire and the reference stays.
+                    // The run's bound covers this path's texels (and more), so it is tried
+                    // first; when it fails, the path's own.
+                    let inside = |b: Option<(f32, f32)>| {
+                        b.is_some_and(|(lo, hi)| {
+                            hi + s0.max(s1) + SAMPLE_EPS_LOG < r + c_on
+                                && lo + s0.min(s1) - SAMPLE_EPS_LOG > r - c_off
+                        })
+                    };
+                    if wi >= run.0 {
+                        run = run_range(kf0, kf1, tex, &work, wi, &self.class);
+                    }
                     let fp1 = fp0 + dfp;
-                    if let Some((lo, hi)) = tex.path_range(
-                        u0,
-                        v0,
-                        u0 + du,
-                        v0 + dv,
-                        fp0.min(fp1),
-                        fp0.max(fp1),
-                        PATH_RANGE_TEXELS,
-                    ) && hi + s0.max(s1) + SAMPLE_EPS_LOG < r + c_on
-                        && lo + s0.min(s1) - SAMPLE_EPS_LOG > r - c_off
+                    if inside(run.1)
+                        || inside(tex.path_range(
+                            u0,
+                            v0,
+                            u0 + du,
+                            v0 + dv,
+                            fp0.min(fp1),
+                            fp0.max(fp1),
+                            PATH_RANGE_TEXELS,
+                        ))
                     {
                         continue;
                     }
@@ -805,6 +824,52 @@ impl Engine {
         }
         self.work.truncate(listed);
     }
+}
+
+/// Texel bound (see [`Texture::path_range`]) of the union of the stable paths of a run of
+/// neighbouring pixels that starts at `work[start]`: up to `RUN_PIXELS` consecutive pixels of
+/// one row, all listed, stable and on the same surface (texture `tex`). Returns the index in
+/// `work` after the run and the bound (`None` for a run of one pixel, or when the union spans
+/// more than `RUN_RANGE_TEXELS` texels). The union's texels include every member path's, so a
+/// member whose thresholds hold the run's bound would hold its own: the same decisions as
+/// bounding every path alone, with one setup and one texel scan per run.
+fn run_range(
+    kf0: &KeyFrame,
+    kf1: &KeyFrame,
+    tex: &Texture,
+    work: &[u32],
+    start: usize,
+    class: &[u8],
+) -> (usize, Option<(f32, f32)>) {
+    let first = work[start] as usize;
+    let key = kf0.key[first];
+    let mut end = start + 1;
+    while end < work.len()
+        && end - start < RUN_PIXELS
+        && work[end] as usize == first + (end - start)
+        && class[work[end] as usize] == STABLE
+        && kf0.key[work[end] as usize] == key
+    {
+        end += 1;
+    }
+    if end - start < 2 {
+        return (end, None);
+    }
+    let (mut u_lo, mut u_hi, mut v_lo, mut v_hi) =
+        (f32::INFINITY, f32::NEG_INFINITY, f32::INFINITY, f32::NEG_INFINITY);
+    let (mut fp_lo, mut fp_hi) = (f32::INFINITY, f32::NEG_INFINITY);
+    for i in first..first + (end - start) {
+        u_lo = fmin(u_lo, fmin(kf0.u[i], kf1.u[i]));
+        u_hi = fmax(u_hi, fmax(kf0.u[i], kf1.u[i]));
+        v_lo = fmin(v_lo, fmin(kf0.v[i], kf1.v[i]));
+        v_hi = fmax(v_hi, fmax(kf0.v[i], kf1.v[i]));
+        fp_lo = fmin(fp_lo, fmin(kf0.footprint[i], kf1.footprint[i]));
+        fp_hi = fmax(fp_hi, fmax(kf0.footprint[i], kf1.footprint[i]));
+    }
+    (
+        end,
+        tex.path_range(u_lo, v_lo, u_hi, v_hi, fp_lo, fp_hi, RUN_RANGE_TEXELS),
+    )
 }
 
 /// Image displacement (px) of the texture point seen by stable pixel `i` from key frame
