@@ -31,7 +31,6 @@ use crate::local_speed::{self, LocalSpeed};
 use crate::math::{fmax, fmin};
 use crate::render::FrameGeom;
 use crate::scene::{self, Scene};
-use crate::texture::Texture;
 use crate::unstable::{PixelState, UnstableList};
 use crate::{SimStats, math};
 
@@ -523,6 +522,7 @@ impl Engine {
         let radius = (travel.ceil() as usize + 1).min(256);
         let shade = self.shade_change(t0, t1);
         self.classify(cfg, radius, shade);
+        self.drop_bounded_runs();
 
         // The interval's events (buffer reused across intervals).
         let mut batch = std::mem::take(&mut self.batch);
@@ -549,10 +549,7 @@ impl Engine {
         let mut path: Vec<f32> = Vec::new();
         let w_img = self.rays.width;
         let work = std::mem::take(&mut self.work);
-        // Texel bound shared by a run of neighbouring stable pixels on one surface (see
-        // `run_range`): the work-list index where the run ends and its bound.
-        let mut run: (usize, Option<(f32, f32)>) = (0, None);
-        for (wi, &p) in work.iter().enumerate() {
+        for &p in &work {
             let i = p as usize;
             let (kf0, kf1) = (&self.kf0, &self.kf1);
             let (c_on, c_off) = (self.thresholds.on[i], self.thresholds.off[i]);
@@ -594,30 +591,19 @@ impl Engine {
                     );
                     let r = self.reference[i];
                     // Exact shortcut: when the texels under the whole path keep every sample
-                    // strictly inside the thresholds, none can fire and the reference stays.
-                    // The run's bound covers this path's texels (and more), so it is tried
-                    // first; when it fails, the path's own.
-                    let inside = |b: Option<(f32, f32)>| {
-                        b.is_some_and(|(lo, hi)| {
-                            hi + s0.max(s1) + SAMPLE_EPS_LOG < r + c_on
-                                && lo + s0.min(s1) - SAMPLE_EPS_LOG > r - c_off
-                        })
-                    };
-                    if wi >= run.0 {
-                        run = run_range(kf0, kf1, tex, &work, wi, &self.class);
-                    }
+                    // strictly inside the thresholds, none can fire and the reference stays
+                    // (the bound of the pixel's run failed; see `drop_bounded_runs`).
                     let fp1 = fp0 + dfp;
-                    if inside(run.1)
-                        || inside(tex.path_range(
-                            u0,
-                            v0,
-                            u0 + du,
-                            v0 + dv,
-                            fp0.min(fp1),
-                            fp0.max(fp1),
-                            PATH_RANGE_TEXELS,
-                        ))
-                    {
+                    let own = tex.path_range(
+                        u0,
+                        v0,
+                        u0 + du,
+                        v0 + dv,
+                        fp0.min(fp1),
+                        fp0.max(fp1),
+                        PATH_RANGE_TEXELS,
+                    );
+                    if shaded_bounds(own, s0, s1).is_some_and(|(lo, hi)| hi < r + c_on && lo > r - c_off) {
                         continue;
                     }
                     let disp = stable_displacement(kf0, kf1, i, w_img, du, dv);
@@ -775,6 +761,44 @@ impl Engine {
         self.t = t1;
     }
 
+    /// Drops from the work list the stable pixels whose run's texel bound (see `run_range`)
+    /// keeps their whole path strictly inside their thresholds: none of them can fire and
+    /// their references stay. The tests run without branches per pixel; the list keeps its
+    /// order.
+    fn drop_bounded_runs(&mut self) {
+        let (kf0, kf1, scene) = (&self.kf0, &self.kf1, &self.scene);
+        let (on, off, reference, class) = (
+            &self.thresholds.on,
+            &self.thresholds.off,
+            &self.reference,
+            &self.class,
+        );
+        let work = &mut self.work;
+        let (mut kept, mut wi) = (0usize, 0usize);
+        while wi < work.len() {
+            let p = work[wi];
+            if class[p as usize] != STABLE {
+                work[kept] = p;
+                kept += 1;
+                wi += 1;
+                continue;
+            }
+            let (end, bound) = run_range(kf0, kf1, scene, work, wi, class);
+            // No bound: every member stays.
+            let (lo, hi) = bound.unwrap_or((f32::NEG_INFINITY, f32::INFINITY));
+            for k in wi..end {
+                let p = work[k];
+                let i = p as usize;
+                let r = reference[i];
+                let inside = (hi < r + on[i]) & (lo > r - off[i]);
+                work[kept] = p;
+                kept += usize::from(!inside);
+            }
+            wi = end;
+        }
+        work.truncate(kept);
+    }
+
     /// Sorts every pixel into quiet, stable or unstable for the interval.
     fn classify(&mut self, cfg: &SceneConfig, radius: usize, shade_margin: f32) {
         let (w, h) = (self.rays.width, self.rays.height);
@@ -828,7 +852,7 @@ impl Engine {
 
 /// Texel bound (see [`Texture::path_range`]) of the union of the stable paths of a run of
 /// neighbouring pixels that starts at `work[start]`: up to `RUN_PIXELS` consecutive pixels of
-/// one row, all listed, stable and on the same surface (texture `tex`). Returns the index in
+/// one row, all listed, stable and on the same surface. Returns the index in
 /// `work` after the run and the bound (`None` for a run of one pixel, or when the union spans
 /// more than `RUN_RANGE_TEXELS` texels). The union's texels include every member path's, so a
 /// member whose thresholds hold the run's bound would hold its own: the same decisions as
@@ -836,7 +860,7 @@ impl Engine {
 fn run_range(
     kf0: &KeyFrame,
     kf1: &KeyFrame,
-    tex: &Texture,
+    scene: &Scene,
     work: &[u32],
     start: usize,
     class: &[u8],
@@ -866,10 +890,21 @@ fn run_range(
         fp_lo = fmin(fp_lo, fmin(kf0.footprint[i], kf1.footprint[i]));
         fp_hi = fmax(fp_hi, fmax(kf0.footprint[i], kf1.footprint[i]));
     }
+    let key = key as usize;
+    let tex = &scene.textures[scene.key_texture[key]];
+    let texels = tex.path_range(u_lo, v_lo, u_hi, v_hi, fp_lo, fp_hi, RUN_RANGE_TEXELS);
     (
         end,
-        tex.path_range(u_lo, v_lo, u_hi, v_hi, fp_lo, fp_hi, RUN_RANGE_TEXELS),
+        shaded_bounds(texels, kf0.geom.shade_by_key[key], kf1.geom.shade_by_key[key]),
     )
+}
+
+/// Bounds of the log intensities along a stable path from the texel bound `texels` of its
+/// surface (see [`Texture::path_range`]), with the surface's log shading `s0` and `s1` at the
+/// key frames and the rounding allowance.
+#[inline]
+fn shaded_bounds(texels: Option<(f32, f32)>, s0: f32, s1: f32) -> Option<(f32, f32)> {
+    texels.map(|(lo, hi)| (lo + s0.min(s1) - SAMPLE_EPS_LOG, hi + s0.max(s1) + SAMPLE_EPS_LOG))
 }
 
 /// Image displacement (px) of the texture point seen by stable pixel `i` from key frame
