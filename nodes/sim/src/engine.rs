@@ -29,6 +29,7 @@ use crate::esim::{self, NoiseSource, Thresholds};
 use crate::filters;
 use crate::local_speed::{self, LocalSpeed};
 use crate::math::{fmax, fmin};
+use crate::radix;
 use crate::render::FrameGeom;
 use crate::scene::{self, Scene};
 use crate::unstable::{PixelState, UnstableList};
@@ -150,6 +151,8 @@ pub struct Engine {
     unstable: UnstableList,
     /// Event buffer of the current interval.
     batch: Vec<RawEvent>,
+    /// Scratch of the event sort.
+    sort_scratch: Vec<RawEvent>,
     /// Quiet pixels that may cross at the closing key frame and stable pixels, in pixel order.
     work: Vec<u32>,
     // Filter buffers.
@@ -198,6 +201,7 @@ impl Engine {
             class: vec![QUIET; n],
             unstable: UnstableList::default(),
             batch: Vec::new(),
+            sort_scratch: Vec::new(),
             work: Vec::new(),
             lo: vec![0.0; n],
             hi: vec![0.0; n],
@@ -754,7 +758,12 @@ impl Engine {
         });
         self.stats.noise_events += noise;
 
-        batch.sort_by(|a, b| a.t.total_cmp(&b.t));
+        if batch.iter().any(|e| e.t.is_sign_negative()) {
+            batch.sort_by(|a, b| a.t.total_cmp(&b.t));
+        } else {
+            // Non-negative times order like their bit patterns (a stable sort, as above).
+            radix::sort_by_key(&mut batch, &mut self.sort_scratch, |e| e.t.to_bits());
+        }
         out.extend_from_slice(&batch);
         self.batch = batch;
         std::mem::swap(&mut self.kf0, &mut self.kf1);

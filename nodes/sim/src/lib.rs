@@ -31,6 +31,7 @@ pub mod imu;
 pub mod local_speed;
 pub mod math;
 pub mod presets;
+pub mod radix;
 pub mod render;
 pub mod rng;
 pub mod scene;
