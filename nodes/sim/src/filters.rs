@@ -25,7 +25,8 @@ pub fn window_min_max(
 
 /// Replaces `lo` by its minimum and `hi` by its maximum over square windows of radius `r`
 /// (row-major `w` x `h` images, windows clipped at the border). Separable sparse-table passes
-/// (log2(2r + 1) vectorisable sweeps per axis, whatever the radius); `scratch` is reused.
+/// (log2(2r + 1) vectorisable sweeps per axis, whatever the radius; columns in strips that
+/// stay in cache); `scratch` is reused.
 pub fn window_min_max_in_place(
     lo: &mut [f32],
     hi: &mut [f32],
@@ -37,57 +38,77 @@ pub fn window_min_max_in_place(
     if r == 0 {
         return;
     }
+    // One scratch buffer: a column strip, then the two padded copies `sliding` works in.
+    let strip = STRIP.min(w);
+    let (s_len, p_len) = (h * strip, 2 * (w.max(h) + 2 * r) * strip);
+    scratch.resize(s_len + p_len, 0.0);
+    let (cols, pad) = scratch.split_at_mut(s_len);
     for y in 0..h {
-        sliding::<false>(&mut lo[y * w..(y + 1) * w], w, 1, r, scratch);
-        sliding::<true>(&mut hi[y * w..(y + 1) * w], w, 1, r, scratch);
+        sliding::<false>(&mut lo[y * w..(y + 1) * w], w, 1, r, pad);
+        sliding::<true>(&mut hi[y * w..(y + 1) * w], w, 1, r, pad);
     }
-    sliding::<false>(&mut lo[..w * h], h, w, r, scratch);
-    sliding::<true>(&mut hi[..w * h], h, w, r, scratch);
+    columns::<false>(lo, w, h, r, cols, pad);
+    columns::<true>(hi, w, h, r, cols, pad);
 }
+
+/// The column pass of [`sliding`] over the `w` x `h` image `img`, in strips of `STRIP`
+/// columns copied to `cols` (a strip and its padded copy `pad` stay in cache).
+fn columns<const MAX: bool>(
+    img: &mut [f32],
+    w: usize,
+    h: usize,
+    r: usize,
+    cols: &mut [f32],
+    pad: &mut [f32],
+) {
+    for c0 in (0..w).step_by(STRIP) {
+        let sw = STRIP.min(w - c0);
+        let cols = &mut cols[..h * sw];
+        for y in 0..h {
+            cols[y * sw..(y + 1) * sw].copy_from_slice(&img[y * w + c0..y * w + c0 + sw]);
+        }
+        sliding::<MAX>(cols, h, sw, r, pad);
+        for y in 0..h {
+            img[y * w + c0..y * w + c0 + sw].copy_from_slice(&cols[y * sw..(y + 1) * sw]);
+        }
+    }
+}
+
+/// Columns per strip of the column pass of [`window_min_max_in_place`].
+const STRIP: usize = 64;
 
 /// Sliding minimum (maximum when `MAX`) over windows of `2r + 1` items, in place. `data` holds
 /// `n` items of `stride` values each (item `j` is `data[j * stride..(j + 1) * stride]`); the
 /// window runs over items, element-wise.
-fn sliding<const MAX: bool>(data: &mut [f32], n: usize, stride: usize, r: usize, pad: &mut Vec<f32>) {
+fn sliding<const MAX: bool>(data: &mut [f32], n: usize, stride: usize, r: usize, pad: &mut [f32]) {
     let fill = if MAX { f32::NEG_INFINITY } else { f32::INFINITY };
     // Log intensities are never NaN: plain comparisons vectorise to single min/max ops.
     let pick = |a: f32, b: f32| if MAX { fmax(a, b) } else { fmin(a, b) };
     let np = n + 2 * r;
-    pad.clear();
-    pad.resize(np * stride, fill);
-    pad[r * stride..(r + n) * stride].copy_from_slice(&data[..n * stride]);
+    let size = np * stride;
+    // Two padded copies: each pass reads one and writes the other (vectorises whatever the
+    // distance between the items it combines).
+    let (mut cur, mut next) = pad[..2 * size].split_at_mut(size);
+    cur[..r * stride].fill(fill);
+    cur[(r + n) * stride..].fill(fill);
+    cur[r * stride..(r + n) * stride].copy_from_slice(&data[..n * stride]);
     let win = 2 * r + 1;
-    // After the pass for `len`, item j holds the extreme of items [j, j + 2 len) (clipped).
+    // After the pass for `len`, item j holds the extreme of items [j, j + 2 len) (clipped);
+    // items past the last combined one keep their values.
     let mut len = 1;
     while len * 2 <= win {
-        let s = len * stride;
-        let m = (np - len) * stride;
-        let (head, tail) = pad.split_at_mut(s);
-        // pad[j] = pick(pad[j], pad[j + s]) for j < m, done in blocks of s (no overlap).
-        let mut j = 0;
-        while j < m {
-            let e = (j + s).min(m);
-            if j == 0 {
-                let (a, b) = (&mut head[..e], &tail[..e]);
-                for (x, y) in a.iter_mut().zip(b) {
-                    *x = pick(*x, *y);
-                }
-            } else {
-                let (a, b) = tail.split_at_mut(j);
-                let a = &mut a[j - s..e - s];
-                let b = &b[..e - j];
-                for (x, y) in a.iter_mut().zip(b) {
-                    *x = pick(*x, *y);
-                }
-            }
-            j = e;
+        let (s, m) = (len * stride, (np - len) * stride);
+        for ((o, a), b) in next[..m].iter_mut().zip(&cur[..m]).zip(&cur[s..s + m]) {
+            *o = pick(*a, *b);
         }
+        next[m..].copy_from_slice(&cur[m..]);
+        std::mem::swap(&mut cur, &mut next);
         len *= 2;
     }
     // Window [j, j + win) of the padded items = items [j, j + len) and [j + win - len, j + win).
     let off = (win - len) * stride;
     for (j, d) in data[..n * stride].iter_mut().enumerate() {
-        *d = pick(pad[j], pad[j + off]);
+        *d = pick(cur[j], cur[j + off]);
     }
 }
 
