@@ -634,20 +634,22 @@ impl Engine {
                         } else {
                             t0 + (t1 - t0) * (next as f32 / mf) as f64
                         };
-                        fire_segment(
-                            &ctx,
-                            &mut self.reference[i],
-                            &mut self.last_event[i],
-                            i,
-                            l_prev,
-                            l,
-                            (t_prev, t),
-                            (t0, t1),
-                            (&kf0.geom, &kf1.geom),
-                            id,
-                            (c_on, c_off),
-                            &mut batch,
-                        );
+                        if esim::may_cross(self.reference[i], l, c_on, c_off) {
+                            fire_segment(
+                                &ctx,
+                                &mut self.reference[i],
+                                &mut self.last_event[i],
+                                i,
+                                l_prev,
+                                l,
+                                (t_prev, t),
+                                (t0, t1),
+                                (&kf0.geom, &kf1.geom),
+                                id,
+                                (c_on, c_off),
+                                &mut batch,
+                            );
+                        }
                         l_prev = l;
                         t_prev = t;
                     }
@@ -707,21 +709,23 @@ impl Engine {
                     (self.kf1.l[i], self.kf1.id[i])
                 };
                 let sp = u.s_prev[j] as usize;
-                let before = batch.len();
-                fire(
-                    &ctx,
-                    &mut u.reference[j],
-                    &mut u.last_event[j],
-                    i,
-                    u.l_prev[j],
-                    l1,
-                    (times[sp], times[s]),
-                    (&geoms[sp], &geoms[s]),
-                    (u.id_prev[j], id1),
-                    (u.c_on[j], u.c_off[j]),
-                    &mut batch,
-                );
-                fired += (batch.len() - before) as u64;
+                if esim::may_cross(u.reference[j], l1, u.c_on[j], u.c_off[j]) {
+                    let before = batch.len();
+                    fire(
+                        &ctx,
+                        &mut u.reference[j],
+                        &mut u.last_event[j],
+                        i,
+                        u.l_prev[j],
+                        l1,
+                        (times[sp], times[s]),
+                        (&geoms[sp], &geoms[s]),
+                        (u.id_prev[j], id1),
+                        (u.c_on[j], u.c_off[j]),
+                        &mut batch,
+                    );
+                    fired += (batch.len() - before) as u64;
+                }
                 u.l_prev[j] = l1;
                 u.id_prev[j] = id1;
                 u.s_prev[j] = s as u32;

@@ -101,6 +101,14 @@ impl Thresholds {
     }
 }
 
+/// False when [`crossings`] to `l1` can do nothing (no event, no reference change) whatever the
+/// start: `l1` lies strictly inside the thresholds around `reference` (a rising segment fires
+/// only if it reaches `reference + c_on`, a falling one only if it reaches `reference - c_off`).
+#[inline(always)]
+pub fn may_cross(reference: f32, l1: f32, c_on: f32, c_off: f32) -> bool {
+    (l1 >= reference + c_on) | (l1 <= reference - c_off)
+}
+
 /// Threshold crossings of one pixel whose log intensity goes linearly from `l0` at `t0` to `l1`
 /// at `t1`. `reference` is the pixel's reference level, `last_event` the time of its last
 /// emitted event (both updated). Calls `emit(t, polarity)` for every emitted event, in time order.
