@@ -8,6 +8,9 @@ use crate::render::FrameGeom;
 use crate::scene::{BoxPose, Scene};
 use crate::trajectory::RigidState;
 
+/// Pixels located together by [`mask`] (a multiple of the SIMD width).
+const MASK_LANES: usize = 8;
+
 /// Camera motion sample of a camera state at `t`: pose camera -> world, velocities in the
 /// camera frame.
 pub fn camera_motion(t: f64, cam: &RigidState) -> CameraMotion {
@@ -34,21 +37,34 @@ pub fn object_poses(t: f64, scene: &Scene, cam: &RigidState, out: &mut Vec<Objec
 }
 
 /// Object id of the nearest surface at every pixel centre (0 = background), row-major.
+/// Only pixels inside a moving object's bounding box are located, a group of
+/// `MASK_LANES` along the row at a time (see `FrameGeom::locate_lanes`).
 pub fn mask(_scene: &Scene, rays: &Rays, geom: &FrameGeom) -> Mask {
     let (w, h) = (rays.width, rays.height);
     let mut ids = vec![0u16; w * h];
-    let boxes: Vec<[i32; 4]> = geom.object_bboxes().map(|(_, bb)| bb).collect();
-    for (v, row) in ids.chunks_mut(w).enumerate() {
-        for (u, id) in row.iter_mut().enumerate() {
-            let (ui, vi) = (u as i32, v as i32);
-            if !boxes
-                .iter()
-                .any(|b| ui >= b[0] && ui <= b[2] && vi >= b[1] && vi <= b[3])
-            {
-                continue;
+    for (_, b) in geom.object_bboxes() {
+        // Inclusive pixel bounding box [u0, v0, u1, v1], inside the image.
+        let (u0, u1) = (b[0].max(0) as usize, (b[2].max(-1) + 1) as usize);
+        let (v0, v1) = (b[1].max(0) as usize, (b[3].max(-1) + 1) as usize);
+        for v in v0..v1.min(h) {
+            let row = v * w;
+            let mut u = u0;
+            while u < u1.min(w) {
+                let i = row + u;
+                if u + MASK_LANES <= u1.min(w) {
+                    let x: &[f32; MASK_LANES] = rays.x[i..i + MASK_LANES].try_into().expect("lane slice");
+                    let y: &[f32; MASK_LANES] = rays.y[i..i + MASK_LANES].try_into().expect("lane slice");
+                    let px = std::array::from_fn(|l| (u + l) as i32);
+                    let found = geom.locate_lanes(x, y, &px, &[v as i32; MASK_LANES]);
+                    for (l, f) in found.iter().enumerate() {
+                        ids[i + l] = f.id;
+                    }
+                    u += MASK_LANES;
+                } else {
+                    ids[i] = geom.locate(rays.x[i], rays.y[i], u as i32, v as i32, None).id;
+                    u += 1;
+                }
             }
-            let i = v * w + u;
-            *id = geom.locate(rays.x[i], rays.y[i], ui, vi, None).id;
         }
     }
     Mask {
@@ -56,5 +72,37 @@ pub fn mask(_scene: &Scene, rays: &Rays, geom: &FrameGeom) -> Mask {
         width: w as u16,
         height: h as u16,
         ids,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn masks_match_locating_every_pixel() {
+        let cfg = crate::presets::preset("two-objects", 2).unwrap();
+        let scene = Scene::new(&cfg.scene, cfg.camera_trajectory.clone(), 2, 0.01);
+        let rays = Rays::new(&cfg.camera);
+        let w = rays.width;
+        let mut covered = 0;
+        for t in [0.0, 0.4, 1.3] {
+            let geom = FrameGeom::new(&scene, &cfg.camera, t);
+            let m = mask(&scene, &rays, &geom);
+            for (i, &id) in m.ids.iter().enumerate() {
+                let (u, v) = ((i % w) as i32, (i / w) as i32);
+                let inside = geom
+                    .object_bboxes()
+                    .any(|(_, b)| u >= b[0] && u <= b[2] && v >= b[1] && v <= b[3]);
+                let expected = if inside {
+                    geom.locate(rays.x[i], rays.y[i], u, v, None).id
+                } else {
+                    0
+                };
+                assert_eq!(id, expected, "t {t} pixel {u} {v}");
+                covered += usize::from(id != 0);
+            }
+        }
+        assert!(covered > 1000, "{covered}");
     }
 }
