@@ -15,7 +15,8 @@
 //!   the key frames and the texture is sampled at steps of at most `max_px_per_step` of this
 //!   pixel's own image motion (its texture-coordinate change mapped through the pixel-to-texture
 //!   Jacobian; no ray casting). When the texels under the whole path keep it strictly inside
-//!   its thresholds, no sample is taken (none could fire: exact). Otherwise all samples of the
+//!   its thresholds, no sample is taken (none could fire: exact; runs of neighbouring pixels on
+//!   one surface are bounded together first, see `run_range`). Otherwise all samples of the
 //!   pixel are taken first (they do not depend on its reference level, so they pipeline), and
 //!   the threshold test runs only when one of them reaches a threshold.
 //! - **unstable** (near a silhouette, crease or seam): ray cast every `stride` render steps,
