@@ -37,8 +37,8 @@ pub mod params;
 pub mod warp;
 
 use evseg_geometry::{
-    FlowSample, RotationRate, TableCache, clear_of_foreground, estimate_translation, flow_direction,
-    flow_samples,
+    EgomotionParams, FlowSample, RotationRate, TableCache, clear_of_foreground, estimate_translation,
+    flow_direction, flow_samples,
 };
 use evseg_schemas::align::AlignError;
 use evseg_schemas::{CameraInfo, Clusters, CoarseSegmentation, Egomotion, Events, NormalFlow, Residuals};
@@ -449,6 +449,10 @@ fn select_hypothesis(
 ) -> Option<([f64; 3], Vec<bool>)> {
     let (ev, cam) = (input.events, input.camera);
     let (w, h) = (u32::from(cam.width.max(1)), u32::from(cam.height.max(1)));
+    let rough = EgomotionParams {
+        refine_iterations: p.egomotion.refine_iterations.min(p.hypothesis_refine_iterations),
+        ..p.egomotion
+    };
     let estimate = |keep: &dyn Fn(&FlowSample) -> bool| {
         let chosen: Vec<&FlowSample> = per_cluster
             .iter()
@@ -460,7 +464,7 @@ fn select_hypothesis(
         // re-estimated from all its samples afterwards).
         let stride = chosen.len().div_ceil(p.hypothesis_max_samples.max(1)).max(1);
         let sub: Vec<&FlowSample> = chosen.iter().step_by(stride).copied().collect();
-        estimate_translation(&sub, &ev.x, &ev.y, cam.width, cam.height, &p.egomotion)
+        estimate_translation(&sub, &ev.x, &ev.y, cam.width, cam.height, &rough)
     };
     let mut hypotheses: Vec<[f64; 3]> = previous.into_iter().collect();
     let candidate_set: Vec<bool> = priors.iter().map(|&q| q >= p.candidate_threshold).collect();

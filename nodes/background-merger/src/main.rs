@@ -89,6 +89,11 @@ fn main() -> ExitCode {
         "a cluster's area counts prior_floor + prior in a hypothesis' score",
     )
     .param(
+        "hypothesis_refine_iterations",
+        d.hypothesis_refine_iterations,
+        "most depth-refinement rounds per hypothesis estimate",
+    )
+    .param(
         "hypothesis_max_samples",
         d.hypothesis_max_samples,
         "most samples per hypothesis estimate (more are subsampled)",
@@ -172,6 +177,7 @@ fn main() -> ExitCode {
             hypotheses: cfg.param("hypotheses")?,
             prior_floor: cfg.param("prior_floor")?,
             hypothesis_max_samples: cfg.param("hypothesis_max_samples")?,
+            hypothesis_refine_iterations: cfg.param("hypothesis_refine_iterations")?,
             refine_rounds: cfg.param("refine_rounds")?,
             warp_cell_px: cfg.param("warp_cell_px")?,
             warp_min_hits: cfg.param("warp_min_hits")?,

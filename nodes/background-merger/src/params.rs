@@ -26,6 +26,11 @@ pub struct BackgroundParams {
     /// tenth of a 640x480 slice's flow samples, plenty for 3 parameters; the ten hypotheses
     /// otherwise made this the graph's slowest stage).
     pub hypothesis_max_samples: usize,
+    /// Most rounds of the depth refinement per hypothesis estimate (the egomotion's
+    /// `refine_iterations` when smaller). Default 10: the hypotheses only need to be roughly
+    /// right, the winner is re-estimated with every round; the ten hypotheses' refinements
+    /// were the largest part of the stage's time (`evseg bench pipeline`, `perf`).
+    pub hypothesis_refine_iterations: usize,
     /// Rounds of "SVM on the background, residuals, background = consistent candidates"
     /// (default 2: the second round drops the candidates the first translation does not explain,
     /// such as an object the planar vote missed, from the SVM; a third changed nothing on the
@@ -98,6 +103,7 @@ impl Default for BackgroundParams {
             hypotheses: true,
             prior_floor: 0.5,
             hypothesis_max_samples: 3000,
+            hypothesis_refine_iterations: 10,
             refine_rounds: 2,
             warp_cell_px: 4,
             warp_min_hits: 10,
