@@ -69,7 +69,7 @@ pub fn flow_direction(
         let e = translational_flow(s.x, s.y, t, 1.0);
         ex += e[0];
         ey += e[1];
-        elen += e[0].hypot(e[1]);
+        elen += (e[0] * e[0] + e[1] * e[1]).sqrt(); // not hypot: libm's is several times slower, and these lengths cannot overflow
     }
     let m = samples.len() as f64;
     let tr = sxx + syy;

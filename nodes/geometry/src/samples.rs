@@ -59,7 +59,7 @@ pub fn flow_samples(
         let (u, v) = (events.x[i], events.y[i]);
         let [x, y] = table.event(i, u, v)?;
         let (fx, fy, c) = (f64::from(flow.nx[i]), f64::from(flow.ny[i]), flow.confidence[i]);
-        let n = fx.hypot(fy);
+        let n = (fx * fx + fy * fy).sqrt(); // not hypot: libm's is several times slower; f32 inputs cannot overflow
         if !(c > min_confidence && n.is_finite() && n > 0.0) {
             continue;
         }
