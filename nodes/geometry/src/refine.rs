@@ -96,18 +96,9 @@ pub fn refine_direction_robust(
             let (_, med, _) = abs_res.select_nth_unstable_by(mid, f64::total_cmp);
             scale = Some((1.4826 * *med).max(f64::MIN_POSITIVE));
         }
-        let Some(next) = m.cholesky().map(|c| c.solve(&b)) else {
-            break;
-        };
-        let nn = next.norm();
-        if !(nn.is_finite() && nn > 0.0) {
-            break;
-        }
-        let next = next / nn;
-        let change = (next - t).norm();
-        t = next;
-        if change < CONVERGED {
-            break;
+        match direction_step(&m, &b, &mut t) {
+            Some(change) if change >= CONVERGED => {}
+            _ => break,
         }
     }
     Some(t.into())
@@ -155,21 +146,27 @@ fn refine_by_moments(
             m += rho * rho * xx;
             b += rho * nx;
         }
-        let Some(next) = m.cholesky().map(|c| c.solve(&b)) else {
-            break;
-        };
-        let nn = next.norm();
-        if !(nn.is_finite() && nn > 0.0) {
-            break;
-        }
-        let next = next / nn;
-        let change = (next - t).norm();
-        t = next;
-        if change < CONVERGED {
-            break;
+        match direction_step(&m, &b, &mut t) {
+            Some(change) if change >= CONVERGED => {}
+            _ => break,
         }
     }
     Some(t.into())
+}
+
+/// The translation half-step shared by both refinements: solves `m t' = b` (the depth-weighted
+/// normal equations), normalizes `t'` and stores it in `t`. Returns how far the unit direction
+/// moved, or `None` (leaving `t`) when the system is singular or the solution degenerate.
+fn direction_step(m: &Matrix3<f64>, b: &Vector3<f64>, t: &mut Vector3<f64>) -> Option<f64> {
+    let next = m.cholesky().map(|c| c.solve(b))?;
+    let nn = next.norm();
+    if !(nn.is_finite() && nn > 0.0) {
+        return None;
+    }
+    let next = next / nn;
+    let change = (next - *t).norm();
+    *t = next;
+    Some(change)
 }
 
 /// Groups `samples` into the cells of a `cols` x `rows` grid over the `width` x `height` pixel
