@@ -84,3 +84,43 @@ pub fn flow_samples(
     }
     Ok(out)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::camera::Camera;
+    use evseg_schemas::CameraInfo;
+
+    #[test]
+    fn each_event_is_derotated_with_the_rate_at_its_own_time() {
+        let info = CameraInfo::pinhole(64, 48, 50.0, "test");
+        let table = Camera::new(&info).undistort_table();
+        // Yaw rate 1 rad/s at t = 0.1 s, growing by 5 rad/s^2; two events near the image centre
+        // (where the rotational flow along x is about -w_y) 20 ms apart, both seeing a flow of 1
+        // along x.
+        let rate = RotationRate {
+            mean: [0.0, 1.0, 0.0],
+            slope: [0.0, 5.0, 0.0],
+            t_ref: 0.1,
+        };
+        let mut events = Events::with_capacity(2);
+        events.push(0.09, 32, 24, 1);
+        events.push(0.11, 32, 24, 1);
+        let flow = NormalFlow {
+            nx: vec![1.0; 2],
+            ny: vec![0.0; 2],
+            confidence: vec![1.0; 2],
+        };
+        let s = flow_samples(&table, &events, &flow, Some(&rate), 0.0).unwrap();
+        let [x, y] = table.get(32, 24).unwrap();
+        let expect = |t: f64| 1.0 - rotational_flow(f64::from(x), f64::from(y), rate.at(t))[0];
+        assert!((s[0].n_derot - expect(0.09)).abs() < 1e-12, "{}", s[0].n_derot);
+        assert!((s[1].n_derot - expect(0.11)).abs() < 1e-12, "{}", s[1].n_derot);
+        // 0.95 and 1.05 rad/s: the two events are derotated differently.
+        assert!(((s[1].n_derot - s[0].n_derot).abs() - 0.1).abs() < 0.01);
+        // A constant rate derotates both alike.
+        let constant = RotationRate::from([0.0, 1.0, 0.0]);
+        let c = flow_samples(&table, &events, &flow, Some(&constant), 0.0).unwrap();
+        assert_eq!(c[0].n_derot, c[1].n_derot);
+    }
+}
