@@ -37,8 +37,8 @@ pub mod params;
 pub mod warp;
 
 use evseg_geometry::{
-    EgomotionParams, FlowSample, RotationRate, TableCache, clear_of_foreground, estimate_translation,
-    flow_direction, flow_samples,
+    EgomotionParams, FlowSample, RotationRate, TableCache, estimate_background_translation,
+    estimate_translation, flow_direction, flow_samples,
 };
 use evseg_schemas::align::AlignError;
 use evseg_schemas::{CameraInfo, Clusters, CoarseSegmentation, Egomotion, Events, NormalFlow, Residuals};
@@ -272,22 +272,12 @@ impl BackgroundMerger {
                 .filter(|(c, _)| in_svm[*c])
                 .flat_map(|(_, m)| m.iter().copied())
                 .collect();
-            let chosen = clear_of_foreground(
+            let estimate = estimate_background_translation(
                 &chosen,
-                &events.x,
-                &events.y,
+                events,
                 (input.camera.width, input.camera.height),
-                p.egomotion.clear_px,
-                p.egomotion.min_samples,
-                |i| cluster_of(input.clusters, i).is_some_and(|c| !in_svm[c]),
-            );
-            let estimate = estimate_translation(
-                &chosen,
-                &events.x,
-                &events.y,
-                input.camera.width,
-                input.camera.height,
                 &p.egomotion,
+                |i| cluster_of(input.clusters, i).is_some_and(|c| !in_svm[c]),
             );
             direction = estimate.or(previous_direction);
             for (c, members) in per_cluster.iter().enumerate() {

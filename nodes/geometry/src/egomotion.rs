@@ -144,6 +144,29 @@ pub fn clear_of_foreground<'a>(
     }
 }
 
+/// The translation direction of the background `samples` of a slice with `events` seen by a
+/// sensor of `size` = (width, height) pixels, leaving out the samples next to an event with
+/// `foreground(i)` first: [`clear_of_foreground`] with `p.clear_px` and `p.min_samples`, then
+/// [`estimate_translation`]. What both mergers do with their background.
+pub fn estimate_background_translation(
+    samples: &[&FlowSample],
+    events: &evseg_schemas::Events,
+    size: (u16, u16),
+    p: &EgomotionParams,
+    foreground: impl Fn(usize) -> bool,
+) -> Option<[f64; 3]> {
+    let kept = clear_of_foreground(
+        samples,
+        &events.x,
+        &events.y,
+        size,
+        p.clear_px,
+        p.min_samples,
+        foreground,
+    );
+    estimate_translation(&kept, &events.x, &events.y, size.0, size.1, p)
+}
+
 /// The unit translation direction (camera frame) of the background `samples`, whose events lie
 /// at pixels `x`, `y` (the slice's event columns) of a `width` x `height` sensor. `None` with too
 /// few samples or no translation signal.

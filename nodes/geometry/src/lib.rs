@@ -32,7 +32,9 @@ pub mod translation;
 pub use camera::{Camera, TableCache, UndistortTable};
 pub use density::density_weights;
 pub use direction::{FlowDirection, flow_direction};
-pub use egomotion::{EgomotionParams, clear_of_foreground, estimate_translation};
+pub use egomotion::{
+    EgomotionParams, clear_of_foreground, estimate_background_translation, estimate_translation,
+};
 pub use motion::{a_matrix, b_matrix, c_matrix, planar_flow, rotational_flow, translational_flow};
 pub use refine::{grid_regions, refine_direction, refine_direction_robust};
 pub use rotation::RotationRate;

@@ -26,8 +26,7 @@ pub mod fill;
 pub mod params;
 
 use evseg_geometry::{
-    FlowSample, RotationRate, TableCache, TranslationFit, clear_of_foreground, estimate_translation,
-    flow_samples,
+    FlowSample, RotationRate, TableCache, TranslationFit, estimate_background_translation, flow_samples,
 };
 use evseg_schemas::align::AlignError;
 use evseg_schemas::{CameraInfo, CoarseSegmentation, Egomotion, Events, NormalFlow, Segment, Segmentation};
@@ -397,22 +396,12 @@ impl HierarchicalMerger {
 
         // 5. Final egomotion on the final background.
         let bg_samples: Vec<&FlowSample> = samples.iter().filter(|s| label[s.index] == 0).collect();
-        let bg_samples = clear_of_foreground(
+        let estimate = estimate_background_translation(
             &bg_samples,
-            &events.x,
-            &events.y,
+            events,
             (camera.width, camera.height),
-            p.egomotion.clear_px,
-            p.egomotion.min_samples,
-            |i| label[i] != 0,
-        );
-        let estimate = estimate_translation(
-            &bg_samples,
-            &events.x,
-            &events.y,
-            camera.width,
-            camera.height,
             &p.egomotion,
+            |i| label[i] != 0,
         );
         let egomotion = match estimate {
             Some(direction) => Egomotion {
