@@ -37,7 +37,7 @@ pub mod fit;
 pub mod smooth;
 pub mod two_means;
 
-use evseg_geometry::{RotationRate, TableCache, density_weights, flow_samples};
+use evseg_geometry::{FlowSample, RotationRate, TableCache, density_weights, flow_samples};
 use evseg_schemas::align::AlignError;
 use evseg_schemas::{CameraInfo, Events, NormalFlow, Residuals};
 
@@ -79,6 +79,19 @@ pub struct PlanarParams {
     /// textured background: on the simulator's one-object scene the object holds 45 % of the
     /// events on 15 % of the image and the plain fit follows the object.
     pub density_cell_px: u16,
+    /// Discount of long flows' residuals before the smoothing and the split: each event's `|r|`
+    /// is scaled by `(1 + k) n_med / (n + k n_med)` (`n` its normal-flow length, `n_med` the
+    /// slice's median length; 1 at the median length, so the residual keeps its units and
+    /// `min_center_gap` its meaning), because an estimated normal flow's error grows with its
+    /// length (mostly rotational flow; see `evseg_geometry::EgomotionParams::
+    /// magnitude_weighting`), so a long flow's residual says less about independent motion.
+    /// 0 = off (absolute residuals, as in the paper). Default 6, the middle of the flat part
+    /// of `evseg bench` (evseg-bench-v1) over k = 4 / 6 / 8 (IoU mask 33.04 / 33.03 / 33.08 %
+    /// against 29.85 % off; 16: 30.28 %); k = 1 or 2 (nearly relative residuals) lost on the
+    /// object scenes (hierarchical merger's `examples/method_on_sim.rs`, one-object 0.31 ->
+    /// 0.20 / 0.28) while helping fast-rotation (0.13 -> 0.17), whose long rotational flows
+    /// otherwise dominate the split.
+    pub residual_length_k: f64,
     /// Support needed to classify an event without flow (Gaussian-weighted count of valid
     /// events around it, 1 = one event in the same cell; default 1).
     pub min_support: f64,
@@ -97,6 +110,7 @@ impl Default for PlanarParams {
             classify_invalid: true,
             min_support: 1.0,
             density_cell_px: 8,
+            residual_length_k: 6.0,
         }
     }
 }
@@ -153,6 +167,13 @@ impl PlanarSegmenter {
         };
         if params.cell_px == 0 {
             return bad("cell_px", "0".into(), "must be >= 1");
+        }
+        if !(params.residual_length_k.is_finite() && params.residual_length_k >= 0.0) {
+            return bad(
+                "residual_length_k",
+                params.residual_length_k.to_string(),
+                "must be finite and >= 0",
+            );
         }
         if !(params.sigma_px.is_finite() && params.sigma_px >= 0.0) {
             return bad("sigma_px", params.sigma_px.to_string(), "must be finite and >= 0");
@@ -241,10 +262,11 @@ impl PlanarSegmenter {
         };
 
         let mut grid = SmoothGrid::new(camera.width, camera.height, p.cell_px);
-        for (e, &i) in eqs.iter().zip(&index) {
+        let discount = length_discount(&samples, p.residual_length_k);
+        for (k, (e, &i)) in eqs.iter().zip(&index).enumerate() {
             let r = e.residual(&a);
             residual[i] = r as f32;
-            grid.add(events.x[i], events.y[i], r.abs());
+            grid.add(events.x[i], events.y[i], r.abs() * discount(k));
         }
         grid.blur(p.sigma_px);
         let mut values = Vec::with_capacity(index.len());
@@ -281,6 +303,26 @@ impl PlanarSegmenter {
             fitted_events: eqs.len(),
             derotated: w.is_some(),
         })
+    }
+}
+
+/// The factor `(1 + k) n_med / (n_i + k n_med)` for sample `i` of `samples` (see
+/// [`PlanarParams::residual_length_k`]); 1 for every sample when `k` is 0 or the median length
+/// is not positive.
+fn length_discount(samples: &[FlowSample], k: f64) -> impl Fn(usize) -> f64 + '_ {
+    let n_med = if k > 0.0 && !samples.is_empty() {
+        let mut ns: Vec<f64> = samples.iter().map(|s| s.n).collect();
+        let mid = ns.len() / 2;
+        *ns.select_nth_unstable_by(mid, f64::total_cmp).1
+    } else {
+        0.0
+    };
+    move |i| {
+        if n_med > 0.0 {
+            (1.0 + k) * n_med / (samples[i].n + k * n_med)
+        } else {
+            1.0
+        }
     }
 }
 

@@ -91,6 +91,11 @@ fn main() -> ExitCode {
     .param("ridge", d.fit.ridge, "Tikhonov regularization per equation")
     .param("cell_px", d.cell_px, "smoothing grid cell, pixels")
     .param(
+        "residual_length_k",
+        d.residual_length_k,
+        "residuals scaled by (1 + k) n_med / (n + k n_med) before smoothing and the split: long flows' residuals count less (0 = absolute residuals, the paper)",
+    )
+    .param(
         "sigma_px",
         d.sigma_px,
         "Gaussian smoothing standard deviation, pixels",
@@ -129,6 +134,7 @@ fn main() -> ExitCode {
             },
             cell_px: cfg.param("cell_px")?,
             sigma_px: cfg.param("sigma_px")?,
+            residual_length_k: cfg.param("residual_length_k")?,
             min_center_gap: cfg.param("min_center_gap")?,
             two_means_iter: cfg.param("two_means_iter")?,
             classify_invalid: cfg.param("classify_invalid")?,

@@ -318,3 +318,28 @@ fn malformed_input_is_an_error() {
         assert!(matches!(PlanarSegmenter::new(p), Err(PlanarError::Param(_))));
     }
 }
+
+#[test]
+fn long_flows_residuals_are_discounted_relative_to_the_median_length() {
+    let sample = |n: f64| FlowSample {
+        index: 0,
+        x: 0.0,
+        y: 0.0,
+        n0: [1.0, 0.0],
+        n,
+        n_derot: n,
+        confidence: 1.0,
+    };
+    let samples: Vec<FlowSample> = [0.5, 1.0, 1.0, 2.0, 8.0].into_iter().map(sample).collect();
+    // Median length 1: the median sample keeps its residual, k = 6.
+    let d = length_discount(&samples, 6.0);
+    assert!((d(1) - 1.0).abs() < 1e-12);
+    assert!((d(0) - 7.0 / 6.5).abs() < 1e-12, "shorter: a little more");
+    assert!((d(3) - 7.0 / 8.0).abs() < 1e-12);
+    assert!((d(4) - 7.0 / 14.0).abs() < 1e-12, "8x the median: half");
+    // Off, and no samples.
+    let off = length_discount(&samples, 0.0);
+    assert!((0..5).all(|i| off(i) == 1.0));
+    let none = length_discount(&[], 6.0);
+    assert_eq!(none(0), 1.0);
+}
