@@ -161,6 +161,17 @@ impl CameraInfo {
             sensor: sensor.to_string(),
         }
     }
+
+    /// A vector of the IMU frame (a gyro rate, rad/s) in the camera frame:
+    /// `imu_to_camera * v`.
+    pub fn imu_vector_to_camera(&self, v: [f64; 3]) -> [f64; 3] {
+        let r = &self.imu_to_camera;
+        [
+            r[0] * v[0] + r[1] * v[1] + r[2] * v[2],
+            r[3] * v[0] + r[4] * v[1] + r[5] * v[2],
+            r[6] * v[0] + r[7] * v[1] + r[8] * v[2],
+        ]
+    }
 }
 
 /// What a source publishes per batch on its `events` output: a time-ordered chunk of events, the

@@ -105,7 +105,7 @@ impl RotationRate {
         let (mut stt, mut stw) = (0.0, [0.0; 3]);
         for s in usable() {
             let dt = s.t + offset - t_mean;
-            let w = rotate(&camera.imu_to_camera, s.gyro);
+            let w = camera.imu_vector_to_camera(s.gyro);
             stt += dt * dt;
             for (a, wi) in stw.iter_mut().zip(w) {
                 *a += dt * wi;
@@ -120,23 +120,12 @@ impl RotationRate {
             t_ref: t_mean,
         })
     }
-}
 
-impl RotationRate {
     /// [`RotationRate::from_gyro`] of a slice with window `span` (seconds): its mean rate
     /// `omega`, gyro samples and camera.
     pub fn of_slice(slice: &Slice, span: (f64, f64), linear: bool) -> Option<Self> {
         Self::from_gyro(slice.omega, &slice.imu, &slice.camera, span, linear)
     }
-}
-
-/// `m v` for a row-major 3x3 matrix.
-fn rotate(m: &[f64; 9], v: [f64; 3]) -> [f64; 3] {
-    [
-        m[0] * v[0] + m[1] * v[1] + m[2] * v[2],
-        m[3] * v[0] + m[4] * v[1] + m[5] * v[2],
-        m[6] * v[0] + m[7] * v[1] + m[8] * v[2],
-    ]
 }
 
 #[cfg(test)]
@@ -165,10 +154,10 @@ mod tests {
         let mean_imu = ts.iter().map(|&t| rate_imu(t)).fold([0.0; 3], |a, w| {
             [a[0] + w[0] / 6.0, a[1] + w[1] / 6.0, a[2] + w[2] / 6.0]
         });
-        let mean = rotate(&cam.imu_to_camera, mean_imu);
+        let mean = cam.imu_vector_to_camera(mean_imu);
         let r = RotationRate::from_gyro(Some(mean), &samples, &cam, (0.1, 0.13), true).unwrap();
         for t_imu in [0.1, 0.117, 0.13] {
-            let want = rotate(&cam.imu_to_camera, rate_imu(t_imu));
+            let want = cam.imu_vector_to_camera(rate_imu(t_imu));
             let got = r.at(t_imu + 0.002);
             for (g, w) in got.iter().zip(want) {
                 assert!((g - w).abs() < 1e-9, "t {t_imu}: {got:?} vs {want:?}");

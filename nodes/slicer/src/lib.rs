@@ -79,14 +79,6 @@ pub struct Slicer {
     without_rate: u64,
 }
 
-fn rotate(r: &[f64; 9], v: [f64; 3]) -> [f64; 3] {
-    [
-        r[0] * v[0] + r[1] * v[1] + r[2] * v[2],
-        r[3] * v[0] + r[4] * v[1] + r[5] * v[2],
-        r[6] * v[0] + r[7] * v[1] + r[8] * v[2],
-    ]
-}
-
 impl Slicer {
     /// A slicer with `params`.
     pub fn new(params: SlicerParams) -> Result<Self, SlicerError> {
@@ -213,7 +205,7 @@ impl Slicer {
                 }
             }
             let k = imu.len() as f64;
-            let w = rotate(&camera.imu_to_camera, [m[0] / k, m[1] / k, m[2] / k]);
+            let w = camera.imu_vector_to_camera([m[0] / k, m[1] / k, m[2] / k]);
             self.last_rate = Some((t_end, w));
             Some(w)
         };
