@@ -10,7 +10,7 @@
 //! residual, one-object / two-objects).
 
 use crate::motion::translational_flow;
-use crate::samples::FlowSample;
+use crate::samples::{FlowSample, median_length};
 
 /// The fitted flow of a region and the angle to its translational flow direction.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -47,10 +47,8 @@ pub fn flow_direction(
         return None;
     }
     let med2 = if magnitude_weighting {
-        let mut ns: Vec<f64> = samples.iter().map(|s| s.n.abs()).collect();
-        let mid = ns.len() / 2;
-        let (_, med, _) = ns.select_nth_unstable_by(mid, f64::total_cmp);
-        Some((*med * *med).max(f64::MIN_POSITIVE))
+        let med = median_length(samples.iter().copied()).unwrap_or(0.0);
+        Some((med * med).max(f64::MIN_POSITIVE))
     } else {
         None
     };

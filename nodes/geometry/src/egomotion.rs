@@ -4,7 +4,7 @@
 
 use crate::density::density_weights;
 use crate::refine::{grid_regions, refine_direction_robust};
-use crate::samples::FlowSample;
+use crate::samples::{FlowSample, median_length};
 use crate::svm::{SvmParams, translation_direction};
 
 /// Settings of [`estimate_translation`].
@@ -208,10 +208,8 @@ pub fn estimate_translation(
         vec![1.0; samples.len()]
     };
     let weights = if p.magnitude_weighting {
-        let mut ns: Vec<f64> = samples.iter().map(|s| s.n.abs()).collect();
-        let mid = ns.len() / 2;
-        let (_, med, _) = ns.select_nth_unstable_by(mid, f64::total_cmp);
-        let med2 = (*med * *med).max(f64::MIN_POSITIVE);
+        let med = median_length(samples.iter().copied()).unwrap_or(0.0);
+        let med2 = (med * med).max(f64::MIN_POSITIVE);
         weights
             .iter()
             .zip(samples)

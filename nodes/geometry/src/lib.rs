@@ -38,6 +38,6 @@ pub use egomotion::{
 pub use motion::{a_matrix, b_matrix, c_matrix, planar_flow, rotational_flow, translational_flow};
 pub use refine::{grid_regions, refine_direction, refine_direction_robust};
 pub use rotation::RotationRate;
-pub use samples::{FlowSample, flow_samples};
+pub use samples::{FlowSample, flow_samples, median_length};
 pub use svm::{SvmDirection, SvmParams, translation_direction};
 pub use translation::TranslationFit;

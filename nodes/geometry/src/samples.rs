@@ -42,6 +42,18 @@ impl FlowSample {
     }
 }
 
+/// The median normal-flow length `n` of `samples` (normalized units/s; the upper median of an
+/// even count), `None` without samples: the scale the magnitude weighting of the egomotion and
+/// of the direction test, and the planar segmenter's residual discount, are relative to.
+pub fn median_length<'a>(samples: impl IntoIterator<Item = &'a FlowSample>) -> Option<f64> {
+    let mut ns: Vec<f64> = samples.into_iter().map(|s| s.n.abs()).collect();
+    if ns.is_empty() {
+        return None;
+    }
+    let mid = ns.len() / 2;
+    Some(*ns.select_nth_unstable_by(mid, f64::total_cmp).1)
+}
+
 /// The samples of a slice: every event whose flow has confidence above `min_confidence` and a
 /// finite non-zero length, derotated with the rotation `rate` at each event's time when given.
 ///

@@ -37,7 +37,7 @@ pub mod fit;
 pub mod smooth;
 pub mod two_means;
 
-use evseg_geometry::{FlowSample, RotationRate, TableCache, density_weights, flow_samples};
+use evseg_geometry::{FlowSample, RotationRate, TableCache, density_weights, flow_samples, median_length};
 use evseg_schemas::align::AlignError;
 use evseg_schemas::{CameraInfo, Events, NormalFlow, Residuals};
 
@@ -321,10 +321,8 @@ impl PlanarSegmenter {
 /// [`PlanarParams::residual_length_k`]); 1 for every sample when `k` is 0 or the median length
 /// is not positive.
 fn length_discount(samples: &[FlowSample], k: f64) -> impl Fn(usize) -> f64 + '_ {
-    let n_med = if k > 0.0 && !samples.is_empty() {
-        let mut ns: Vec<f64> = samples.iter().map(|s| s.n).collect();
-        let mid = ns.len() / 2;
-        *ns.select_nth_unstable_by(mid, f64::total_cmp).1
+    let n_med = if k > 0.0 {
+        median_length(samples).unwrap_or(0.0)
     } else {
         0.0
     };
