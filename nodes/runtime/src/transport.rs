@@ -450,6 +450,8 @@ pub fn encode_payload<T: evseg_schemas::Message>(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use evseg_schemas::codec;
+    use evseg_schemas::{EventPacket, Events};
 
     #[test]
     fn gaps_count_what_never_arrived_including_a_lost_start_and_end() {
@@ -465,8 +467,6 @@ mod tests {
         g.end(0, 9); // 7 and 8 never came
         assert_eq!(g.missing(), 6);
     }
-    use evseg_schemas::codec;
-    use evseg_schemas::{EventPacket, Events};
 
     fn packet(n: usize) -> EventPacket {
         let mut events = Events::with_capacity(n);
