@@ -308,6 +308,14 @@ fn malformed_input_is_an_error() {
             ..Default::default()
         },
         PlanarParams {
+            residual_length_k: -1.0,
+            ..Default::default()
+        },
+        PlanarParams {
+            residual_length_k: f64::NAN,
+            ..Default::default()
+        },
+        PlanarParams {
             fit: FitParams {
                 robust: Robust::Huber { k: 0.0 },
                 ..Default::default()
