@@ -18,6 +18,7 @@
 
 #![deny(missing_docs)]
 
+pub mod consensus;
 pub mod estimator;
 pub mod fit;
 pub mod learned;
@@ -28,6 +29,7 @@ pub mod score;
 pub mod train;
 pub mod weights;
 
+pub use consensus::{ConsensusParams, ConsensusStats, consensus};
 pub use estimator::{EstimatorError, EstimatorStats, PixelEstimate, PlaneFitEstimator, jacobian_table};
 pub use fit::{Neighbourhood, PlaneFit, fit_plane};
 pub use learned::{LearnedError, LearnedEstimator, LearnedParams};

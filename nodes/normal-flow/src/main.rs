@@ -5,7 +5,9 @@
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use evseg_normal_flow::{NodeScore, PlaneFitEstimator, PlaneFitParams, Score, write_run_score};
+use evseg_normal_flow::{
+    ConsensusParams, NodeScore, PlaneFitEstimator, PlaneFitParams, Score, consensus, write_run_score,
+};
 use evseg_runtime::describe::Describe;
 use evseg_runtime::{BoxError, Inputs, NodeConfig, Outputs, Stage, run_stage};
 use evseg_schemas::{NormalFlow, Slice, Truth};
@@ -15,6 +17,8 @@ struct NormalFlowNode {
     node: String,
     run_dir: PathBuf,
     params: PlaneFitParams,
+    consensus: ConsensusParams,
+    replaced: u64,
     estimator: Option<PlaneFitEstimator>,
     score: NodeScore,
     slices: u64,
@@ -34,6 +38,10 @@ struct RunReport<'a> {
     outlier_ms: f64,
     max_speed_px_s: f64,
     min_confidence: f64,
+    consensus_cell_px: u16,
+    consensus_max_deviation: f64,
+    /// Estimates whose length the neighbourhood consensus replaced.
+    consensus_replaced: u64,
     events: u64,
     valid: u64,
     out_of_sensor: u64,
@@ -63,8 +71,16 @@ impl Stage for NormalFlowNode {
             return Ok(());
         };
         let before = estimator.stats();
-        let flow: NormalFlow = estimator.process(&slice.events)?;
+        let mut flow: NormalFlow = estimator.process(&slice.events)?;
         let after = estimator.stats();
+        let c = consensus(
+            &slice.events,
+            &mut flow,
+            slice.camera.width,
+            slice.camera.height,
+            &self.consensus,
+        );
+        self.replaced += c.replaced as u64;
         let ignored = (after.out_of_sensor - before.out_of_sensor) + (after.bad_time - before.bad_time);
         if ignored > 0 {
             tracing::warn!(
@@ -99,6 +115,9 @@ impl Stage for NormalFlowNode {
             outlier_ms: p.outlier_s * 1e3,
             max_speed_px_s: p.max_speed_px_s,
             min_confidence: p.min_confidence,
+            consensus_cell_px: self.consensus.cell_px,
+            consensus_max_deviation: self.consensus.max_deviation,
+            consensus_replaced: self.replaced,
             events: stats.events,
             valid: stats.valid,
             out_of_sensor: stats.out_of_sensor,
@@ -113,6 +132,7 @@ impl Stage for NormalFlowNode {
 
 fn main() -> ExitCode {
     let d = PlaneFitParams::default();
+    let dc = ConsensusParams::default();
     let description = Describe::new(
         "evseg-normal-flow",
         "Per-event normal flow by local plane fits on the surface of active events (Benosman et al. 2014)",
@@ -179,6 +199,31 @@ fn main() -> ExitCode {
         d.min_confidence,
         "fits with a confidence at or below this are invalid, [0, 1)",
     )
+    .param(
+        "consensus_cell_px",
+        u64::from(dc.cell_px),
+        "neighbourhood consensus: grid cell, pixels (neighbourhood = 3x3 cells); 0 = off",
+    )
+    .param(
+        "consensus_min_neighbours",
+        dc.min_neighbours as u64,
+        "neighbourhood consensus: fewest valid neighbours for a prediction",
+    )
+    .param(
+        "consensus_max_deviation",
+        dc.max_deviation,
+        "neighbourhood consensus: relative deviation from the neighbours' prediction above which an estimate's length is replaced",
+    )
+    .param(
+        "consensus_min_deviation",
+        dc.min_deviation,
+        "neighbourhood consensus: ...and by more than this, normalized units/s",
+    )
+    .param(
+        "consensus_ridge",
+        dc.ridge,
+        "neighbourhood consensus: ridge of the local 2-D flow fit, relative to the summed weight",
+    )
     .build();
     run_stage(description, |cfg: &NodeConfig| {
         let params = PlaneFitParams {
@@ -196,10 +241,20 @@ fn main() -> ExitCode {
                 .map_or(f64::INFINITY, f64::to_radians),
         };
         params.validate()?;
+        let consensus = ConsensusParams {
+            cell_px: cfg.param::<u16>("consensus_cell_px")?,
+            min_neighbours: cfg.param::<usize>("consensus_min_neighbours")?,
+            max_deviation: cfg.param::<f64>("consensus_max_deviation")?,
+            min_deviation: cfg.param::<f64>("consensus_min_deviation")?,
+            ridge: cfg.param::<f64>("consensus_ridge")?,
+        };
+        consensus.validate()?;
         Ok(NormalFlowNode {
             node: cfg.node.clone(),
             run_dir: cfg.run_dir.clone(),
             params,
+            consensus,
+            replaced: 0,
             estimator: None,
             score: NodeScore::default(),
             slices: 0,
