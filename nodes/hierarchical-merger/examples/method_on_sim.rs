@@ -6,7 +6,14 @@
 //! env: SEED (1), SECONDS (2), FLOW (est | ideal; "ideal" puts n0 along the true flow, which
 //! makes the SVM degenerate), SET ("name=value,...": background-merger, hierarchical-merger and
 //! planar parameters, several variants separated by ';'), VERBOSE (per-slice cluster reports),
-//! FLOW_MIN_CONF (the plane-fit estimator's min_confidence), DUMP=k (PNG panels of slice k: truth, planar, coarse, final, in /tmp/dump-<scene>.png).
+//! FLOW_MIN_CONF (the plane-fit estimator's min_confidence; default 0 as in graph.yaml),
+//! NF_LOOKAHEAD_MS / NF_RADIUS / NF_DT_MAX_MS / NF_OUTLIER_MS (its other settings), CONS
+//! ("cell,min_neighbours,max_deviation[,ridge]" of the normal-flow consensus, default as the
+//! node; "0" = off), DUMP=k (PNG panels of slice k: truth, planar, coarse, final, in
+//! /tmp/dump-<scene>.png). It prints the share of normal-flow lengths more than 30 % off the
+//! truth. Flow oracles: FLOW=truemag (true length along the estimated direction), with
+//! DROPTAIL=x (drop the estimates more than x off instead) or DROPTAIL=-x (only those take the
+//! true length).
 //! Diagnostics that replace the final labels: ORACLE_CLUSTERS (each cluster labelled by its
 //! ground-truth majority: the over-segmentation's ceiling), ORACLE_T=ratio (a cluster is
 //! background when the true camera translation explains it with a depth of its own).
@@ -160,6 +167,24 @@ fn main() -> anyhow::Result<()> {
     let seed: u64 = env_or("SEED", 1)?;
     let seconds: f64 = env_or("SECONDS", 2.0)?;
     let ideal = env_or("FLOW", String::from("est"))? == "ideal";
+    let truemag = env_or("FLOW", String::from("est"))? == "truemag";
+    let cons: Option<evseg_normal_flow::ConsensusParams> = match std::env::var("CONS") {
+        Err(_) => Some(evseg_normal_flow::ConsensusParams::default()),
+        Ok(v) => {
+            let d = evseg_normal_flow::ConsensusParams::default();
+            let f: Vec<f64> = v.split(',').filter_map(|x| x.parse().ok()).collect();
+            let p = evseg_normal_flow::ConsensusParams {
+                cell_px: f.first().map_or(d.cell_px, |&c| c as u16),
+                min_neighbours: f.get(1).map_or(d.min_neighbours, |&c| c as usize),
+                max_deviation: f.get(2).copied().unwrap_or(d.max_deviation),
+                ridge: f.get(3).copied().unwrap_or(d.ridge),
+                ..d
+            };
+            (p.cell_px > 0).then_some(p)
+        }
+    };
+    let mut cstat = (0usize, 0usize);
+    let droptail: Option<f64> = std::env::var("DROPTAIL").ok().and_then(|v| v.parse().ok());
     let sets: Vec<String> = env_or("SET", String::new())?
         .split(';')
         .map(str::to_string)
@@ -183,11 +208,15 @@ fn main() -> anyhow::Result<()> {
                 slices.push((s.slice, s.truth.unwrap_or_default(), (s.t_start, s.t_end)));
             }
         }
-        let flow_conf: f64 = env_or("FLOW_MIN_CONF", PlaneFitParams::default().min_confidence)?;
+        let flow_conf: f64 = env_or("FLOW_MIN_CONF", 0.0)?;
         let mut est = PlaneFitEstimator::new(
             &camera,
             PlaneFitParams {
                 min_confidence: flow_conf,
+                lookahead_s: env_or("NF_LOOKAHEAD_MS", PlaneFitParams::default().lookahead_s * 1e3)? * 1e-3,
+                radius: env_or("NF_RADIUS", PlaneFitParams::default().radius)?,
+                dt_max_s: env_or("NF_DT_MAX_MS", PlaneFitParams::default().dt_max_s * 1e3)? * 1e-3,
+                outlier_s: env_or("NF_OUTLIER_MS", PlaneFitParams::default().outlier_s * 1e3)? * 1e-3,
                 ..PlaneFitParams::default()
             },
         )?;
@@ -208,11 +237,97 @@ fn main() -> anyhow::Result<()> {
                         f.confidence.push(1.0);
                     }
                     Ok(f)
+                } else if truemag {
+                    let mut f = est.process(&s.events)?;
+                    for i in 0..s.events.len() {
+                        let (nx, ny) = (f64::from(f.nx[i]), f64::from(f.ny[i]));
+                        let len = (nx * nx + ny * ny).sqrt();
+                        if !(f.confidence[i] > 0.0 && len > 0.0) {
+                            continue;
+                        }
+                        let v = cam.pixel_flow_to_normalized(
+                            f64::from(s.events.x[i]),
+                            f64::from(s.events.y[i]),
+                            f64::from(truth.flow_x[i]),
+                            f64::from(truth.flow_y[i]),
+                        );
+                        let (ux, uy) = (nx / len, ny / len);
+                        let m = v[0] * ux + v[1] * uy;
+                        let e = (len / m - 1.0).abs();
+                        let off = |x: f64| e.is_nan() || e > x;
+                        match droptail {
+                            Some(x) if x < 0.0 => {
+                                // Only the lengths more than -x off take the true value.
+                                if off(-x) {
+                                    f.nx[i] = (m * ux) as f32;
+                                    f.ny[i] = (m * uy) as f32;
+                                }
+                            }
+                            Some(x) => {
+                                // The lengths more than x off are dropped.
+                                if off(x) {
+                                    f.confidence[i] = 0.0;
+                                    f.nx[i] = 0.0;
+                                    f.ny[i] = 0.0;
+                                }
+                            }
+                            None => {
+                                f.nx[i] = (m * ux) as f32;
+                                f.ny[i] = (m * uy) as f32;
+                            }
+                        }
+                    }
+                    Ok(f)
+                } else if let Some(cp) = cons {
+                    let mut f = est.process(&s.events)?;
+                    let st =
+                        evseg_normal_flow::consensus(&s.events, &mut f, s.camera.width, s.camera.height, &cp);
+                    cstat.0 += st.valid;
+                    cstat.1 += st.replaced;
+                    Ok(f)
                 } else {
                     est.process(&s.events)
                 }
             })
             .collect::<Result<_, _>>()?;
+        if cons.is_some() {
+            println!("consensus: replaced {} of {} valid", cstat.1, cstat.0);
+        }
+        {
+            // Tail census of the normal-flow lengths against the truth: share of valid estimates
+            // with |len / (u . n0) - 1| > 0.3, background and objects, and of those the share
+            // with the wrong sign.
+            let mut c = [[0usize; 2]; 2];
+            let mut wrong_sign = 0usize;
+            for ((s, truth, _), f) in slices.iter().zip(&flows) {
+                for i in 0..s.events.len() {
+                    let (nx, ny) = (f64::from(f.nx[i]), f64::from(f.ny[i]));
+                    let len = (nx * nx + ny * ny).sqrt();
+                    if f.confidence[i] <= 0.0 || len <= 0.0 {
+                        continue;
+                    }
+                    let v = cam.pixel_flow_to_normalized(
+                        f64::from(s.events.x[i]),
+                        f64::from(s.events.y[i]),
+                        f64::from(truth.flow_x[i]),
+                        f64::from(truth.flow_y[i]),
+                    );
+                    let m = (v[0] * nx + v[1] * ny) / len;
+                    let tail = (len / m - 1.0).abs().is_nan() || (len / m - 1.0).abs() > 0.3;
+                    c[usize::from(truth.event_object[i] != 0)][usize::from(tail)] += 1;
+                    wrong_sign += usize::from(tail && m < 0.0);
+                }
+            }
+            let tails = c[0][1] + c[1][1];
+            println!(
+                "length tail (> 30 % off): background {:.3} of {}, objects {:.3} of {}; wrong sign {:.3} of the tail",
+                c[0][1] as f64 / (c[0][0] + c[0][1]).max(1) as f64,
+                c[0][0] + c[0][1],
+                c[1][1] as f64 / (c[1][0] + c[1][1]).max(1) as f64,
+                c[1][0] + c[1][1],
+                wrong_sign as f64 / tails.max(1) as f64
+            );
+        }
         {
             let (mut ov, mut on, mut bv, mut bn) = (0usize, 0usize, 0usize, 0usize);
             for ((_, truth, _), f) in slices.iter().zip(&flows) {
@@ -468,7 +583,13 @@ fn main() -> anyhow::Result<()> {
             let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
             println!(
                 "{name:14} seed {seed} flow {} [{set}] slices {:3} IoU mean {:.3} pooled {:.3} (planar {:.3}, coarse {:.3}) dir median {:.1} deg (n {})",
-                if ideal { "ideal" } else { "est" },
+                if ideal {
+                    "ideal"
+                } else if truemag {
+                    "truemag"
+                } else {
+                    "est"
+                },
                 ious.len(),
                 mean(&ious),
                 inter_all as f64 / union_all.max(1) as f64,
