@@ -128,9 +128,9 @@ const RUN_RANGE_TEXELS: u32 = 12;
 /// the Jacobian along the path (perspective) and its finite-difference estimate.
 const DISPLACEMENT_SAFETY: f32 = 1.1;
 
-/// Rays located together in a key frame (a multiple of the SIMD width; see
-/// `FrameGeom::locate_lanes`).
-const KEY_LANES: usize = 8;
+/// Rays located and shaded together in a key frame (see `FrameGeom::locate_lanes` and
+/// `FrameGeom::shade_lanes`).
+const KEY_LANES: usize = crate::texture::LANES;
 
 const QUIET: u8 = 0;
 const STABLE: u8 = 1;
@@ -422,46 +422,9 @@ impl Engine {
             }
         }
         let mut block_z = vec![f32::INFINITY; bw * bh];
-        let kf = &mut self.kf1;
         let inv_f = (2.0 / (cfg.camera.fx + cfg.camera.fy)) as f32;
-        for v in 0..h {
-            let brow = (v / BLOCK) * bw;
-            let row = v * w;
-            // Rays are located a group of `KEY_LANES` at a time along the row (see
-            // `FrameGeom::locate_lanes`), then shaded one by one.
-            let mut found = [None; KEY_LANES];
-            for u in 0..w {
-                let i = row + u;
-                let lane = u % KEY_LANES;
-                if lane == 0 {
-                    found = [None; KEY_LANES];
-                    if u + KEY_LANES <= w {
-                        let x: &[f32; KEY_LANES] =
-                            self.rays.x[i..i + KEY_LANES].try_into().expect("lane slice");
-                        let y: &[f32; KEY_LANES] =
-                            self.rays.y[i..i + KEY_LANES].try_into().expect("lane slice");
-                        let px = std::array::from_fn(|l| (u + l) as i32);
-                        found = kf.geom.locate_lanes(x, y, &px, &[v as i32; KEY_LANES]).map(Some);
-                    }
-                }
-                let (x, y) = (self.rays.x[i], self.rays.y[i]);
-                let hit = match &found[lane] {
-                    Some(loc) => kf.geom.shade(&self.scene, x, y, loc),
-                    None => kf.geom.cast(&self.scene, x, y, u as i32, v as i32, None),
-                };
-                kf.l[i] = hit.l;
-                kf.key[i] = hit.key;
-                kf.id[i] = hit.id;
-                kf.u[i] = hit.u;
-                kf.v[i] = hit.v;
-                kf.footprint[i] = hit.footprint;
-                kf.px_size[i] = hit.z * inv_f;
-                if hit.id == 0 {
-                    let b = &mut block_z[brow + u / BLOCK];
-                    *b = b.min(hit.z);
-                }
-            }
-        }
+        cast_keyframe(&mut self.kf1, &self.scene, &self.rays, inv_f, &mut block_z);
+        let kf = &mut self.kf1;
         let mut zmin = f32::INFINITY;
         for (b, z) in self.blocks.iter_mut().zip(&block_z) {
             b.zmin_prev = b.zmin;
@@ -861,6 +824,73 @@ impl Engine {
             listed += usize::from(!settled & (quiet | same));
         }
         self.work.truncate(listed);
+    }
+}
+
+/// Ray casts every pixel of `rays` at `kf.geom` into `kf` (before edge sampling) and lowers
+/// `block_z` (per `BLOCK` x `BLOCK` block) to the background depths seen. With AVX2 (detected
+/// at run time) the same code is compiled for it: the same arithmetic, so the same values
+/// (no fused multiply-adds), with the lane samples inlined.
+fn cast_keyframe(kf: &mut KeyFrame, scene: &Scene, rays: &Rays, inv_f: f32, block_z: &mut [f32]) {
+    #[cfg(target_arch = "x86_64")]
+    if std::is_x86_feature_detected!("avx2") {
+        // SAFETY: AVX2 is available (checked just above).
+        return unsafe { cast_keyframe_avx2(kf, scene, rays, inv_f, block_z) };
+    }
+    cast_keyframe_with(kf, scene, rays, inv_f, block_z);
+}
+
+/// [`cast_keyframe`] compiled with AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn cast_keyframe_avx2(kf: &mut KeyFrame, scene: &Scene, rays: &Rays, inv_f: f32, block_z: &mut [f32]) {
+    cast_keyframe_with(kf, scene, rays, inv_f, block_z);
+}
+
+/// The body of [`cast_keyframe`].
+#[inline(always)]
+fn cast_keyframe_with(kf: &mut KeyFrame, scene: &Scene, rays: &Rays, inv_f: f32, block_z: &mut [f32]) {
+    let (w, h) = (rays.width, rays.height);
+    let bw = w.div_ceil(BLOCK);
+    for v in 0..h {
+        let brow = (v / BLOCK) * bw;
+        let row = v * w;
+        // Rays are located and shaded a group of `KEY_LANES` at a time along the row (see
+        // `FrameGeom::locate_lanes` and `FrameGeom::shade_lanes`), the rest one by one.
+        let mut u = 0;
+        while u < w {
+            let i = row + u;
+            let n = if u + KEY_LANES <= w { KEY_LANES } else { 1 };
+            let mut hits = [None; KEY_LANES];
+            if n == KEY_LANES {
+                let x: &[f32; KEY_LANES] = rays.x[i..i + KEY_LANES].try_into().expect("lane slice");
+                let y: &[f32; KEY_LANES] = rays.y[i..i + KEY_LANES].try_into().expect("lane slice");
+                let px = std::array::from_fn(|l| (u + l) as i32);
+                let found = kf.geom.locate_lanes(x, y, &px, &[v as i32; KEY_LANES]);
+                hits = kf.geom.shade_lanes(scene, x, y, &found).map(Some);
+            } else {
+                hits[0] = Some(
+                    kf.geom
+                        .cast(scene, rays.x[i], rays.y[i], u as i32, v as i32, None),
+                );
+            }
+            for (l, hit) in hits.iter().take(n).enumerate() {
+                let Some(hit) = hit else { continue };
+                let i = i + l;
+                kf.l[i] = hit.l;
+                kf.key[i] = hit.key;
+                kf.id[i] = hit.id;
+                kf.u[i] = hit.u;
+                kf.v[i] = hit.v;
+                kf.footprint[i] = hit.footprint;
+                kf.px_size[i] = hit.z * inv_f;
+                if hit.id == 0 {
+                    let b = &mut block_z[brow + (u + l) / BLOCK];
+                    *b = b.min(hit.z);
+                }
+            }
+            u += n;
+        }
     }
 }
 

@@ -11,6 +11,7 @@
 use crate::camera::CameraConfig;
 use crate::math::{self, V3};
 use crate::scene::{BoxPose, RelativeMotion, Scene};
+use crate::texture::LANES;
 use crate::trajectory::RigidState;
 
 /// Texture coordinate offsets (m) that make the six faces of a box show different parts of its
@@ -27,6 +28,48 @@ const FACE_OFFSET: [[f32; 2]; 6] = [
 const SUBSAMPLES: [(f32, f32); 4] = [(-0.25, -0.25), (0.25, -0.25), (-0.25, 0.25), (0.25, 0.25)];
 /// Smallest cosine of incidence used for the texture footprint (caps the blur at grazing view).
 const MIN_COS: f32 = 0.25;
+/// Fewest lanes of [`FrameGeom::shade_lanes`] on one texture sampled together (fewer are
+/// sampled one by one).
+const MIN_GROUP: u32 = 3;
+
+/// Where a ray meets a surface's texture (see [`FrameGeom::shade`]).
+#[derive(Debug, Clone, Copy)]
+struct TexturePoint {
+    /// Texture index in the scene (`usize::MAX`: no surface).
+    tex: usize,
+    /// Texture coordinates, m (face offsets included).
+    u: f32,
+    v: f32,
+    /// Pixel footprint on the surface, m.
+    footprint: f32,
+    /// Log shading of the surface.
+    ln_shade: f32,
+}
+
+impl TexturePoint {
+    /// No surface.
+    const NONE: Self = Self {
+        tex: usize::MAX,
+        u: 0.0,
+        v: 0.0,
+        footprint: 1.0,
+        ln_shade: 0.0,
+    };
+
+    /// The hit of `loc` with log intensity `l`.
+    #[inline(always)]
+    fn hit(&self, loc: &Located, l: f32) -> Hit {
+        Hit {
+            l,
+            key: loc.key,
+            id: loc.id,
+            z: loc.z,
+            u: self.u,
+            v: self.v,
+            footprint: self.footprint,
+        }
+    }
+}
 
 /// Result of casting one ray.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -45,6 +88,19 @@ pub struct Hit {
     pub v: f32,
     /// Pixel footprint on the surface, m (selects the mip level).
     pub footprint: f32,
+}
+
+impl Hit {
+    /// A ray that hits no surface.
+    pub const NONE: Self = Self {
+        l: 0.0,
+        key: u16::MAX,
+        id: 0,
+        z: f32::INFINITY,
+        u: 0.0,
+        v: 0.0,
+        footprint: 1.0,
+    };
 }
 
 /// Which surface a ray hits (see [`FrameGeom::locate`]).
@@ -314,7 +370,7 @@ impl FrameGeom {
     /// `(px[l], py[l])` at once: the same arithmetic lane by lane (so the same
     /// results), arranged so the compiler can run the lanes in SIMD registers and the
     /// per-surface branches of the scalar search become selects.
-    #[inline]
+    #[inline(always)]
     pub fn locate_lanes<const N: usize>(
         &self,
         x: &[f32; N],
@@ -414,6 +470,80 @@ impl FrameGeom {
     /// [`FrameGeom::locate`] on the ray `(x, y)`.
     #[inline(always)]
     pub fn shade(&self, scene: &Scene, x: f32, y: f32, loc: &Located) -> Hit {
+        let p = self.texture_point(x, y, loc);
+        let l = if p.tex == usize::MAX {
+            0.0
+        } else {
+            scene.textures[p.tex].sample(p.u, p.v, p.footprint) + p.ln_shade
+        };
+        p.hit(loc, l)
+    }
+
+    /// [`FrameGeom::shade`] of `LANES` located rays: lanes on one texture are sampled
+    /// together ([`crate::texture::Texture::sample_lanes`], the same values), the others one
+    /// by one.
+    #[inline(always)]
+    pub fn shade_lanes(
+        &self,
+        scene: &Scene,
+        x: &[f32; LANES],
+        y: &[f32; LANES],
+        locs: &[Located; LANES],
+    ) -> [Hit; LANES] {
+        // Plain loops: `array::from_fn` closures were left out of line.
+        let mut pts = [TexturePoint::NONE; LANES];
+        for l in 0..LANES {
+            pts[l] = self.texture_point(x[l], y[l], &locs[l]);
+        }
+        let mut l_out = [0.0f32; LANES];
+        // Lanes not yet shaded (bit per lane); `Nothing` lanes keep 0.
+        let mut todo: u32 = 0;
+        for (l, p) in pts.iter().enumerate() {
+            todo |= u32::from(p.tex != usize::MAX) << l;
+        }
+        while todo != 0 {
+            let first = todo.trailing_zeros() as usize;
+            let tex = pts[first].tex;
+            let mut group = 0u32;
+            for (l, p) in pts.iter().enumerate() {
+                group |= u32::from(p.tex == tex) << l;
+            }
+            group &= todo;
+            todo &= !group;
+            let t = &scene.textures[tex];
+            if group.count_ones() >= MIN_GROUP {
+                // Lanes outside the group repeat the first member's point (results unused).
+                let (mut u, mut v, mut fp) = ([0.0; LANES], [0.0; LANES], [0.0; LANES]);
+                for l in 0..LANES {
+                    let p = &pts[if group >> l & 1 == 1 { l } else { first }];
+                    (u[l], v[l], fp[l]) = (p.u, p.v, p.footprint);
+                }
+                let s = t.sample_lanes(&u, &v, &fp);
+                for l in 0..LANES {
+                    if group >> l & 1 == 1 {
+                        l_out[l] = s[l] + pts[l].ln_shade;
+                    }
+                }
+            } else {
+                for l in 0..LANES {
+                    if group >> l & 1 == 1 {
+                        let p = &pts[l];
+                        l_out[l] = t.sample(p.u, p.v, p.footprint) + p.ln_shade;
+                    }
+                }
+            }
+        }
+        let mut hits = [Hit::NONE; LANES];
+        for l in 0..LANES {
+            hits[l] = pts[l].hit(&locs[l], l_out[l]);
+        }
+        hits
+    }
+
+    /// Texture, texture coordinates, footprint and log shading of the surface `loc` on the
+    /// ray `(x, y)` (texture `usize::MAX` for no surface).
+    #[inline(always)]
+    fn texture_point(&self, x: f32, y: f32, loc: &Located) -> TexturePoint {
         let dn = (x * x + y * y + 1.0).sqrt();
         let s = loc.z;
         match loc.surface {
@@ -425,42 +555,27 @@ impl FrameGeom {
                 let cos = (db[axis].abs() / dn).max(MIN_COS);
                 let footprint = s * self.inv_f / cos;
                 let off = FACE_OFFSET[face];
-                let (u, v) = (hp[j] + off[0], hp[k] + off[1]);
-                let l = scene.textures[b.tex].sample(u, v, footprint) + b.ln_shade[face];
-                Hit {
-                    l,
-                    key: loc.key,
-                    id: loc.id,
-                    z: s,
-                    u,
-                    v,
+                TexturePoint {
+                    tex: b.tex,
+                    u: hp[j] + off[0],
+                    v: hp[k] + off[1],
                     footprint,
+                    ln_shade: b.ln_shade[face],
                 }
             }
-            Surface::Nothing => Hit {
-                l: 0.0,
-                key: u16::MAX,
-                id: 0,
-                z: f32::INFINITY,
-                u: 0.0,
-                v: 0.0,
-                footprint: 1.0,
-            },
+            Surface::Nothing => TexturePoint::NONE,
             Surface::Plane(index) => {
                 let p = &self.planes[index];
                 let u = s * dot3(&p.e1, x, y) + p.off1;
                 let v = s * dot3(&p.e2, x, y) + p.off2;
                 let cos = (dot3(&p.n, x, y).abs() / dn).max(MIN_COS);
                 let footprint = s * self.inv_f / cos;
-                let l = scene.textures[p.tex].sample(u, v, footprint) + p.ln_shade;
-                Hit {
-                    l,
-                    key: p.key,
-                    id: 0,
-                    z: s,
+                TexturePoint {
+                    tex: p.tex,
                     u,
                     v,
                     footprint,
+                    ln_shade: p.ln_shade,
                 }
             }
         }

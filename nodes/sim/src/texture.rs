@@ -451,7 +451,7 @@ impl Texture {
     /// [`Texture::sample`] of [`LANES`] points at once: the same arithmetic lane by lane, so
     /// the same values. With AVX2 (detected at run time) the lanes run in SIMD registers and
     /// the texels are gathered; otherwise the points are sampled one by one.
-    #[inline]
+    #[inline(always)]
     pub fn sample_lanes(&self, u: &[f32; LANES], v: &[f32; LANES], fp: &[f32; LANES]) -> [f32; LANES] {
         #[cfg(target_arch = "x86_64")]
         if std::is_x86_feature_detected!("avx2") {
@@ -467,6 +467,7 @@ impl Texture {
     /// truncate like `as i32` for the |x| < 2^31 that texture coordinates stay within.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
+    #[inline]
     fn sample_lanes_avx2(&self, u: &[f32; LANES], v: &[f32; LANES], fp: &[f32; LANES]) -> [f32; LANES] {
         use std::arch::x86_64::*;
         // SAFETY: unaligned loads of 8 values from arrays of 8.
