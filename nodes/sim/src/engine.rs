@@ -31,7 +31,7 @@ use crate::filters;
 use crate::local_speed::{self, LocalSpeed};
 use crate::math::{fmax, fmin};
 use crate::radix;
-use crate::render::FrameGeom;
+use crate::render::{FrameGeom, Hit};
 use crate::scene::{self, Scene};
 use crate::unstable::{PixelState, UnstableList};
 use crate::{SimStats, math};
@@ -855,27 +855,28 @@ fn cast_keyframe_with(kf: &mut KeyFrame, scene: &Scene, rays: &Rays, inv_f: f32,
     for v in 0..h {
         let brow = (v / BLOCK) * bw;
         let row = v * w;
-        // Rays are located and shaded a group of `KEY_LANES` at a time along the row (see
-        // `FrameGeom::locate_lanes` and `FrameGeom::shade_lanes`), the rest one by one.
+        // Rays are cast a group of `KEY_LANES` at a time along the row (see
+        // `FrameGeom::cast_lanes`), the rest one by one. Plain loops: `array::from_fn` and
+        // `array::map` closures were left out of line.
         let mut u = 0;
         while u < w {
             let i = row + u;
             let n = if u + KEY_LANES <= w { KEY_LANES } else { 1 };
-            let mut hits = [None; KEY_LANES];
+            let mut hits = [Hit::NONE; KEY_LANES];
             if n == KEY_LANES {
                 let x: &[f32; KEY_LANES] = rays.x[i..i + KEY_LANES].try_into().expect("lane slice");
                 let y: &[f32; KEY_LANES] = rays.y[i..i + KEY_LANES].try_into().expect("lane slice");
-                let px = std::array::from_fn(|l| (u + l) as i32);
-                let found = kf.geom.locate_lanes(x, y, &px, &[v as i32; KEY_LANES]);
-                hits = kf.geom.shade_lanes(scene, x, y, &found).map(Some);
+                let mut px = [0i32; KEY_LANES];
+                for (l, p) in px.iter_mut().enumerate() {
+                    *p = (u + l) as i32;
+                }
+                hits = kf.geom.cast_lanes(scene, x, y, &px, &[v as i32; KEY_LANES]);
             } else {
-                hits[0] = Some(
-                    kf.geom
-                        .cast(scene, rays.x[i], rays.y[i], u as i32, v as i32, None),
-                );
+                hits[0] = kf
+                    .geom
+                    .cast(scene, rays.x[i], rays.y[i], u as i32, v as i32, None);
             }
             for (l, hit) in hits.iter().take(n).enumerate() {
-                let Some(hit) = hit else { continue };
                 let i = i + l;
                 kf.l[i] = hit.l;
                 kf.key[i] = hit.key;

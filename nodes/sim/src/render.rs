@@ -144,6 +144,55 @@ impl Located {
     };
 }
 
+/// The result of [`FrameGeom::search_lanes`] lane by lane.
+struct LaneSearch<const N: usize> {
+    /// Nearest plane (`u32::MAX`: none in front).
+    best_plane: [u32; N],
+    /// Nearest box hit nearer than the plane (`u32::MAX`: none).
+    best_box: [u32; N],
+    /// Face of that box.
+    box_face: [u32; N],
+    /// Ray direction in that box's coordinates.
+    box_db: [[f32; 3]; N],
+    /// Depth of the nearest surface (infinite: none).
+    s: [f32; N],
+}
+
+impl<const N: usize> LaneSearch<N> {
+    /// The lanes as [`Located`] surfaces of `g`.
+    #[inline(always)]
+    fn located(&self, g: &FrameGeom) -> [Located; N] {
+        let mut out = [Located::NOTHING; N];
+        for (l, o) in out.iter_mut().enumerate() {
+            *o = if self.best_box[l] != u32::MAX {
+                let b = &g.boxes[self.best_box[l] as usize];
+                let face = self.box_face[l] as usize;
+                Located {
+                    surface: Surface::Box {
+                        index: self.best_box[l] as usize,
+                        face,
+                        db: self.box_db[l],
+                    },
+                    key: b.key_base + face as u16,
+                    id: b.id,
+                    z: self.s[l],
+                }
+            } else if self.best_plane[l] == u32::MAX {
+                Located::NOTHING
+            } else {
+                let p = &g.planes[self.best_plane[l] as usize];
+                Located {
+                    surface: Surface::Plane(self.best_plane[l] as usize),
+                    key: p.key,
+                    id: 0,
+                    z: self.s[l],
+                }
+            };
+        }
+        out
+    }
+}
+
 #[derive(Debug, Clone)]
 struct PlaneGeom {
     /// Camera-frame normal divided by the signed plane offset: inverse depth = a . d.
@@ -378,6 +427,18 @@ impl FrameGeom {
         px: &[i32; N],
         py: &[i32; N],
     ) -> [Located; N] {
+        self.search_lanes(x, y, px, py).located(self)
+    }
+
+    /// The search of [`FrameGeom::locate_lanes`], lane by lane in arrays.
+    #[inline(always)]
+    fn search_lanes<const N: usize>(
+        &self,
+        x: &[f32; N],
+        y: &[f32; N],
+        px: &[i32; N],
+        py: &[i32; N],
+    ) -> LaneSearch<N> {
         let mut best_inv = [0.0f32; N];
         let mut best_plane = [u32::MAX; N];
         for (i, p) in self.planes.iter().enumerate() {
@@ -400,9 +461,11 @@ impl FrameGeom {
         let mut box_face = [0u32; N];
         let mut box_db = [[0.0f32; 3]; N];
         for (j, b) in self.boxes.iter().enumerate() {
-            let inside: [bool; N] = std::array::from_fn(|l| {
-                px[l] >= b.bbox[0] && px[l] <= b.bbox[2] && py[l] >= b.bbox[1] && py[l] <= b.bbox[3]
-            });
+            let mut inside = [false; N];
+            for l in 0..N {
+                inside[l] =
+                    px[l] >= b.bbox[0] && px[l] <= b.bbox[2] && py[l] >= b.bbox[1] && py[l] <= b.bbox[3];
+            }
             if !inside.contains(&true) {
                 continue;
             }
@@ -438,32 +501,66 @@ impl FrameGeom {
                 }
             }
         }
-        std::array::from_fn(|l| {
-            if best_box[l] != u32::MAX {
-                let b = &self.boxes[best_box[l] as usize];
-                let face = box_face[l] as usize;
-                Located {
-                    surface: Surface::Box {
-                        index: best_box[l] as usize,
-                        face,
-                        db: box_db[l],
-                    },
-                    key: b.key_base + face as u16,
-                    id: b.id,
-                    z: s[l],
-                }
-            } else if best_plane[l] == u32::MAX {
-                Located::NOTHING
-            } else {
-                let p = &self.planes[best_plane[l] as usize];
-                Located {
-                    surface: Surface::Plane(best_plane[l] as usize),
-                    key: p.key,
-                    id: 0,
-                    z: s[l],
-                }
-            }
-        })
+        LaneSearch {
+            best_plane,
+            best_box,
+            box_face,
+            box_db,
+            s,
+        }
+    }
+
+    /// [`FrameGeom::cast`] of `LANES` rays `(x[l], y[l])` of pixels `(px[l], py[l])`: located
+    /// together ([`FrameGeom::locate_lanes`]); when all lanes hit one plane, shaded in
+    /// arrays the compiler vectorises, else by [`FrameGeom::shade_lanes`]. The same values.
+    #[inline(always)]
+    pub fn cast_lanes(
+        &self,
+        scene: &Scene,
+        x: &[f32; LANES],
+        y: &[f32; LANES],
+        px: &[i32; LANES],
+        py: &[i32; LANES],
+    ) -> [Hit; LANES] {
+        let found = self.search_lanes(x, y, px, py);
+        let first = found.best_plane[0];
+        let one_plane = found.best_box.iter().all(|&b| b == u32::MAX)
+            & found.best_plane.iter().all(|&p| p == first)
+            & (first != u32::MAX);
+        if !one_plane {
+            return self.shade_lanes(scene, x, y, &found.located(self));
+        }
+        let p = &self.planes[first as usize];
+        let s = &found.s;
+        let (mut u, mut v, mut fp) = ([0.0f32; LANES], [0.0f32; LANES], [0.0f32; LANES]);
+        // `texture_point` of a plane, lane by lane, in loops the compiler vectorises (the
+        // select is `max(MIN_COS)`, NaN included).
+        let mut cos = [0.0f32; LANES];
+        for l in 0..LANES {
+            let (x, y) = (x[l], y[l]);
+            let dn = (x * x + y * y + 1.0).sqrt();
+            u[l] = s[l] * dot3(&p.e1, x, y) + p.off1;
+            v[l] = s[l] * dot3(&p.e2, x, y) + p.off2;
+            let c = dot3(&p.n, x, y).abs() / dn;
+            cos[l] = if c > MIN_COS { c } else { MIN_COS };
+        }
+        for l in 0..LANES {
+            fp[l] = s[l] * self.inv_f / cos[l];
+        }
+        let t = scene.textures[p.tex].sample_lanes(&u, &v, &fp);
+        let mut hits = [Hit::NONE; LANES];
+        for l in 0..LANES {
+            hits[l] = Hit {
+                l: t[l] + p.ln_shade,
+                key: p.key,
+                id: 0,
+                z: s[l],
+                u: u[l],
+                v: v[l],
+                footprint: fp[l],
+            };
+        }
+        hits
     }
 
     /// Texture coordinates, footprint and log intensity of the surface `loc` found by
@@ -624,8 +721,12 @@ impl FrameGeom {
         py: i32,
         centre: (f32, u16),
     ) -> (f32, bool) {
-        let rays = SUBSAMPLES.map(|(ou, ov)| (x + ou * du[0] + ov * dv[0], y + ou * du[1] + ov * dv[1]));
-        let found = self.locate_lanes(&rays.map(|r| r.0), &rays.map(|r| r.1), &[px; 4], &[py; 4]);
+        let (mut rx, mut ry) = ([0.0f32; 4], [0.0f32; 4]);
+        for (k, (ou, ov)) in SUBSAMPLES.into_iter().enumerate() {
+            (rx[k], ry[k]) = (x + ou * du[0] + ov * dv[0], y + ou * du[1] + ov * dv[1]);
+        }
+        let rays: [(f32, f32); 4] = [(rx[0], ry[0]), (rx[1], ry[1]), (rx[2], ry[2]), (rx[3], ry[3])];
+        let found = self.locate_lanes(&rx, &ry, &[px; 4], &[py; 4]);
         if found.iter().all(|f| f.key == centre.1) {
             return (centre.0, false);
         }
@@ -729,7 +830,7 @@ mod tests {
     use evseg_schemas::Distortion;
 
     #[test]
-    fn locating_rays_in_lanes_matches_locating_them_one_by_one() {
+    fn locating_and_casting_rays_in_lanes_matches_doing_it_one_by_one() {
         // Every pixel of two presets (moving boxes, furniture, a distorted lens) at a few
         // instants, in lanes of 8 along rows and of 4 sub-rays inside a pixel.
         for name in ["two-objects", "distorted-lens"] {
@@ -746,9 +847,14 @@ mod tests {
                         let y: [f32; 8] = std::array::from_fn(|l| rays.y[i + l]);
                         let px = std::array::from_fn(|l| (u0 + l) as i32);
                         let lanes = g.locate_lanes(&x, &y, &px, &[v as i32; 8]);
+                        let hits = g.cast_lanes(&scene, &x, &y, &px, &[v as i32; 8]);
                         for l in 0..8 {
                             let one = g.locate(x[l], y[l], px[l], v as i32, None);
                             assert_eq!(lanes[l], one, "{name} t {t} pixel {} {v}", u0 + l);
+                            // Bit for bit (NaN-free), through the one-plane and mixed paths.
+                            let hit = g.cast(&scene, x[l], y[l], px[l], v as i32, None);
+                            assert_eq!(hits[l], hit, "{name} t {t} pixel {} {v}", u0 + l);
+                            assert_eq!(hits[l].l.to_bits(), hit.l.to_bits());
                         }
                         let sub: [f32; 4] = std::array::from_fn(|k| x[0] + 0.3 * k as f32 * rays.d_du[i][0]);
                         let found = g.locate_lanes(&sub, &[y[0]; 4], &[u0 as i32; 4], &[v as i32; 4]);

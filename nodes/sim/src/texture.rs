@@ -576,9 +576,16 @@ impl Texture {
         // `LANES` samples at a time (`sample_lanes`), the last group padded with the path's
         // last point.
         for j0 in (0..n).step_by(LANES) {
-            let f: [f32; LANES] = std::array::from_fn(|l| ((j0 + l).min(n - 1) + 1) as f32 / mf);
-            let at = |k: usize| std::array::from_fn(|l| start[k] + f[l] * delta[k]);
-            let s = self.sample_lanes(&at(0), &at(1), &at(2));
+            // Plain loops: `array::from_fn` closures were left out of line.
+            let mut f = [0.0f32; LANES];
+            let (mut u, mut v, mut fp) = ([0.0f32; LANES], [0.0f32; LANES], [0.0f32; LANES]);
+            for l in 0..LANES {
+                f[l] = ((j0 + l).min(n - 1) + 1) as f32 / mf;
+                u[l] = start[0] + f[l] * delta[0];
+                v[l] = start[1] + f[l] * delta[1];
+                fp[l] = start[2] + f[l] * delta[2];
+            }
+            let s = self.sample_lanes(&u, &v, &fp);
             for (l, o) in out[j0..(j0 + LANES).min(n)].iter_mut().enumerate() {
                 *o = s[l] + start[3] + f[l] * delta[3];
             }

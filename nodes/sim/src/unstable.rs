@@ -197,10 +197,15 @@ impl UnstableList {
         // `FrameGeom::shade_lanes`).
         let mut groups = self.active.chunks_exact(LANES);
         for g in &mut groups {
-            let js: [usize; LANES] = std::array::from_fn(|l| g[l] as usize);
-            let px = js.map(|j| (self.pixel[j] as usize % w) as i32);
-            let py = js.map(|j| (self.pixel[j] as usize / w) as i32);
-            let (x, y) = (js.map(|j| self.x[j]), js.map(|j| self.y[j]));
+            // Plain loops: `array::from_fn` and `array::map` closures were left out of line.
+            let mut js = [0usize; LANES];
+            let (mut px, mut py) = ([0i32; LANES], [0i32; LANES]);
+            let (mut x, mut y) = ([0.0f32; LANES], [0.0f32; LANES]);
+            for l in 0..LANES {
+                let j = g[l] as usize;
+                let p = self.pixel[j] as usize;
+                (js[l], px[l], py[l], x[l], y[l]) = (j, (p % w) as i32, (p / w) as i32, self.x[j], self.y[j]);
+            }
             let found = geom.locate_lanes(&x, &y, &px, &py);
             let hits = geom.shade_lanes(scene, &x, &y, &found);
             for (l, hit) in hits.iter().enumerate() {
