@@ -172,11 +172,69 @@ fn kf_lanes(scene: &Scene, rays: &Rays, cfg: &evseg_sim::SceneConfig) {
                 let y: &[f32; 8] = rays.y[i..i + 8].try_into().unwrap();
                 let px = std::array::from_fn(|l| (u + l) as i32);
                 let hits = geom.cast_lanes(scene, x, y, &px, &[v as i32; 8]);
-                sum += hits.iter().map(|h| h.l).sum::<f32>();
+                sum += hits.l.iter().sum::<f32>();
             }
         }
     }
     let t1 = cpu_now();
     let n = (frames * w * h) as f64;
     println!("cast_lanes {:.1} ns per pixel ({sum})", (t1 - t0) / n * 1e9);
+    // The same with the key frame's stores.
+    let mut l = vec![0.0f32; w * h];
+    let mut key = vec![0u16; w * h];
+    let mut id = vec![0u16; w * h];
+    let mut uu = vec![0.0f32; w * h];
+    let mut vv = vec![0.0f32; w * h];
+    let mut fp = vec![0.0f32; w * h];
+    let mut ps = vec![0.0f32; w * h];
+    let t0 = cpu_now();
+    for f in 0..frames {
+        let geom = FrameGeom::new(scene, &cfg.camera, 0.2 + f as f64 * 0.001);
+        for v in 0..h {
+            for u in (0..w).step_by(8) {
+                let i = v * w + u;
+                let x: &[f32; 8] = rays.x[i..i + 8].try_into().unwrap();
+                let y: &[f32; 8] = rays.y[i..i + 8].try_into().unwrap();
+                let px = std::array::from_fn(|l| (u + l) as i32);
+                let hits = geom.cast_lanes(scene, x, y, &px, &[v as i32; 8]);
+                for k in 0..8 {
+                    let hit = hits.get(k);
+                    l[i + k] = hit.l;
+                    key[i + k] = hit.key;
+                    id[i + k] = hit.id;
+                    uu[i + k] = hit.u;
+                    vv[i + k] = hit.v;
+                    fp[i + k] = hit.footprint;
+                    ps[i + k] = hit.z * 0.001;
+                }
+            }
+        }
+    }
+    let t1 = cpu_now();
+    println!(
+        "cast_lanes with stores {:.1} ns per pixel ({})",
+        (t1 - t0) / n * 1e9,
+        l[1000] + uu[5] + vv[7] + fp[9] + ps[11] + (key[3] + id[4]) as f32
+    );
+    for t in [0.0, 0.1, 0.3, 0.45] {
+        let t0 = cpu_now();
+        for _ in 0..5 {
+            let geom = FrameGeom::new(scene, &cfg.camera, t);
+            for v in 0..h {
+                for u in (0..w).step_by(8) {
+                    let i = v * w + u;
+                    let x: &[f32; 8] = rays.x[i..i + 8].try_into().unwrap();
+                    let y: &[f32; 8] = rays.y[i..i + 8].try_into().unwrap();
+                    let px = std::array::from_fn(|l| (u + l) as i32);
+                    let hits = geom.cast_lanes(scene, x, y, &px, &[v as i32; 8]);
+                    sum += hits.l.iter().sum::<f32>();
+                }
+            }
+        }
+        let t1 = cpu_now();
+        println!(
+            "cast_lanes at t {t}: {:.1} ns per pixel ({sum})",
+            (t1 - t0) / (5 * w * h) as f64 * 1e9
+        );
+    }
 }

@@ -31,7 +31,7 @@ use crate::filters;
 use crate::local_speed::{self, LocalSpeed};
 use crate::math::{fmax, fmin};
 use crate::radix;
-use crate::render::{FrameGeom, Hit};
+use crate::render::FrameGeom;
 use crate::scene::{self, Scene};
 use crate::unstable::{PixelState, UnstableList};
 use crate::{SimStats, math};
@@ -859,38 +859,50 @@ fn cast_keyframe_with(kf: &mut KeyFrame, scene: &Scene, rays: &Rays, inv_f: f32,
         // `FrameGeom::cast_lanes`), the rest one by one. Plain loops: `array::from_fn` and
         // `array::map` closures were left out of line.
         let mut u = 0;
-        while u < w {
+        while u + KEY_LANES <= w {
             let i = row + u;
-            let n = if u + KEY_LANES <= w { KEY_LANES } else { 1 };
-            let mut hits = [Hit::NONE; KEY_LANES];
-            if n == KEY_LANES {
-                let x: &[f32; KEY_LANES] = rays.x[i..i + KEY_LANES].try_into().expect("lane slice");
-                let y: &[f32; KEY_LANES] = rays.y[i..i + KEY_LANES].try_into().expect("lane slice");
-                let mut px = [0i32; KEY_LANES];
-                for (l, p) in px.iter_mut().enumerate() {
-                    *p = (u + l) as i32;
-                }
-                hits = kf.geom.cast_lanes(scene, x, y, &px, &[v as i32; KEY_LANES]);
-            } else {
-                hits[0] = kf
-                    .geom
-                    .cast(scene, rays.x[i], rays.y[i], u as i32, v as i32, None);
+            let x: &[f32; KEY_LANES] = rays.x[i..i + KEY_LANES].try_into().expect("lane slice");
+            let y: &[f32; KEY_LANES] = rays.y[i..i + KEY_LANES].try_into().expect("lane slice");
+            let mut px = [0i32; KEY_LANES];
+            for (l, p) in px.iter_mut().enumerate() {
+                *p = (u + l) as i32;
             }
-            for (l, hit) in hits.iter().take(n).enumerate() {
-                let i = i + l;
-                kf.l[i] = hit.l;
-                kf.key[i] = hit.key;
-                kf.id[i] = hit.id;
-                kf.u[i] = hit.u;
-                kf.v[i] = hit.v;
-                kf.footprint[i] = hit.footprint;
-                kf.px_size[i] = hit.z * inv_f;
-                if hit.id == 0 {
+            let h = kf.geom.cast_lanes(scene, x, y, &px, &[v as i32; KEY_LANES]);
+            // Whole lanes at a time (scalar stores to seven arrays cost as much as shading).
+            let span = i..i + KEY_LANES;
+            kf.l[span.clone()].copy_from_slice(&h.l);
+            kf.key[span.clone()].copy_from_slice(&h.key);
+            kf.id[span.clone()].copy_from_slice(&h.id);
+            kf.u[span.clone()].copy_from_slice(&h.u);
+            kf.v[span.clone()].copy_from_slice(&h.v);
+            kf.footprint[span.clone()].copy_from_slice(&h.footprint);
+            for (o, z) in kf.px_size[span].iter_mut().zip(&h.z) {
+                *o = z * inv_f;
+            }
+            for l in 0..KEY_LANES {
+                if h.id[l] == 0 {
                     let b = &mut block_z[brow + (u + l) / BLOCK];
-                    *b = b.min(hit.z);
+                    *b = b.min(h.z[l]);
                 }
             }
-            u += n;
+            u += KEY_LANES;
+        }
+        for u in u..w {
+            let i = row + u;
+            let hit = kf
+                .geom
+                .cast(scene, rays.x[i], rays.y[i], u as i32, v as i32, None);
+            kf.l[i] = hit.l;
+            kf.key[i] = hit.key;
+            kf.id[i] = hit.id;
+            kf.u[i] = hit.u;
+            kf.v[i] = hit.v;
+            kf.footprint[i] = hit.footprint;
+            kf.px_size[i] = hit.z * inv_f;
+            if hit.id == 0 {
+                let b = &mut block_z[brow + u / BLOCK];
+                *b = b.min(hit.z);
+            }
         }
     }
 }

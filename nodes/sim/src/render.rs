@@ -103,6 +103,40 @@ impl Hit {
     };
 }
 
+/// [`Hit`]s of [`LANES`] rays, field by field (see [`FrameGeom::cast_lanes`]).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct HitLanes {
+    /// Log intensities.
+    pub l: [f32; LANES],
+    /// Surface keys.
+    pub key: [u16; LANES],
+    /// Object ids.
+    pub id: [u16; LANES],
+    /// Depths, m.
+    pub z: [f32; LANES],
+    /// Texture coordinates, m.
+    pub u: [f32; LANES],
+    /// Texture coordinates, m.
+    pub v: [f32; LANES],
+    /// Pixel footprints on the surfaces, m.
+    pub footprint: [f32; LANES],
+}
+
+impl HitLanes {
+    /// The hit of lane `l`.
+    pub fn get(&self, l: usize) -> Hit {
+        Hit {
+            l: self.l[l],
+            key: self.key[l],
+            id: self.id[l],
+            z: self.z[l],
+            u: self.u[l],
+            v: self.v[l],
+            footprint: self.footprint[l],
+        }
+    }
+}
+
 /// Which surface a ray hits (see [`FrameGeom::locate`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Surface {
@@ -521,14 +555,20 @@ impl FrameGeom {
         y: &[f32; LANES],
         px: &[i32; LANES],
         py: &[i32; LANES],
-    ) -> [Hit; LANES] {
+    ) -> HitLanes {
         let found = self.search_lanes(x, y, px, py);
         let first = found.best_plane[0];
         let one_plane = found.best_box.iter().all(|&b| b == u32::MAX)
             & found.best_plane.iter().all(|&p| p == first)
             & (first != u32::MAX);
         if !one_plane {
-            return self.shade_lanes(scene, x, y, &found.located(self));
+            let hits = self.shade_lanes(scene, x, y, &found.located(self));
+            let mut out = HitLanes::default();
+            for (l, h) in hits.iter().enumerate() {
+                (out.l[l], out.key[l], out.id[l], out.z[l]) = (h.l, h.key, h.id, h.z);
+                (out.u[l], out.v[l], out.footprint[l]) = (h.u, h.v, h.footprint);
+            }
+            return out;
         }
         let p = &self.planes[first as usize];
         let s = &found.s;
@@ -548,19 +588,19 @@ impl FrameGeom {
             fp[l] = s[l] * self.inv_f / cos[l];
         }
         let t = scene.textures[p.tex].sample_lanes(&u, &v, &fp);
-        let mut hits = [Hit::NONE; LANES];
+        let mut l_out = [0.0f32; LANES];
         for l in 0..LANES {
-            hits[l] = Hit {
-                l: t[l] + p.ln_shade,
-                key: p.key,
-                id: 0,
-                z: s[l],
-                u: u[l],
-                v: v[l],
-                footprint: fp[l],
-            };
+            l_out[l] = t[l] + p.ln_shade;
         }
-        hits
+        HitLanes {
+            l: l_out,
+            key: [p.key; LANES],
+            id: [0; LANES],
+            z: *s,
+            u,
+            v,
+            footprint: fp,
+        }
     }
 
     /// Texture coordinates, footprint and log intensity of the surface `loc` found by
@@ -853,8 +893,8 @@ mod tests {
                             assert_eq!(lanes[l], one, "{name} t {t} pixel {} {v}", u0 + l);
                             // Bit for bit (NaN-free), through the one-plane and mixed paths.
                             let hit = g.cast(&scene, x[l], y[l], px[l], v as i32, None);
-                            assert_eq!(hits[l], hit, "{name} t {t} pixel {} {v}", u0 + l);
-                            assert_eq!(hits[l].l.to_bits(), hit.l.to_bits());
+                            assert_eq!(hits.get(l), hit, "{name} t {t} pixel {} {v}", u0 + l);
+                            assert_eq!(hits.l[l].to_bits(), hit.l.to_bits());
                         }
                         let sub: [f32; 4] = std::array::from_fn(|k| x[0] + 0.3 * k as f32 * rays.d_du[i][0]);
                         let found = g.locate_lanes(&sub, &[y[0]; 4], &[u0 as i32; 4], &[v as i32; 4]);
