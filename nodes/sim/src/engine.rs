@@ -14,11 +14,12 @@
 //!   either, so its texture coordinates move smoothly; they are interpolated linearly between
 //!   the key frames and the texture is sampled at steps of at most `max_px_per_step` of this
 //!   pixel's own image motion (its texture-coordinate change mapped through the pixel-to-texture
-//!   Jacobian; no ray casting). When the texels under the whole path keep it strictly inside
-//!   its thresholds, no sample is taken (none could fire: exact; runs of neighbouring pixels on
-//!   one surface are bounded together first, see `run_range`). Otherwise all samples of the
-//!   pixel are taken first (they do not depend on its reference level, so they pipeline), and
-//!   the threshold test runs only when one of them reaches a threshold.
+//!   Jacobian; no ray casting). When the texels under the paths of a run of neighbouring
+//!   pixels on one surface keep a pixel strictly inside its thresholds, no sample is taken
+//!   (none could fire: exact; see `run_range`). Otherwise all samples of the pixel are taken
+//!   first, 8 at a time (they do not depend on its reference level), and the threshold test
+//!   runs only when one of them reaches a threshold. (A bound of the pixel's own path before
+//!   sampling no longer paid once samples were taken 8 at a time; it decided the same.)
 //! - **unstable** (near a silhouette, crease or seam): ray cast every `stride` render steps,
 //!   the largest power of two that keeps its local image-speed bound within `max_px_per_step`
 //!   per render (see [`crate::local_speed`]), with edge anti-aliasing
@@ -116,10 +117,6 @@ struct DepthBlock {
 /// Rounding allowance, log units, of bounds of interpolated texture samples (f32 rounding of
 /// the blends; not a modelling parameter).
 const SAMPLE_EPS_LOG: f32 = 1e-4;
-/// Largest texel span per axis of a stable path bounded by its texels before sampling (a
-/// cost choice: up to 64 texel reads cost less than the samples they usually save; 4 -> 8
-/// cut interpolated samples by about a fifth, larger spans gain little).
-const PATH_RANGE_TEXELS: u32 = 8;
 /// Most neighbouring stable pixels whose paths are bounded together (see `run_range`).
 const RUN_PIXELS: usize = 8;
 /// Largest texel span per axis of the union of a run's paths (see `run_range`).
@@ -558,22 +555,6 @@ impl Engine {
                         kf1.footprint[i] - kf0.footprint[i],
                     );
                     let r = self.reference[i];
-                    // Exact shortcut: when the texels under the whole path keep every sample
-                    // strictly inside the thresholds, none can fire and the reference stays
-                    // (the bound of the pixel's run failed; see `drop_bounded_runs`).
-                    let fp1 = fp0 + dfp;
-                    let own = tex.path_range(
-                        u0,
-                        v0,
-                        u0 + du,
-                        v0 + dv,
-                        fp0.min(fp1),
-                        fp0.max(fp1),
-                        PATH_RANGE_TEXELS,
-                    );
-                    if shaded_bounds(own, s0, s1).is_some_and(|(lo, hi)| hi < r + c_on && lo > r - c_off) {
-                        continue;
-                    }
                     let disp = stable_displacement(kf0, kf1, i, w_img, du, dv);
                     let m = ((disp / max_px).ceil() as usize).clamp(1, 4096);
                     let id = kf0.id[i];
