@@ -545,8 +545,9 @@ impl FrameGeom {
     }
 
     /// [`FrameGeom::cast`] of `LANES` rays `(x[l], y[l])` of pixels `(px[l], py[l])`: located
-    /// together ([`FrameGeom::locate_lanes`]); when all lanes hit one plane, shaded in
-    /// arrays the compiler vectorises, else by [`FrameGeom::shade_lanes`]. The same values.
+    /// together ([`FrameGeom::locate_lanes`]); when all lanes hit one plane or one box face,
+    /// shaded in arrays the compiler vectorises, else by [`FrameGeom::shade_lanes`]. The same
+    /// values.
     #[inline(always)]
     pub fn cast_lanes(
         &self,
@@ -561,6 +562,13 @@ impl FrameGeom {
         let one_plane = found.best_box.iter().all(|&b| b == u32::MAX)
             & found.best_plane.iter().all(|&p| p == first)
             & (first != u32::MAX);
+        let first_box = found.best_box[0];
+        let one_face = found.best_box.iter().all(|&b| b == first_box)
+            & found.box_face.iter().all(|&f| f == found.box_face[0])
+            & (first_box != u32::MAX);
+        if one_face {
+            return self.shade_face_lanes(scene, x, y, &found);
+        }
         if !one_plane {
             let hits = self.shade_lanes(scene, x, y, &found.located(self));
             let mut out = HitLanes::default();
@@ -596,6 +604,51 @@ impl FrameGeom {
             l: l_out,
             key: [p.key; LANES],
             id: [0; LANES],
+            z: *s,
+            u,
+            v,
+            footprint: fp,
+        }
+    }
+
+    /// The shading of [`FrameGeom::cast_lanes`] when all lanes hit one face of one box
+    /// (`texture_point` of a box face, lane by lane).
+    #[inline(always)]
+    fn shade_face_lanes(
+        &self,
+        scene: &Scene,
+        x: &[f32; LANES],
+        y: &[f32; LANES],
+        found: &LaneSearch<LANES>,
+    ) -> HitLanes {
+        let b = &self.boxes[found.best_box[0] as usize];
+        let face = found.box_face[0] as usize;
+        let axis = face / 2;
+        let (j, k) = ((axis + 1) % 3, (axis + 2) % 3);
+        let off = FACE_OFFSET[face];
+        let s = &found.s;
+        let (mut u, mut v, mut cos) = ([0.0f32; LANES], [0.0f32; LANES], [0.0f32; LANES]);
+        for l in 0..LANES {
+            let db = found.box_db[l];
+            let dn = (x[l] * x[l] + y[l] * y[l] + 1.0).sqrt();
+            u[l] = (b.o_b[j] + s[l] * db[j]) + off[0];
+            v[l] = (b.o_b[k] + s[l] * db[k]) + off[1];
+            let c = db[axis].abs() / dn;
+            cos[l] = if c > MIN_COS { c } else { MIN_COS };
+        }
+        let mut fp = [0.0f32; LANES];
+        for l in 0..LANES {
+            fp[l] = s[l] * self.inv_f / cos[l];
+        }
+        let t = scene.textures[b.tex].sample_lanes(&u, &v, &fp);
+        let mut l_out = [0.0f32; LANES];
+        for l in 0..LANES {
+            l_out[l] = t[l] + b.ln_shade[face];
+        }
+        HitLanes {
+            l: l_out,
+            key: [b.key_base + face as u16; LANES],
+            id: [b.id; LANES],
             z: *s,
             u,
             v,
