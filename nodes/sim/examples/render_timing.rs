@@ -51,6 +51,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         frames
     );
     texture_only(&scene);
+    lanes_timing(&scene);
+    kf_parts(&scene, &rays, &cfg);
+    kf_lanes(&scene, &rays, &cfg);
     Ok(())
 }
 
@@ -84,4 +87,154 @@ fn texture_only(scene: &Scene) {
         "texture trilinear: {:.1} ns (CPU) per sample (checksum {sum})",
         dt / (20.0 * 640.0 * 480.0) * 1e9
     );
+}
+
+#[allow(dead_code)]
+fn lanes_timing(scene: &Scene) {
+    let tex = &scene.textures[2];
+    for fp in [0.004f32, 0.02] {
+        let t0 = cpu_now();
+        let mut sum = 0.0f32;
+        for f in 0..20 {
+            for v in 0..480 {
+                for u in (0..640).step_by(8) {
+                    let uu = std::array::from_fn(|l| (u + l) as f32 * 0.009 + f as f32 * 0.001);
+                    let vv = [v as f32 * 0.009; 8];
+                    let s = tex.sample_lanes(&uu, &vv, &[fp; 8]);
+                    sum += s.iter().sum::<f32>();
+                }
+            }
+        }
+        let dt = cpu_now() - t0;
+        println!(
+            "lanes fp {fp}: {:.2} ns per sample ({sum})",
+            dt / (20.0 * 640.0 * 480.0) * 1e9
+        );
+    }
+}
+
+#[allow(dead_code)]
+fn kf_parts(scene: &Scene, rays: &Rays, cfg: &evseg_sim::SceneConfig) {
+    let (w, h) = (rays.width, rays.height);
+    let frames = 20;
+    let mut sum = 0.0f32;
+    let t0 = cpu_now();
+    for f in 0..frames {
+        let geom = FrameGeom::new(scene, &cfg.camera, 0.2 + f as f64 * 0.001);
+        for v in 0..h {
+            for u in (0..w).step_by(8) {
+                let i = v * w + u;
+                let x: &[f32; 8] = rays.x[i..i + 8].try_into().unwrap();
+                let y: &[f32; 8] = rays.y[i..i + 8].try_into().unwrap();
+                let px = std::array::from_fn(|l| (u + l) as i32);
+                let found = geom.locate_lanes(x, y, &px, &[v as i32; 8]);
+                sum += found.iter().map(|l| l.z).sum::<f32>();
+            }
+        }
+    }
+    let t1 = cpu_now();
+    for f in 0..frames {
+        let geom = FrameGeom::new(scene, &cfg.camera, 0.2 + f as f64 * 0.001);
+        for v in 0..h {
+            for u in (0..w).step_by(8) {
+                let i = v * w + u;
+                let x: &[f32; 8] = rays.x[i..i + 8].try_into().unwrap();
+                let y: &[f32; 8] = rays.y[i..i + 8].try_into().unwrap();
+                let px = std::array::from_fn(|l| (u + l) as i32);
+                let found = geom.locate_lanes(x, y, &px, &[v as i32; 8]);
+                for l in 0..8 {
+                    sum += geom.shade(scene, x[l], y[l], &found[l]).l;
+                }
+            }
+        }
+    }
+    let t2 = cpu_now();
+    let n = (frames * w * h) as f64;
+    println!(
+        "locate_lanes {:.1} ns, +shade {:.1} ns per pixel ({sum})",
+        (t1 - t0) / n * 1e9,
+        (t2 - t1) / n * 1e9
+    );
+}
+
+#[allow(dead_code)]
+fn kf_lanes(scene: &Scene, rays: &Rays, cfg: &evseg_sim::SceneConfig) {
+    let (w, h) = (rays.width, rays.height);
+    let frames = 20;
+    let mut sum = 0.0f32;
+    let t0 = cpu_now();
+    for f in 0..frames {
+        let geom = FrameGeom::new(scene, &cfg.camera, 0.2 + f as f64 * 0.001);
+        for v in 0..h {
+            for u in (0..w).step_by(8) {
+                let i = v * w + u;
+                let x: &[f32; 8] = rays.x[i..i + 8].try_into().unwrap();
+                let y: &[f32; 8] = rays.y[i..i + 8].try_into().unwrap();
+                let px = std::array::from_fn(|l| (u + l) as i32);
+                let hits = geom.cast_lanes(scene, x, y, &px, &[v as i32; 8]);
+                sum += hits.l.iter().sum::<f32>();
+            }
+        }
+    }
+    let t1 = cpu_now();
+    let n = (frames * w * h) as f64;
+    println!("cast_lanes {:.1} ns per pixel ({sum})", (t1 - t0) / n * 1e9);
+    // The same with the key frame's stores.
+    let mut l = vec![0.0f32; w * h];
+    let mut key = vec![0u16; w * h];
+    let mut id = vec![0u16; w * h];
+    let mut uu = vec![0.0f32; w * h];
+    let mut vv = vec![0.0f32; w * h];
+    let mut fp = vec![0.0f32; w * h];
+    let mut ps = vec![0.0f32; w * h];
+    let t0 = cpu_now();
+    for f in 0..frames {
+        let geom = FrameGeom::new(scene, &cfg.camera, 0.2 + f as f64 * 0.001);
+        for v in 0..h {
+            for u in (0..w).step_by(8) {
+                let i = v * w + u;
+                let x: &[f32; 8] = rays.x[i..i + 8].try_into().unwrap();
+                let y: &[f32; 8] = rays.y[i..i + 8].try_into().unwrap();
+                let px = std::array::from_fn(|l| (u + l) as i32);
+                let hits = geom.cast_lanes(scene, x, y, &px, &[v as i32; 8]);
+                for k in 0..8 {
+                    let hit = hits.get(k);
+                    l[i + k] = hit.l;
+                    key[i + k] = hit.key;
+                    id[i + k] = hit.id;
+                    uu[i + k] = hit.u;
+                    vv[i + k] = hit.v;
+                    fp[i + k] = hit.footprint;
+                    ps[i + k] = hit.z * 0.001;
+                }
+            }
+        }
+    }
+    let t1 = cpu_now();
+    println!(
+        "cast_lanes with stores {:.1} ns per pixel ({})",
+        (t1 - t0) / n * 1e9,
+        l[1000] + uu[5] + vv[7] + fp[9] + ps[11] + (key[3] + id[4]) as f32
+    );
+    for t in [0.0, 0.1, 0.3, 0.45] {
+        let t0 = cpu_now();
+        for _ in 0..5 {
+            let geom = FrameGeom::new(scene, &cfg.camera, t);
+            for v in 0..h {
+                for u in (0..w).step_by(8) {
+                    let i = v * w + u;
+                    let x: &[f32; 8] = rays.x[i..i + 8].try_into().unwrap();
+                    let y: &[f32; 8] = rays.y[i..i + 8].try_into().unwrap();
+                    let px = std::array::from_fn(|l| (u + l) as i32);
+                    let hits = geom.cast_lanes(scene, x, y, &px, &[v as i32; 8]);
+                    sum += hits.l.iter().sum::<f32>();
+                }
+            }
+        }
+        let t1 = cpu_now();
+        println!(
+            "cast_lanes at t {t}: {:.1} ns per pixel ({sum})",
+            (t1 - t0) / (5 * w * h) as f64 * 1e9
+        );
+    }
 }

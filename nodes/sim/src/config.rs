@@ -24,6 +24,8 @@ pub struct RenderConfig {
     pub min_step_s: f64,
     /// Render steps per key frame. Every key frame renders all pixels; in between only pixels
     /// that may fire are rendered (see `quiet_margin_log`); 1 renders every pixel every step.
+    /// Default 20 (a cost choice: 16 -> 20 was 1.01 to 1.10 times faster, with event counts
+    /// as close to rendering every pixel every step, within 0.5 %).
     pub steps_per_keyframe: u32,
     /// Safety margin, log units, of the test that skips pixels between key frames: a pixel is
     /// skipped when the log intensities within the image distance that scene points can move
@@ -48,7 +50,7 @@ impl Default for RenderConfig {
             speed_safety: 1.1,
             max_step_s: 5e-3,
             min_step_s: 1e-6,
-            steps_per_keyframe: 16,
+            steps_per_keyframe: 20,
             quiet_margin_log: 0.03,
             path_margin_log: 0.01,
             depth_safety: 0.9,

@@ -14,11 +14,12 @@
 //!   either, so its texture coordinates move smoothly; they are interpolated linearly between
 //!   the key frames and the texture is sampled at steps of at most `max_px_per_step` of this
 //!   pixel's own image motion (its texture-coordinate change mapped through the pixel-to-texture
-//!   Jacobian; no ray casting). When the texels under the whole path keep it strictly inside
-//!   its thresholds, no sample is taken (none could fire: exact; runs of neighbouring pixels on
-//!   one surface are bounded together first, see `run_range`). Otherwise all samples of the
-//!   pixel are taken first (they do not depend on its reference level, so they pipeline), and
-//!   the threshold test runs only when one of them reaches a threshold.
+//!   Jacobian; no ray casting). When the texels under the paths of a run of neighbouring
+//!   pixels on one surface keep a pixel strictly inside its thresholds, no sample is taken
+//!   (none could fire: exact; see `run_range`). Otherwise all samples of the pixel are taken
+//!   first, 8 at a time (they do not depend on its reference level), and the threshold test
+//!   runs only when one of them reaches a threshold. (A bound of the pixel's own path before
+//!   sampling no longer paid once samples were taken 8 at a time; it decided the same.)
 //! - **unstable** (near a silhouette, crease or seam): ray cast every `stride` render steps,
 //!   the largest power of two that keeps its local image-speed bound within `max_px_per_step`
 //!   per render (see [`crate::local_speed`]), with edge anti-aliasing
@@ -116,10 +117,6 @@ struct DepthBlock {
 /// Rounding allowance, log units, of bounds of interpolated texture samples (f32 rounding of
 /// the blends; not a modelling parameter).
 const SAMPLE_EPS_LOG: f32 = 1e-4;
-/// Largest texel span per axis of a stable path bounded by its texels before sampling (a
-/// cost choice: up to 64 texel reads cost less than the samples they usually save; 4 -> 8
-/// cut interpolated samples by about a fifth, larger spans gain little).
-const PATH_RANGE_TEXELS: u32 = 8;
 /// Most neighbouring stable pixels whose paths are bounded together (see `run_range`).
 const RUN_PIXELS: usize = 8;
 /// Largest texel span per axis of the union of a run's paths (see `run_range`).
@@ -128,9 +125,9 @@ const RUN_RANGE_TEXELS: u32 = 12;
 /// the Jacobian along the path (perspective) and its finite-difference estimate.
 const DISPLACEMENT_SAFETY: f32 = 1.1;
 
-/// Rays located together in a key frame (a multiple of the SIMD width; see
-/// `FrameGeom::locate_lanes`).
-const KEY_LANES: usize = 8;
+/// Rays located and shaded together in a key frame (see `FrameGeom::locate_lanes` and
+/// `FrameGeom::shade_lanes`).
+const KEY_LANES: usize = crate::texture::LANES;
 
 const QUIET: u8 = 0;
 const STABLE: u8 = 1;
@@ -422,46 +419,9 @@ impl Engine {
             }
         }
         let mut block_z = vec![f32::INFINITY; bw * bh];
-        let kf = &mut self.kf1;
         let inv_f = (2.0 / (cfg.camera.fx + cfg.camera.fy)) as f32;
-        for v in 0..h {
-            let brow = (v / BLOCK) * bw;
-            let row = v * w;
-            // Rays are located a group of `KEY_LANES` at a time along the row (see
-            // `FrameGeom::locate_lanes`), then shaded one by one.
-            let mut found = [None; KEY_LANES];
-            for u in 0..w {
-                let i = row + u;
-                let lane = u % KEY_LANES;
-                if lane == 0 {
-                    found = [None; KEY_LANES];
-                    if u + KEY_LANES <= w {
-                        let x: &[f32; KEY_LANES] =
-                            self.rays.x[i..i + KEY_LANES].try_into().expect("lane slice");
-                        let y: &[f32; KEY_LANES] =
-                            self.rays.y[i..i + KEY_LANES].try_into().expect("lane slice");
-                        let px = std::array::from_fn(|l| (u + l) as i32);
-                        found = kf.geom.locate_lanes(x, y, &px, &[v as i32; KEY_LANES]).map(Some);
-                    }
-                }
-                let (x, y) = (self.rays.x[i], self.rays.y[i]);
-                let hit = match &found[lane] {
-                    Some(loc) => kf.geom.shade(&self.scene, x, y, loc),
-                    None => kf.geom.cast(&self.scene, x, y, u as i32, v as i32, None),
-                };
-                kf.l[i] = hit.l;
-                kf.key[i] = hit.key;
-                kf.id[i] = hit.id;
-                kf.u[i] = hit.u;
-                kf.v[i] = hit.v;
-                kf.footprint[i] = hit.footprint;
-                kf.px_size[i] = hit.z * inv_f;
-                if hit.id == 0 {
-                    let b = &mut block_z[brow + u / BLOCK];
-                    *b = b.min(hit.z);
-                }
-            }
-        }
+        cast_keyframe(&mut self.kf1, &self.scene, &self.rays, inv_f, &mut block_z);
+        let kf = &mut self.kf1;
         let mut zmin = f32::INFINITY;
         for (b, z) in self.blocks.iter_mut().zip(&block_z) {
             b.zmin_prev = b.zmin;
@@ -595,22 +555,6 @@ impl Engine {
                         kf1.footprint[i] - kf0.footprint[i],
                     );
                     let r = self.reference[i];
-                    // Exact shortcut: when the texels under the whole path keep every sample
-                    // strictly inside the thresholds, none can fire and the reference stays
-                    // (the bound of the pixel's run failed; see `drop_bounded_runs`).
-                    let fp1 = fp0 + dfp;
-                    let own = tex.path_range(
-                        u0,
-                        v0,
-                        u0 + du,
-                        v0 + dv,
-                        fp0.min(fp1),
-                        fp0.max(fp1),
-                        PATH_RANGE_TEXELS,
-                    );
-                    if shaded_bounds(own, s0, s1).is_some_and(|(lo, hi)| hi < r + c_on && lo > r - c_off) {
-                        continue;
-                    }
                     let disp = stable_displacement(kf0, kf1, i, w_img, du, dv);
                     let m = ((disp / max_px).ceil() as usize).clamp(1, 4096);
                     let id = kf0.id[i];
@@ -861,6 +805,86 @@ impl Engine {
             listed += usize::from(!settled & (quiet | same));
         }
         self.work.truncate(listed);
+    }
+}
+
+/// Ray casts every pixel of `rays` at `kf.geom` into `kf` (before edge sampling) and lowers
+/// `block_z` (per `BLOCK` x `BLOCK` block) to the background depths seen. With AVX2 (detected
+/// at run time) the same code is compiled for it: the same arithmetic, so the same values
+/// (no fused multiply-adds), with the lane samples inlined.
+fn cast_keyframe(kf: &mut KeyFrame, scene: &Scene, rays: &Rays, inv_f: f32, block_z: &mut [f32]) {
+    #[cfg(target_arch = "x86_64")]
+    if std::is_x86_feature_detected!("avx2") {
+        // SAFETY: AVX2 is available (checked just above).
+        return unsafe { cast_keyframe_avx2(kf, scene, rays, inv_f, block_z) };
+    }
+    cast_keyframe_with(kf, scene, rays, inv_f, block_z);
+}
+
+/// [`cast_keyframe`] compiled with AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn cast_keyframe_avx2(kf: &mut KeyFrame, scene: &Scene, rays: &Rays, inv_f: f32, block_z: &mut [f32]) {
+    cast_keyframe_with(kf, scene, rays, inv_f, block_z);
+}
+
+/// The body of [`cast_keyframe`].
+#[inline(always)]
+fn cast_keyframe_with(kf: &mut KeyFrame, scene: &Scene, rays: &Rays, inv_f: f32, block_z: &mut [f32]) {
+    let (w, h) = (rays.width, rays.height);
+    let bw = w.div_ceil(BLOCK);
+    for v in 0..h {
+        let brow = (v / BLOCK) * bw;
+        let row = v * w;
+        // Rays are cast a group of `KEY_LANES` at a time along the row (see
+        // `FrameGeom::cast_lanes`), the rest one by one. Plain loops: `array::from_fn` and
+        // `array::map` closures were left out of line.
+        let mut u = 0;
+        while u + KEY_LANES <= w {
+            let i = row + u;
+            let x: &[f32; KEY_LANES] = rays.x[i..i + KEY_LANES].try_into().expect("lane slice");
+            let y: &[f32; KEY_LANES] = rays.y[i..i + KEY_LANES].try_into().expect("lane slice");
+            let mut px = [0i32; KEY_LANES];
+            for (l, p) in px.iter_mut().enumerate() {
+                *p = (u + l) as i32;
+            }
+            let h = kf.geom.cast_lanes(scene, x, y, &px, &[v as i32; KEY_LANES]);
+            // Whole lanes at a time (scalar stores to seven arrays cost as much as shading).
+            let span = i..i + KEY_LANES;
+            kf.l[span.clone()].copy_from_slice(&h.l);
+            kf.key[span.clone()].copy_from_slice(&h.key);
+            kf.id[span.clone()].copy_from_slice(&h.id);
+            kf.u[span.clone()].copy_from_slice(&h.u);
+            kf.v[span.clone()].copy_from_slice(&h.v);
+            kf.footprint[span.clone()].copy_from_slice(&h.footprint);
+            for (o, z) in kf.px_size[span].iter_mut().zip(&h.z) {
+                *o = z * inv_f;
+            }
+            for l in 0..KEY_LANES {
+                if h.id[l] == 0 {
+                    let b = &mut block_z[brow + (u + l) / BLOCK];
+                    *b = b.min(h.z[l]);
+                }
+            }
+            u += KEY_LANES;
+        }
+        for u in u..w {
+            let i = row + u;
+            let hit = kf
+                .geom
+                .cast(scene, rays.x[i], rays.y[i], u as i32, v as i32, None);
+            kf.l[i] = hit.l;
+            kf.key[i] = hit.key;
+            kf.id[i] = hit.id;
+            kf.u[i] = hit.u;
+            kf.v[i] = hit.v;
+            kf.footprint[i] = hit.footprint;
+            kf.px_size[i] = hit.z * inv_f;
+            if hit.id == 0 {
+                let b = &mut block_z[brow + u / BLOCK];
+                *b = b.min(hit.z);
+            }
+        }
     }
 }
 

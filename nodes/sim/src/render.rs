@@ -11,6 +11,7 @@
 use crate::camera::CameraConfig;
 use crate::math::{self, V3};
 use crate::scene::{BoxPose, RelativeMotion, Scene};
+use crate::texture::LANES;
 use crate::trajectory::RigidState;
 
 /// Texture coordinate offsets (m) that make the six faces of a box show different parts of its
@@ -27,6 +28,48 @@ const FACE_OFFSET: [[f32; 2]; 6] = [
 const SUBSAMPLES: [(f32, f32); 4] = [(-0.25, -0.25), (0.25, -0.25), (-0.25, 0.25), (0.25, 0.25)];
 /// Smallest cosine of incidence used for the texture footprint (caps the blur at grazing view).
 const MIN_COS: f32 = 0.25;
+/// Fewest lanes of [`FrameGeom::shade_lanes`] on one texture sampled together (fewer are
+/// sampled one by one).
+const MIN_GROUP: u32 = 3;
+
+/// Where a ray meets a surface's texture (see [`FrameGeom::shade`]).
+#[derive(Debug, Clone, Copy)]
+struct TexturePoint {
+    /// Texture index in the scene (`usize::MAX`: no surface).
+    tex: usize,
+    /// Texture coordinates, m (face offsets included).
+    u: f32,
+    v: f32,
+    /// Pixel footprint on the surface, m.
+    footprint: f32,
+    /// Log shading of the surface.
+    ln_shade: f32,
+}
+
+impl TexturePoint {
+    /// No surface.
+    const NONE: Self = Self {
+        tex: usize::MAX,
+        u: 0.0,
+        v: 0.0,
+        footprint: 1.0,
+        ln_shade: 0.0,
+    };
+
+    /// The hit of `loc` with log intensity `l`.
+    #[inline(always)]
+    fn hit(&self, loc: &Located, l: f32) -> Hit {
+        Hit {
+            l,
+            key: loc.key,
+            id: loc.id,
+            z: loc.z,
+            u: self.u,
+            v: self.v,
+            footprint: self.footprint,
+        }
+    }
+}
 
 /// Result of casting one ray.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -45,6 +88,53 @@ pub struct Hit {
     pub v: f32,
     /// Pixel footprint on the surface, m (selects the mip level).
     pub footprint: f32,
+}
+
+impl Hit {
+    /// A ray that hits no surface.
+    pub const NONE: Self = Self {
+        l: 0.0,
+        key: u16::MAX,
+        id: 0,
+        z: f32::INFINITY,
+        u: 0.0,
+        v: 0.0,
+        footprint: 1.0,
+    };
+}
+
+/// [`Hit`]s of [`LANES`] rays, field by field (see [`FrameGeom::cast_lanes`]).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct HitLanes {
+    /// Log intensities.
+    pub l: [f32; LANES],
+    /// Surface keys.
+    pub key: [u16; LANES],
+    /// Object ids.
+    pub id: [u16; LANES],
+    /// Depths, m.
+    pub z: [f32; LANES],
+    /// Texture coordinates, m.
+    pub u: [f32; LANES],
+    /// Texture coordinates, m.
+    pub v: [f32; LANES],
+    /// Pixel footprints on the surfaces, m.
+    pub footprint: [f32; LANES],
+}
+
+impl HitLanes {
+    /// The hit of lane `l`.
+    pub fn get(&self, l: usize) -> Hit {
+        Hit {
+            l: self.l[l],
+            key: self.key[l],
+            id: self.id[l],
+            z: self.z[l],
+            u: self.u[l],
+            v: self.v[l],
+            footprint: self.footprint[l],
+        }
+    }
 }
 
 /// Which surface a ray hits (see [`FrameGeom::locate`]).
@@ -86,6 +176,55 @@ impl Located {
         id: 0,
         z: f32::INFINITY,
     };
+}
+
+/// The result of [`FrameGeom::search_lanes`] lane by lane.
+struct LaneSearch<const N: usize> {
+    /// Nearest plane (`u32::MAX`: none in front).
+    best_plane: [u32; N],
+    /// Nearest box hit nearer than the plane (`u32::MAX`: none).
+    best_box: [u32; N],
+    /// Face of that box.
+    box_face: [u32; N],
+    /// Ray direction in that box's coordinates.
+    box_db: [[f32; 3]; N],
+    /// Depth of the nearest surface (infinite: none).
+    s: [f32; N],
+}
+
+impl<const N: usize> LaneSearch<N> {
+    /// The lanes as [`Located`] surfaces of `g`.
+    #[inline(always)]
+    fn located(&self, g: &FrameGeom) -> [Located; N] {
+        let mut out = [Located::NOTHING; N];
+        for (l, o) in out.iter_mut().enumerate() {
+            *o = if self.best_box[l] != u32::MAX {
+                let b = &g.boxes[self.best_box[l] as usize];
+                let face = self.box_face[l] as usize;
+                Located {
+                    surface: Surface::Box {
+                        index: self.best_box[l] as usize,
+                        face,
+                        db: self.box_db[l],
+                    },
+                    key: b.key_base + face as u16,
+                    id: b.id,
+                    z: self.s[l],
+                }
+            } else if self.best_plane[l] == u32::MAX {
+                Located::NOTHING
+            } else {
+                let p = &g.planes[self.best_plane[l] as usize];
+                Located {
+                    surface: Surface::Plane(self.best_plane[l] as usize),
+                    key: p.key,
+                    id: 0,
+                    z: self.s[l],
+                }
+            };
+        }
+        out
+    }
 }
 
 #[derive(Debug, Clone)]
@@ -314,7 +453,7 @@ impl FrameGeom {
     /// `(px[l], py[l])` at once: the same arithmetic lane by lane (so the same
     /// results), arranged so the compiler can run the lanes in SIMD registers and the
     /// per-surface branches of the scalar search become selects.
-    #[inline]
+    #[inline(always)]
     pub fn locate_lanes<const N: usize>(
         &self,
         x: &[f32; N],
@@ -322,6 +461,18 @@ impl FrameGeom {
         px: &[i32; N],
         py: &[i32; N],
     ) -> [Located; N] {
+        self.search_lanes(x, y, px, py).located(self)
+    }
+
+    /// The search of [`FrameGeom::locate_lanes`], lane by lane in arrays.
+    #[inline(always)]
+    fn search_lanes<const N: usize>(
+        &self,
+        x: &[f32; N],
+        y: &[f32; N],
+        px: &[i32; N],
+        py: &[i32; N],
+    ) -> LaneSearch<N> {
         let mut best_inv = [0.0f32; N];
         let mut best_plane = [u32::MAX; N];
         for (i, p) in self.planes.iter().enumerate() {
@@ -344,9 +495,11 @@ impl FrameGeom {
         let mut box_face = [0u32; N];
         let mut box_db = [[0.0f32; 3]; N];
         for (j, b) in self.boxes.iter().enumerate() {
-            let inside: [bool; N] = std::array::from_fn(|l| {
-                px[l] >= b.bbox[0] && px[l] <= b.bbox[2] && py[l] >= b.bbox[1] && py[l] <= b.bbox[3]
-            });
+            let mut inside = [false; N];
+            for l in 0..N {
+                inside[l] =
+                    px[l] >= b.bbox[0] && px[l] <= b.bbox[2] && py[l] >= b.bbox[1] && py[l] <= b.bbox[3];
+            }
             if !inside.contains(&true) {
                 continue;
             }
@@ -382,38 +535,205 @@ impl FrameGeom {
                 }
             }
         }
-        std::array::from_fn(|l| {
-            if best_box[l] != u32::MAX {
-                let b = &self.boxes[best_box[l] as usize];
-                let face = box_face[l] as usize;
-                Located {
-                    surface: Surface::Box {
-                        index: best_box[l] as usize,
-                        face,
-                        db: box_db[l],
-                    },
-                    key: b.key_base + face as u16,
-                    id: b.id,
-                    z: s[l],
-                }
-            } else if best_plane[l] == u32::MAX {
-                Located::NOTHING
-            } else {
-                let p = &self.planes[best_plane[l] as usize];
-                Located {
-                    surface: Surface::Plane(best_plane[l] as usize),
-                    key: p.key,
-                    id: 0,
-                    z: s[l],
-                }
+        LaneSearch {
+            best_plane,
+            best_box,
+            box_face,
+            box_db,
+            s,
+        }
+    }
+
+    /// [`FrameGeom::cast`] of `LANES` rays `(x[l], y[l])` of pixels `(px[l], py[l])`: located
+    /// together ([`FrameGeom::locate_lanes`]); when all lanes hit one plane or one box face,
+    /// shaded in arrays the compiler vectorises, else by [`FrameGeom::shade_lanes`]. The same
+    /// values.
+    #[inline(always)]
+    pub fn cast_lanes(
+        &self,
+        scene: &Scene,
+        x: &[f32; LANES],
+        y: &[f32; LANES],
+        px: &[i32; LANES],
+        py: &[i32; LANES],
+    ) -> HitLanes {
+        let found = self.search_lanes(x, y, px, py);
+        let first = found.best_plane[0];
+        let one_plane = found.best_box.iter().all(|&b| b == u32::MAX)
+            & found.best_plane.iter().all(|&p| p == first)
+            & (first != u32::MAX);
+        let first_box = found.best_box[0];
+        let one_face = found.best_box.iter().all(|&b| b == first_box)
+            & found.box_face.iter().all(|&f| f == found.box_face[0])
+            & (first_box != u32::MAX);
+        if one_face {
+            return self.shade_face_lanes(scene, x, y, &found);
+        }
+        if !one_plane {
+            let hits = self.shade_lanes(scene, x, y, &found.located(self));
+            let mut out = HitLanes::default();
+            for (l, h) in hits.iter().enumerate() {
+                (out.l[l], out.key[l], out.id[l], out.z[l]) = (h.l, h.key, h.id, h.z);
+                (out.u[l], out.v[l], out.footprint[l]) = (h.u, h.v, h.footprint);
             }
-        })
+            return out;
+        }
+        let p = &self.planes[first as usize];
+        let s = &found.s;
+        let (mut u, mut v, mut fp) = ([0.0f32; LANES], [0.0f32; LANES], [0.0f32; LANES]);
+        // `texture_point` of a plane, lane by lane, in loops the compiler vectorises (the
+        // select is `max(MIN_COS)`, NaN included).
+        let mut cos = [0.0f32; LANES];
+        for l in 0..LANES {
+            let (x, y) = (x[l], y[l]);
+            let dn = (x * x + y * y + 1.0).sqrt();
+            u[l] = s[l] * dot3(&p.e1, x, y) + p.off1;
+            v[l] = s[l] * dot3(&p.e2, x, y) + p.off2;
+            let c = dot3(&p.n, x, y).abs() / dn;
+            cos[l] = if c > MIN_COS { c } else { MIN_COS };
+        }
+        for l in 0..LANES {
+            fp[l] = s[l] * self.inv_f / cos[l];
+        }
+        let t = scene.textures[p.tex].sample_lanes(&u, &v, &fp);
+        let mut l_out = [0.0f32; LANES];
+        for l in 0..LANES {
+            l_out[l] = t[l] + p.ln_shade;
+        }
+        HitLanes {
+            l: l_out,
+            key: [p.key; LANES],
+            id: [0; LANES],
+            z: *s,
+            u,
+            v,
+            footprint: fp,
+        }
+    }
+
+    /// The shading of [`FrameGeom::cast_lanes`] when all lanes hit one face of one box
+    /// (`texture_point` of a box face, lane by lane).
+    #[inline(always)]
+    fn shade_face_lanes(
+        &self,
+        scene: &Scene,
+        x: &[f32; LANES],
+        y: &[f32; LANES],
+        found: &LaneSearch<LANES>,
+    ) -> HitLanes {
+        let b = &self.boxes[found.best_box[0] as usize];
+        let face = found.box_face[0] as usize;
+        let axis = face / 2;
+        let (j, k) = ((axis + 1) % 3, (axis + 2) % 3);
+        let off = FACE_OFFSET[face];
+        let s = &found.s;
+        let (mut u, mut v, mut cos) = ([0.0f32; LANES], [0.0f32; LANES], [0.0f32; LANES]);
+        for l in 0..LANES {
+            let db = found.box_db[l];
+            let dn = (x[l] * x[l] + y[l] * y[l] + 1.0).sqrt();
+            u[l] = (b.o_b[j] + s[l] * db[j]) + off[0];
+            v[l] = (b.o_b[k] + s[l] * db[k]) + off[1];
+            let c = db[axis].abs() / dn;
+            cos[l] = if c > MIN_COS { c } else { MIN_COS };
+        }
+        let mut fp = [0.0f32; LANES];
+        for l in 0..LANES {
+            fp[l] = s[l] * self.inv_f / cos[l];
+        }
+        let t = scene.textures[b.tex].sample_lanes(&u, &v, &fp);
+        let mut l_out = [0.0f32; LANES];
+        for l in 0..LANES {
+            l_out[l] = t[l] + b.ln_shade[face];
+        }
+        HitLanes {
+            l: l_out,
+            key: [b.key_base + face as u16; LANES],
+            id: [b.id; LANES],
+            z: *s,
+            u,
+            v,
+            footprint: fp,
+        }
     }
 
     /// Texture coordinates, footprint and log intensity of the surface `loc` found by
     /// [`FrameGeom::locate`] on the ray `(x, y)`.
     #[inline(always)]
     pub fn shade(&self, scene: &Scene, x: f32, y: f32, loc: &Located) -> Hit {
+        let p = self.texture_point(x, y, loc);
+        let l = if p.tex == usize::MAX {
+            0.0
+        } else {
+            scene.textures[p.tex].sample(p.u, p.v, p.footprint) + p.ln_shade
+        };
+        p.hit(loc, l)
+    }
+
+    /// [`FrameGeom::shade`] of `LANES` located rays: lanes on one texture are sampled
+    /// together ([`crate::texture::Texture::sample_lanes`], the same values), the others one
+    /// by one.
+    #[inline(always)]
+    pub fn shade_lanes(
+        &self,
+        scene: &Scene,
+        x: &[f32; LANES],
+        y: &[f32; LANES],
+        locs: &[Located; LANES],
+    ) -> [Hit; LANES] {
+        // Plain loops: `array::from_fn` closures were left out of line.
+        let mut pts = [TexturePoint::NONE; LANES];
+        for l in 0..LANES {
+            pts[l] = self.texture_point(x[l], y[l], &locs[l]);
+        }
+        let mut l_out = [0.0f32; LANES];
+        // Lanes not yet shaded (bit per lane); `Nothing` lanes keep 0.
+        let mut todo: u32 = 0;
+        for (l, p) in pts.iter().enumerate() {
+            todo |= u32::from(p.tex != usize::MAX) << l;
+        }
+        while todo != 0 {
+            let first = todo.trailing_zeros() as usize;
+            let tex = pts[first].tex;
+            let mut group = 0u32;
+            for (l, p) in pts.iter().enumerate() {
+                group |= u32::from(p.tex == tex) << l;
+            }
+            group &= todo;
+            todo &= !group;
+            let t = &scene.textures[tex];
+            if group.count_ones() >= MIN_GROUP {
+                // Lanes outside the group repeat the first member's point (results unused).
+                let (mut u, mut v, mut fp) = ([0.0; LANES], [0.0; LANES], [0.0; LANES]);
+                for l in 0..LANES {
+                    let p = &pts[if group >> l & 1 == 1 { l } else { first }];
+                    (u[l], v[l], fp[l]) = (p.u, p.v, p.footprint);
+                }
+                let s = t.sample_lanes(&u, &v, &fp);
+                for l in 0..LANES {
+                    if group >> l & 1 == 1 {
+                        l_out[l] = s[l] + pts[l].ln_shade;
+                    }
+                }
+            } else {
+                for l in 0..LANES {
+                    if group >> l & 1 == 1 {
+                        let p = &pts[l];
+                        l_out[l] = t.sample(p.u, p.v, p.footprint) + p.ln_shade;
+                    }
+                }
+            }
+        }
+        let mut hits = [Hit::NONE; LANES];
+        for l in 0..LANES {
+            hits[l] = pts[l].hit(&locs[l], l_out[l]);
+        }
+        hits
+    }
+
+    /// Texture, texture coordinates, footprint and log shading of the surface `loc` on the
+    /// ray `(x, y)` (texture `usize::MAX` for no surface).
+    #[inline(always)]
+    fn texture_point(&self, x: f32, y: f32, loc: &Located) -> TexturePoint {
         let dn = (x * x + y * y + 1.0).sqrt();
         let s = loc.z;
         match loc.surface {
@@ -425,42 +745,27 @@ impl FrameGeom {
                 let cos = (db[axis].abs() / dn).max(MIN_COS);
                 let footprint = s * self.inv_f / cos;
                 let off = FACE_OFFSET[face];
-                let (u, v) = (hp[j] + off[0], hp[k] + off[1]);
-                let l = scene.textures[b.tex].sample(u, v, footprint) + b.ln_shade[face];
-                Hit {
-                    l,
-                    key: loc.key,
-                    id: loc.id,
-                    z: s,
-                    u,
-                    v,
+                TexturePoint {
+                    tex: b.tex,
+                    u: hp[j] + off[0],
+                    v: hp[k] + off[1],
                     footprint,
+                    ln_shade: b.ln_shade[face],
                 }
             }
-            Surface::Nothing => Hit {
-                l: 0.0,
-                key: u16::MAX,
-                id: 0,
-                z: f32::INFINITY,
-                u: 0.0,
-                v: 0.0,
-                footprint: 1.0,
-            },
+            Surface::Nothing => TexturePoint::NONE,
             Surface::Plane(index) => {
                 let p = &self.planes[index];
                 let u = s * dot3(&p.e1, x, y) + p.off1;
                 let v = s * dot3(&p.e2, x, y) + p.off2;
                 let cos = (dot3(&p.n, x, y).abs() / dn).max(MIN_COS);
                 let footprint = s * self.inv_f / cos;
-                let l = scene.textures[p.tex].sample(u, v, footprint) + p.ln_shade;
-                Hit {
-                    l,
-                    key: p.key,
-                    id: 0,
-                    z: s,
+                TexturePoint {
+                    tex: p.tex,
                     u,
                     v,
                     footprint,
+                    ln_shade: p.ln_shade,
                 }
             }
         }
@@ -509,8 +814,12 @@ impl FrameGeom {
         py: i32,
         centre: (f32, u16),
     ) -> (f32, bool) {
-        let rays = SUBSAMPLES.map(|(ou, ov)| (x + ou * du[0] + ov * dv[0], y + ou * du[1] + ov * dv[1]));
-        let found = self.locate_lanes(&rays.map(|r| r.0), &rays.map(|r| r.1), &[px; 4], &[py; 4]);
+        let (mut rx, mut ry) = ([0.0f32; 4], [0.0f32; 4]);
+        for (k, (ou, ov)) in SUBSAMPLES.into_iter().enumerate() {
+            (rx[k], ry[k]) = (x + ou * du[0] + ov * dv[0], y + ou * du[1] + ov * dv[1]);
+        }
+        let rays: [(f32, f32); 4] = [(rx[0], ry[0]), (rx[1], ry[1]), (rx[2], ry[2]), (rx[3], ry[3])];
+        let found = self.locate_lanes(&rx, &ry, &[px; 4], &[py; 4]);
         if found.iter().all(|f| f.key == centre.1) {
             return (centre.0, false);
         }
@@ -614,7 +923,7 @@ mod tests {
     use evseg_schemas::Distortion;
 
     #[test]
-    fn locating_rays_in_lanes_matches_locating_them_one_by_one() {
+    fn locating_and_casting_rays_in_lanes_matches_doing_it_one_by_one() {
         // Every pixel of two presets (moving boxes, furniture, a distorted lens) at a few
         // instants, in lanes of 8 along rows and of 4 sub-rays inside a pixel.
         for name in ["two-objects", "distorted-lens"] {
@@ -631,9 +940,14 @@ mod tests {
                         let y: [f32; 8] = std::array::from_fn(|l| rays.y[i + l]);
                         let px = std::array::from_fn(|l| (u0 + l) as i32);
                         let lanes = g.locate_lanes(&x, &y, &px, &[v as i32; 8]);
+                        let hits = g.cast_lanes(&scene, &x, &y, &px, &[v as i32; 8]);
                         for l in 0..8 {
                             let one = g.locate(x[l], y[l], px[l], v as i32, None);
                             assert_eq!(lanes[l], one, "{name} t {t} pixel {} {v}", u0 + l);
+                            // Bit for bit (NaN-free), through the one-plane and mixed paths.
+                            let hit = g.cast(&scene, x[l], y[l], px[l], v as i32, None);
+                            assert_eq!(hits.get(l), hit, "{name} t {t} pixel {} {v}", u0 + l);
+                            assert_eq!(hits.l[l].to_bits(), hit.l.to_bits());
                         }
                         let sub: [f32; 4] = std::array::from_fn(|k| x[0] + 0.3 * k as f32 * rays.d_du[i][0]);
                         let found = g.locate_lanes(&sub, &[y[0]; 4], &[u0 as i32; 4], &[v as i32; 4]);

@@ -12,8 +12,8 @@ use crate::camera::Rays;
 use crate::render::FrameGeom;
 use crate::scene::Scene;
 
-/// Pixel centres located together (a multiple of the SIMD width).
-const LANES: usize = 8;
+/// Pixel centres located and shaded together.
+const LANES: usize = crate::texture::LANES;
 
 /// Marks "no unstable neighbour" in [`UnstableList::neighbours`].
 pub const NONE: u32 = u32::MAX;
@@ -175,16 +175,40 @@ impl UnstableList {
     /// those whose surface differs from a listed 4-neighbour's (as of the neighbour's latest
     /// render) are edge sampled. Returns the number of edge-sampled pixels.
     pub fn render(&mut self, scene: &Scene, geom: &FrameGeom, w: usize, supersample: bool) -> u64 {
-        // Centres located `LANES` at a time (see `FrameGeom::locate_lanes`), then shaded.
+        #[cfg(target_arch = "x86_64")]
+        if std::is_x86_feature_detected!("avx2") {
+            // SAFETY: AVX2 is available (checked just above).
+            return unsafe { self.render_avx2(scene, geom, w, supersample) };
+        }
+        self.render_with(scene, geom, w, supersample)
+    }
+
+    /// [`UnstableList::render`] compiled with AVX2 (the same arithmetic, so the same values).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn render_avx2(&mut self, scene: &Scene, geom: &FrameGeom, w: usize, supersample: bool) -> u64 {
+        self.render_with(scene, geom, w, supersample)
+    }
+
+    /// The body of [`UnstableList::render`].
+    #[inline(always)]
+    fn render_with(&mut self, scene: &Scene, geom: &FrameGeom, w: usize, supersample: bool) -> u64 {
+        // Centres located and shaded `LANES` at a time (see `FrameGeom::locate_lanes` and
+        // `FrameGeom::shade_lanes`).
         let mut groups = self.active.chunks_exact(LANES);
         for g in &mut groups {
-            let js: [usize; LANES] = std::array::from_fn(|l| g[l] as usize);
-            let px = js.map(|j| (self.pixel[j] as usize % w) as i32);
-            let py = js.map(|j| (self.pixel[j] as usize / w) as i32);
-            let (x, y) = (js.map(|j| self.x[j]), js.map(|j| self.y[j]));
-            let found = geom.locate_lanes(&x, &y, &px, &py);
+            // Plain loops: `array::from_fn` and `array::map` closures were left out of line.
+            let mut js = [0usize; LANES];
+            let (mut px, mut py) = ([0i32; LANES], [0i32; LANES]);
+            let (mut x, mut y) = ([0.0f32; LANES], [0.0f32; LANES]);
             for l in 0..LANES {
-                let hit = geom.shade(scene, x[l], y[l], &found[l]);
+                let j = g[l] as usize;
+                let p = self.pixel[j] as usize;
+                (js[l], px[l], py[l], x[l], y[l]) = (j, (p % w) as i32, (p / w) as i32, self.x[j], self.y[j]);
+            }
+            let found = geom.locate_lanes(&x, &y, &px, &py);
+            let hits = geom.shade_lanes(scene, &x, &y, &found);
+            for (l, hit) in hits.iter().enumerate() {
                 let j = js[l];
                 self.l[j] = hit.l;
                 self.key[j] = hit.key;
