@@ -262,7 +262,11 @@ impl BackgroundMerger {
             let chosen = select_hypothesis(&per_cluster, &priors, previous_direction, input, &p);
             if let Some((t, consistent)) = chosen {
                 direction = Some(t);
-                in_svm = consistent;
+                in_svm = consistent
+                    .iter()
+                    .zip(&reports)
+                    .map(|(&c, r)| c && r.candidate)
+                    .collect();
             }
         }
         for round in 0..p.refine_rounds.max(1) {
