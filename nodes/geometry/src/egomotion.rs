@@ -66,6 +66,13 @@ pub struct EgomotionParams {
     /// It scales with how far segment borders stray, i.e. with the flow's neighbourhood and the
     /// residual smoothing, not with the scene.
     pub clear_px: u16,
+    /// Most samples of an estimate; more are thinned by a regular stride in the order given (0 =
+    /// all). Default 8000: the 3-parameter direction is set by far fewer (the
+    /// background merger's hypotheses use 3000), and the SVM and the depth refinement cost
+    /// grows with the count; with the repaired normal flow a 30 ms slice of a 640 x 480 scene
+    /// keeps up to ~20000 background samples, which put both mergers on the pipeline's
+    /// critical path (`evseg bench pipeline`).
+    pub max_samples: usize,
 }
 
 impl Default for EgomotionParams {
@@ -81,6 +88,7 @@ impl Default for EgomotionParams {
             huber_k: 1.5,
             magnitude_weighting: true,
             clear_px: 24,
+            max_samples: 8000,
         }
     }
 }
@@ -192,6 +200,17 @@ pub fn estimate_translation(
     if samples.len() < p.min_samples.max(3) {
         return None;
     }
+    let thinned: Vec<&FlowSample>;
+    let samples = if p.max_samples > 0 && samples.len() > p.max_samples {
+        thinned = samples
+            .iter()
+            .step_by(samples.len().div_ceil(p.max_samples))
+            .copied()
+            .collect();
+        &thinned[..]
+    } else {
+        samples
+    };
     let weights: Vec<f64> = if p.density_cell_px > 0 {
         density_weights(
             samples.iter().map(|s| {
@@ -355,5 +374,33 @@ mod tests {
             ..EgomotionParams::default()
         };
         assert!(estimate_translation(&few_refs, &xs, &ys, 640, 480, &strict).is_none());
+    }
+
+    #[test]
+    fn many_samples_are_thinned_by_a_regular_stride() {
+        // Every fourth sample follows the camera's translation, the others another motion.
+        let t_true = [0.6, 0.0, 0.8];
+        let (good, xs, ys) = scene(t_true, 0.9, 0, 2000);
+        let (bad, _, _) = scene([-0.2, 0.9, 0.1], 0.9, 0, 2000);
+        let mut samples = Vec::new();
+        for (g, b) in good.iter().zip(&bad).take(1500) {
+            samples.push(*g);
+            for _ in 0..3 {
+                samples.push(FlowSample { index: g.index, ..*b });
+            }
+        }
+        let refs: Vec<&FlowSample> = samples.iter().collect();
+        let all = EgomotionParams {
+            max_samples: 0,
+            ..EgomotionParams::default()
+        };
+        let t_all = estimate_translation(&refs, &xs, &ys, 640, 480, &all).unwrap();
+        assert!(angle_deg(t_all, t_true) > 10.0, "all samples: {t_all:?}");
+        let thinned = EgomotionParams {
+            max_samples: refs.len() / 4,
+            ..EgomotionParams::default()
+        };
+        let t = estimate_translation(&refs, &xs, &ys, 640, 480, &thinned).unwrap();
+        assert!(angle_deg(t, t_true) < 3.0, "every fourth sample: {t:?}");
     }
 }

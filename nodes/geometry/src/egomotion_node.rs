@@ -56,6 +56,11 @@ pub fn describe_egomotion(d: Describe, defaults: &EgomotionParams) -> Describe {
             defaults.clear_px,
             "leave background events within about this many pixels of a non-background event out of the egomotion (0 = keep all)",
         )
+        .param(
+            "egomotion_max_samples",
+            defaults.max_samples,
+            "most samples of an egomotion estimate; more are thinned by a regular stride (0 = all)",
+        )
 }
 
 /// Reads the parameters declared by [`describe_egomotion`] from the node's config (the
@@ -75,6 +80,7 @@ pub fn egomotion_from_config(cfg: &NodeConfig) -> Result<EgomotionParams, Runtim
         huber_k: cfg.param("refine_huber_k")?,
         magnitude_weighting: cfg.param("egomotion_magnitude_weighting")?,
         clear_px: cfg.param("egomotion_clear_px")?,
+        max_samples: cfg.param("egomotion_max_samples")?,
     })
 }
 
@@ -113,6 +119,7 @@ mod tests {
             huber_k: 2.0,
             magnitude_weighting: false,
             clear_px: 12,
+            max_samples: 500,
             ..EgomotionParams::default()
         };
         let description = describe_egomotion(Describe::new("evseg-test", "test"), &custom).build();
