@@ -168,16 +168,34 @@ pub fn consensus(
             stats.valid += 1;
         }
     }
-    // Prediction `n0_i . u` from the 3 x 3 block of cells around event `i`, without `i` itself.
-    let predict = |grid: &[Sums], i: usize, own_in_grid: bool| -> Option<f64> {
-        let (x, y) = cell_of(i)?;
-        let mut s = Sums::default();
-        for gy in y.saturating_sub(1)..=(y + 1).min(ch - 1) {
-            for gx in x.saturating_sub(1)..=(x + 1).min(cw - 1) {
-                s.merge(&grid[gy * cw + gx]);
+    // Sums over the 3 x 3 block of cells around each cell.
+    let blocks = |grid: &[Sums]| -> Vec<Sums> {
+        let mut rows = vec![Sums::default(); cw * ch];
+        for y in 0..ch {
+            for x in 0..cw {
+                let r = &mut rows[y * cw + x];
+                for gx in x.saturating_sub(1)..=(x + 1).min(cw - 1) {
+                    r.merge(&grid[y * cw + gx]);
+                }
             }
         }
-        if own_in_grid {
+        let mut out = vec![Sums::default(); cw * ch];
+        for y in 0..ch {
+            for x in 0..cw {
+                let o = &mut out[y * cw + x];
+                for gy in y.saturating_sub(1)..=(y + 1).min(ch - 1) {
+                    o.merge(&rows[gy * cw + x]);
+                }
+            }
+        }
+        out
+    };
+    // Prediction `n0_i . u` from the block around event `i`, without `i` itself when
+    // `own_in_block`.
+    let predict = |block: &[Sums], i: usize, own_in_block: bool| -> Option<f64> {
+        let (x, y) = cell_of(i)?;
+        let mut s = block[y * cw + x];
+        if own_in_block {
             s.add(n0[i], len[i], weight[i], -1.0);
         }
         if s.count < params.min_neighbours || s.w.is_nan() || s.w <= 0.0 {
@@ -196,8 +214,9 @@ pub fn consensus(
     let deviates =
         |l: f64, m: f64| (l - m).abs() > (params.max_deviation * m.abs()).max(params.min_deviation);
     // First pass: outliers against all neighbours. Second: against the inliers only.
+    let all = blocks(&grid);
     let outlier: Vec<bool> = (0..n)
-        .map(|i| len[i] > 0.0 && predict(&grid, i, true).is_some_and(|m| deviates(len[i], m)))
+        .map(|i| len[i] > 0.0 && predict(&all, i, true).is_some_and(|m| deviates(len[i], m)))
         .collect();
     let mut inliers = grid;
     for i in 0..n {
@@ -207,11 +226,12 @@ pub fn consensus(
             inliers[y * cw + x].add(n0[i], len[i], weight[i], -1.0);
         }
     }
+    let inlier_blocks = blocks(&inliers);
     for i in 0..n {
         if !outlier[i] {
             continue;
         }
-        let Some(m) = predict(&inliers, i, false) else {
+        let Some(m) = predict(&inlier_blocks, i, false) else {
             continue;
         };
         if !deviates(len[i], m) {
