@@ -20,6 +20,8 @@
 //! against the first prediction are left out of the second, which decides. Cost: six sums per
 //! cell and nine cells per event.
 
+use evseg_runtime::describe::Describe;
+use evseg_runtime::{NodeConfig, RuntimeError};
 use evseg_schemas::{Events, NormalFlow};
 
 /// Settings of [`consensus`].
@@ -74,6 +76,48 @@ impl ConsensusParams {
         nonneg("consensus_min_deviation", self.min_deviation)?;
         Ok(())
     }
+}
+
+/// Declares the consensus parameters (`consensus_*`) on a normal-flow node's description `d`,
+/// with the defaults of `defaults`; one block for every estimator node.
+pub fn describe_consensus(d: Describe, defaults: &ConsensusParams) -> Describe {
+    d.param(
+        "consensus_cell_px",
+        u64::from(defaults.cell_px),
+        "neighbourhood consensus: grid cell, pixels (neighbourhood = 3x3 cells); 0 = off",
+    )
+    .param(
+        "consensus_min_neighbours",
+        defaults.min_neighbours as u64,
+        "neighbourhood consensus: fewest valid neighbours for a prediction",
+    )
+    .param(
+        "consensus_max_deviation",
+        defaults.max_deviation,
+        "neighbourhood consensus: relative deviation from the neighbours' prediction above which an estimate's length is replaced",
+    )
+    .param(
+        "consensus_min_deviation",
+        defaults.min_deviation,
+        "neighbourhood consensus: ...and by more than this, normalized units/s",
+    )
+    .param(
+        "consensus_ridge",
+        defaults.ridge,
+        "neighbourhood consensus: ridge of the local 2-D flow fit, relative to the summed weight",
+    )
+}
+
+/// Reads the parameters declared by [`describe_consensus`] from the node's config (the launcher
+/// fills in the defaults).
+pub fn consensus_from_config(cfg: &NodeConfig) -> Result<ConsensusParams, RuntimeError> {
+    Ok(ConsensusParams {
+        cell_px: cfg.param("consensus_cell_px")?,
+        min_neighbours: cfg.param("consensus_min_neighbours")?,
+        max_deviation: cfg.param("consensus_max_deviation")?,
+        min_deviation: cfg.param("consensus_min_deviation")?,
+        ridge: cfg.param("consensus_ridge")?,
+    })
 }
 
 /// What [`consensus`] did.

@@ -5,6 +5,7 @@
 use std::path::PathBuf;
 use std::process::ExitCode;
 
+use evseg_normal_flow::consensus::{consensus_from_config, describe_consensus};
 use evseg_normal_flow::{
     ConsensusParams, NodeScore, PlaneFitEstimator, PlaneFitParams, Score, consensus, write_run_score,
 };
@@ -198,33 +199,8 @@ fn main() -> ExitCode {
         "min_confidence",
         d.min_confidence,
         "fits with a confidence at or below this are invalid, [0, 1)",
-    )
-    .param(
-        "consensus_cell_px",
-        u64::from(dc.cell_px),
-        "neighbourhood consensus: grid cell, pixels (neighbourhood = 3x3 cells); 0 = off",
-    )
-    .param(
-        "consensus_min_neighbours",
-        dc.min_neighbours as u64,
-        "neighbourhood consensus: fewest valid neighbours for a prediction",
-    )
-    .param(
-        "consensus_max_deviation",
-        dc.max_deviation,
-        "neighbourhood consensus: relative deviation from the neighbours' prediction above which an estimate's length is replaced",
-    )
-    .param(
-        "consensus_min_deviation",
-        dc.min_deviation,
-        "neighbourhood consensus: ...and by more than this, normalized units/s",
-    )
-    .param(
-        "consensus_ridge",
-        dc.ridge,
-        "neighbourhood consensus: ridge of the local 2-D flow fit, relative to the summed weight",
-    )
-    .build();
+    );
+    let description = describe_consensus(description, &dc).build();
     run_stage(description, |cfg: &NodeConfig| {
         let params = PlaneFitParams {
             radius: cfg.param::<usize>("radius")?,
@@ -241,13 +217,7 @@ fn main() -> ExitCode {
                 .map_or(f64::INFINITY, f64::to_radians),
         };
         params.validate()?;
-        let consensus = ConsensusParams {
-            cell_px: cfg.param::<u16>("consensus_cell_px")?,
-            min_neighbours: cfg.param::<usize>("consensus_min_neighbours")?,
-            max_deviation: cfg.param::<f64>("consensus_max_deviation")?,
-            min_deviation: cfg.param::<f64>("consensus_min_deviation")?,
-            ridge: cfg.param::<f64>("consensus_ridge")?,
-        };
+        let consensus = consensus_from_config(cfg)?;
         consensus.validate()?;
         Ok(NormalFlowNode {
             node: cfg.node.clone(),

@@ -7,8 +7,10 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use anyhow::Context;
+use evseg_normal_flow::consensus::{consensus_from_config, describe_consensus};
 use evseg_normal_flow::{
-    LearnedEstimator, LearnedParams, LearnedWeights, NodeScore, Score, WeightsError, write_run_score,
+    ConsensusParams, LearnedEstimator, LearnedParams, LearnedWeights, NodeScore, Score, WeightsError,
+    consensus, write_run_score,
 };
 use evseg_runtime::describe::Describe;
 use evseg_runtime::{BoxError, Inputs, NodeConfig, Outputs, Stage, run_stage};
@@ -24,6 +26,8 @@ struct LearnedNode {
     weights_path: PathBuf,
     weights: LearnedWeights,
     params: LearnedParams,
+    consensus: ConsensusParams,
+    replaced: u64,
     estimator: Option<LearnedEstimator>,
     score: NodeScore,
     slices: u64,
@@ -44,6 +48,10 @@ struct RunReport<'a> {
     ensemble: usize,
     min_neighbours: usize,
     min_confidence: f32,
+    consensus_cell_px: u16,
+    consensus_max_deviation: f64,
+    /// Estimates whose length the neighbourhood consensus replaced.
+    consensus_replaced: u64,
     slices: u64,
     events: u64,
     valid: u64,
@@ -71,7 +79,15 @@ impl Stage for LearnedNode {
         let Some(estimator) = self.estimator.as_mut() else {
             return Ok(());
         };
-        let flow: NormalFlow = estimator.process(&slice.events, t_start, t_end)?;
+        let mut flow: NormalFlow = estimator.process(&slice.events, t_start, t_end)?;
+        let c = consensus(
+            &slice.events,
+            &mut flow,
+            slice.camera.width,
+            slice.camera.height,
+            &self.consensus,
+        );
+        self.replaced += c.replaced as u64;
         self.events += flow.confidence.len() as u64;
         self.valid += flow.confidence.iter().filter(|&&c| c > 0.0).count() as u64;
         out.send("flow", input.seq(), t_start, t_end, &flow)?;
@@ -99,6 +115,9 @@ impl Stage for LearnedNode {
             ensemble: p.ensemble,
             min_neighbours: p.min_neighbours,
             min_confidence: p.min_confidence,
+            consensus_cell_px: self.consensus.cell_px,
+            consensus_max_deviation: self.consensus.max_deviation,
+            consensus_replaced: self.replaced,
             slices: self.slices,
             events: self.events,
             valid: self.valid,
@@ -176,8 +195,8 @@ fn main() -> ExitCode {
         f64::from(d.min_confidence),
         "estimates with confidence (1 - circular spread of the ensemble; 1 without ensemble) at or below this are invalid, [0, 1)",
     )
-    .param("threads", d.threads as u64, "worker threads per slice")
-    .build();
+    .param("threads", d.threads as u64, "worker threads per slice");
+    let description = describe_consensus(description, &ConsensusParams::default()).build();
     run_stage(description, |cfg: &NodeConfig| {
         let (weights, path) = load_weights(&cfg.param::<String>("weights")?)?;
         let expected_d = cfg.param::<usize>("d")?;
@@ -197,6 +216,8 @@ fn main() -> ExitCode {
             threads: cfg.param::<usize>("threads")?,
         };
         // Checks the settings once at start-up (any camera will do).
+        let consensus = consensus_from_config(cfg)?;
+        consensus.validate()?;
         let probe = evseg_schemas::CameraInfo::pinhole(1, 1, 1.0, "probe");
         LearnedEstimator::new(&probe, weights.clone(), params)
             .with_context(|| format!("weights file {}", path.display()))?;
@@ -212,6 +233,8 @@ fn main() -> ExitCode {
             weights_path: path,
             weights,
             params,
+            consensus,
+            replaced: 0,
             estimator: None,
             score: NodeScore::default(),
             slices: 0,
