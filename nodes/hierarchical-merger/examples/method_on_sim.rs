@@ -299,6 +299,7 @@ fn main() -> anyhow::Result<()> {
             // with the wrong sign.
             let mut c = [[0usize; 2]; 2];
             let mut wrong_sign = 0usize;
+            let mut body: Vec<f64> = Vec::new();
             for ((s, truth, _), f) in slices.iter().zip(&flows) {
                 for i in 0..s.events.len() {
                     let (nx, ny) = (f64::from(f.nx[i]), f64::from(f.ny[i]));
@@ -315,10 +316,25 @@ fn main() -> anyhow::Result<()> {
                     let m = (v[0] * nx + v[1] * ny) / len;
                     let tail = (len / m - 1.0).abs().is_nan() || (len / m - 1.0).abs() > 0.3;
                     c[usize::from(truth.event_object[i] != 0)][usize::from(tail)] += 1;
+                    if !tail && truth.event_object[i] == 0 {
+                        body.push(len / m - 1.0);
+                    }
                     wrong_sign += usize::from(tail && m < 0.0);
                 }
             }
             let tails = c[0][1] + c[1][1];
+            body.sort_by(f64::total_cmp);
+            let q = |f: f64| {
+                body.get((f * body.len() as f64) as usize)
+                    .copied()
+                    .unwrap_or(f64::NAN)
+            };
+            println!(
+                "background body (within 30 %): relative length error quartiles {:+.4} / {:+.4} / {:+.4}",
+                q(0.25),
+                q(0.5),
+                q(0.75)
+            );
             println!(
                 "length tail (> 30 % off): background {:.3} of {}, objects {:.3} of {}; wrong sign {:.3} of the tail",
                 c[0][1] as f64 / (c[0][0] + c[0][1]).max(1) as f64,
