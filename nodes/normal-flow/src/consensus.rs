@@ -22,7 +22,7 @@
 
 use evseg_runtime::describe::Describe;
 use evseg_runtime::{NodeConfig, RuntimeError};
-use evseg_schemas::{Events, NormalFlow};
+use evseg_schemas::{Events, NormalFlow, Slice};
 
 /// Settings of [`consensus`].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -167,6 +167,17 @@ impl Sums {
         self.w += o.w;
         self.count += o.count;
     }
+}
+
+/// [`consensus`] on a slice's events and sensor: what the estimator nodes run on each slice.
+pub fn consensus_on_slice(slice: &Slice, flow: &mut NormalFlow, params: &ConsensusParams) -> ConsensusStats {
+    consensus(
+        &slice.events,
+        flow,
+        slice.camera.width,
+        slice.camera.height,
+        params,
+    )
 }
 
 /// Replaces outlying normal-flow lengths of `flow` (aligned with `events`, a `width` x `height`

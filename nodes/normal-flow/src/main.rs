@@ -5,9 +5,9 @@
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use evseg_normal_flow::consensus::{consensus_from_config, describe_consensus};
+use evseg_normal_flow::consensus::{consensus_from_config, consensus_on_slice, describe_consensus};
 use evseg_normal_flow::{
-    ConsensusParams, NodeScore, PlaneFitEstimator, PlaneFitParams, Score, consensus, write_run_score,
+    ConsensusParams, NodeScore, PlaneFitEstimator, PlaneFitParams, Score, write_run_score,
 };
 use evseg_runtime::describe::Describe;
 use evseg_runtime::{BoxError, Inputs, NodeConfig, Outputs, Stage, run_stage};
@@ -74,14 +74,7 @@ impl Stage for NormalFlowNode {
         let before = estimator.stats();
         let mut flow: NormalFlow = estimator.process(&slice.events)?;
         let after = estimator.stats();
-        let c = consensus(
-            &slice.events,
-            &mut flow,
-            slice.camera.width,
-            slice.camera.height,
-            &self.consensus,
-        );
-        self.replaced += c.replaced as u64;
+        self.replaced += consensus_on_slice(&slice, &mut flow, &self.consensus).replaced as u64;
         let ignored = (after.out_of_sensor - before.out_of_sensor) + (after.bad_time - before.bad_time);
         if ignored > 0 {
             tracing::warn!(

@@ -7,10 +7,10 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use anyhow::Context;
-use evseg_normal_flow::consensus::{consensus_from_config, describe_consensus};
+use evseg_normal_flow::consensus::{consensus_from_config, consensus_on_slice, describe_consensus};
 use evseg_normal_flow::{
     ConsensusParams, LearnedEstimator, LearnedParams, LearnedWeights, NodeScore, Score, WeightsError,
-    consensus, write_run_score,
+    write_run_score,
 };
 use evseg_runtime::describe::Describe;
 use evseg_runtime::{BoxError, Inputs, NodeConfig, Outputs, Stage, run_stage};
@@ -80,14 +80,7 @@ impl Stage for LearnedNode {
             return Ok(());
         };
         let mut flow: NormalFlow = estimator.process(&slice.events, t_start, t_end)?;
-        let c = consensus(
-            &slice.events,
-            &mut flow,
-            slice.camera.width,
-            slice.camera.height,
-            &self.consensus,
-        );
-        self.replaced += c.replaced as u64;
+        self.replaced += consensus_on_slice(&slice, &mut flow, &self.consensus).replaced as u64;
         self.events += flow.confidence.len() as u64;
         self.valid += flow.confidence.iter().filter(|&&c| c > 0.0).count() as u64;
         out.send("flow", input.seq(), t_start, t_end, &flow)?;
