@@ -330,6 +330,46 @@ fn the_default_graph_runs_the_method_end_to_end() {
     assert!(run.stdout.contains("| two-objects |"), "{}", run.stdout);
 }
 
+/// A frame lost in transit by a node that still has credit (the tracker's first tracks, which
+/// the background merger needs as feedback for the next slice) must not stop the lock-step
+/// graph: the idle tracker publishes its unconsumed frames again. Without that the graph waits
+/// forever (seen once in `evseg bench`).
+#[test]
+fn a_lost_feedback_frame_is_published_again_and_the_run_completes() {
+    let dir = tempfile::tempdir().unwrap();
+    let port = free_port();
+    let graph = repo_graph_on_loopback("graph.yaml", port);
+    let (g, out) = graph_file(dir.path(), &graph);
+    let run = Launcher::start_with_env(
+        dir.path(),
+        &[
+            "run",
+            g.to_str().unwrap(),
+            "--set",
+            "source.seconds=0.2",
+            "--out",
+            out.to_str().unwrap(),
+            "-q",
+        ],
+        "a",
+        // evseg_runtime::node::DROP_FRAME_ENV
+        &[("EVSEG_TEST_DROP_FRAME", "tracker/tracks/0")],
+    )
+    .wait(Duration::from_secs(120));
+    assert!(run.status.success(), "run failed:\n{}", run.stderr);
+    let log = std::fs::read_to_string(out.join("logs").join("tracker.log")).unwrap_or_default();
+    assert!(
+        log.contains("frame not published"),
+        "the frame was not dropped:\n{log}"
+    );
+    assert!(log.contains("published them again"), "{log}");
+    let report = read_json(&out.join("report").join("report.json"));
+    assert!(
+        report["sequence"]["windows"].as_u64().unwrap_or(0) >= 5,
+        "{report}"
+    );
+}
+
 /// The real DAVIS346 recording of `shared/data/real`, found as the formats tests find it
 /// (`$EVSEG_SHARED/data/real`, else `../shared/data/real` beside the workspace). `None` (test
 /// skipped with a message) when absent; under `CI=true` its absence fails the test.

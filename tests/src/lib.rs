@@ -96,10 +96,16 @@ pub struct Finished {
 impl Launcher {
     /// Starts `evseg <args>` in `cwd`, output captured into `cwd`.
     pub fn start(cwd: &Path, args: &[&str], tag: &str) -> Self {
+        Self::start_with_env(cwd, args, tag, &[])
+    }
+
+    /// [`Launcher::start`] with extra environment variables (inherited by the nodes).
+    pub fn start_with_env(cwd: &Path, args: &[&str], tag: &str, env: &[(&str, &str)]) -> Self {
         let stdout = cwd.join(format!("{tag}.stdout"));
         let stderr = cwd.join(format!("{tag}.stderr"));
         let child = Command::new(bin("evseg"))
             .args(args)
+            .envs(env.iter().copied())
             .current_dir(cwd)
             .stdin(Stdio::null())
             .stdout(std::fs::File::create(&stdout).expect("stdout file"))

@@ -153,6 +153,22 @@ pub struct Outputs {
     waited_ns: u64,
     /// The session's shared-memory pool, large frames are encoded straight into it.
     shm: Option<ShmPool>,
+    /// Lock-step fault injection for tests: `(port, seq)` of one frame that is kept for
+    /// publishing again but not published the first time, from the environment variable
+    /// [`DROP_FRAME_ENV`] (`node/port/seq`, this node's entry only).
+    drop_once: Option<(String, u64)>,
+}
+
+/// Environment variable that makes a node lose one frame of its own in lock-step mode, as a
+/// transport would (`node/port/seq`): for tests of the recovery from lost frames.
+pub const DROP_FRAME_ENV: &str = "EVSEG_TEST_DROP_FRAME";
+
+/// This node's entry of [`DROP_FRAME_ENV`], if any.
+fn drop_once_from_env(node: &str) -> Option<(String, u64)> {
+    let v = std::env::var(DROP_FRAME_ENV).ok()?;
+    let mut parts = v.splitn(3, '/');
+    let (n, port, seq) = (parts.next()?, parts.next()?, parts.next()?);
+    (n == node).then(|| seq.parse().ok().map(|s| (port.to_string(), s)))?
 }
 
 impl Outputs {
@@ -287,15 +303,59 @@ impl Outputs {
             }
         }
         let waited = waiting.elapsed().as_nanos() as u64;
-        p.publisher
-            .put(payload)
-            .wait()
-            .map_err(|e| RuntimeError::Zenoh(e.to_string()))?;
+        let dropped = mode == Mode::Lockstep
+            && self
+                .drop_once
+                .as_ref()
+                .is_some_and(|(dp, ds)| dp == port && *ds == seq);
+        if dropped {
+            self.drop_once = None;
+            tracing::warn!(node = %node, port, seq, "frame not published ({DROP_FRAME_ENV})");
+        }
+        let p = self.port_mut(port)?;
+        if !dropped {
+            p.publisher
+                .put(payload)
+                .wait()
+                .map_err(|e| RuntimeError::Zenoh(e.to_string()))?;
+        }
         p.sent = p.sent.max(seq + 1);
         p.t_end = p.t_end.max(t_end);
         self.waited_ns += waited;
         self.published.fetch_add(1, Ordering::Relaxed);
         Ok(())
+    }
+
+    /// Lock-step: publishes again, on every port, the recent frames some consumer has not
+    /// consumed yet. For a node that has been idle (waiting for input) for [`RESEND_AFTER`]: a
+    /// lost frame of a node that still has credit would otherwise never be sent again, and a
+    /// graph with a feedback loop then stops for good (the consumer of the lost frame waits
+    /// for it, this node waits for input that depends on it). Consumers drop duplicates.
+    /// Returns the number of frames published.
+    pub fn publish_unconsumed_again(&mut self) -> Result<usize, RuntimeError> {
+        if self.mode != Mode::Lockstep {
+            return Ok(0);
+        }
+        let mut total = 0;
+        for (port, p) in &self.ports {
+            let from = self.book.check_min(&p.consumers);
+            if from >= p.sent {
+                continue;
+            }
+            let frames = p.publish_recent_again(from)?;
+            if frames > 0 {
+                tracing::warn!(
+                    node = %self.node,
+                    port = %port,
+                    from,
+                    frames,
+                    "idle for {:?} with frames not consumed: published them again",
+                    RESEND_AFTER
+                );
+            }
+            total += frames;
+        }
+        Ok(total)
     }
 
     /// True when publishing frame `seq` on `port` now would not wait: in lock-step mode every
@@ -709,6 +769,7 @@ pub(crate) fn start(
         published: Arc::new(AtomicU64::new(0)),
         waited_ns: 0,
         shm: shm_pool(&session, cfg.zenoh.shared_memory.enabled),
+        drop_once: drop_once_from_env(&cfg.node),
     };
     let counters = Arc::new(Counters {
         last_seq: AtomicU64::new(u64::MAX),
@@ -890,6 +951,7 @@ fn stage_loop<S: Stage>(mut run: Running, stage: &mut S) -> Result<(), RuntimeEr
             && at.elapsed() >= RESEND_AFTER
         {
             run.publish_progress(consumed.clone())?;
+            run.outputs.publish_unconsumed_again()?;
             *at = Instant::now();
         }
         for arrival in inbox.drain(POLL) {
