@@ -57,7 +57,6 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     Ok(())
 }
 
-#[allow(dead_code)]
 fn texture_only(scene: &Scene) {
     let tex = &scene.textures[2];
     let t0 = cpu_now();
@@ -89,7 +88,6 @@ fn texture_only(scene: &Scene) {
     );
 }
 
-#[allow(dead_code)]
 fn lanes_timing(scene: &Scene) {
     let tex = &scene.textures[2];
     for fp in [0.004f32, 0.02] {
@@ -113,41 +111,60 @@ fn lanes_timing(scene: &Scene) {
     }
 }
 
-#[allow(dead_code)]
+/// One group of 8 neighbouring rays of a row: index of the first, ray directions, pixel
+/// columns and row.
+struct LaneGroup<'a> {
+    i: usize,
+    x: &'a [f32; 8],
+    y: &'a [f32; 8],
+    px: [i32; 8],
+    py: [i32; 8],
+}
+
+/// Calls `each` with the frame geometry at each of `times` and every group of 8 rays of it.
+fn for_each_lane_group(
+    scene: &Scene,
+    rays: &Rays,
+    cfg: &evseg_sim::SceneConfig,
+    times: impl Iterator<Item = f64>,
+    mut each: impl FnMut(&FrameGeom, &LaneGroup<'_>),
+) {
+    let (w, h) = (rays.width, rays.height);
+    for t in times {
+        let geom = FrameGeom::new(scene, &cfg.camera, t);
+        for v in 0..h {
+            for u in (0..w).step_by(8) {
+                let i = v * w + u;
+                let group = LaneGroup {
+                    i,
+                    x: rays.x[i..i + 8].try_into().expect("rows are multiples of 8 rays"),
+                    y: rays.y[i..i + 8].try_into().expect("rows are multiples of 8 rays"),
+                    px: std::array::from_fn(|l| (u + l) as i32),
+                    py: [v as i32; 8],
+                };
+                each(&geom, &group);
+            }
+        }
+    }
+}
+
 fn kf_parts(scene: &Scene, rays: &Rays, cfg: &evseg_sim::SceneConfig) {
     let (w, h) = (rays.width, rays.height);
     let frames = 20;
+    let times = || (0..frames).map(|f| 0.2 + f as f64 * 0.001);
     let mut sum = 0.0f32;
     let t0 = cpu_now();
-    for f in 0..frames {
-        let geom = FrameGeom::new(scene, &cfg.camera, 0.2 + f as f64 * 0.001);
-        for v in 0..h {
-            for u in (0..w).step_by(8) {
-                let i = v * w + u;
-                let x: &[f32; 8] = rays.x[i..i + 8].try_into().unwrap();
-                let y: &[f32; 8] = rays.y[i..i + 8].try_into().unwrap();
-                let px = std::array::from_fn(|l| (u + l) as i32);
-                let found = geom.locate_lanes(x, y, &px, &[v as i32; 8]);
-                sum += found.iter().map(|l| l.z).sum::<f32>();
-            }
-        }
-    }
+    for_each_lane_group(scene, rays, cfg, times(), |geom, g| {
+        let found = geom.locate_lanes(g.x, g.y, &g.px, &g.py);
+        sum += found.iter().map(|l| l.z).sum::<f32>();
+    });
     let t1 = cpu_now();
-    for f in 0..frames {
-        let geom = FrameGeom::new(scene, &cfg.camera, 0.2 + f as f64 * 0.001);
-        for v in 0..h {
-            for u in (0..w).step_by(8) {
-                let i = v * w + u;
-                let x: &[f32; 8] = rays.x[i..i + 8].try_into().unwrap();
-                let y: &[f32; 8] = rays.y[i..i + 8].try_into().unwrap();
-                let px = std::array::from_fn(|l| (u + l) as i32);
-                let found = geom.locate_lanes(x, y, &px, &[v as i32; 8]);
-                for l in 0..8 {
-                    sum += geom.shade(scene, x[l], y[l], &found[l]).l;
-                }
-            }
+    for_each_lane_group(scene, rays, cfg, times(), |geom, g| {
+        let found = geom.locate_lanes(g.x, g.y, &g.px, &g.py);
+        for (l, hit) in found.iter().enumerate() {
+            sum += geom.shade(scene, g.x[l], g.y[l], hit).l;
         }
-    }
+    });
     let t2 = cpu_now();
     let n = (frames * w * h) as f64;
     println!(
@@ -157,25 +174,16 @@ fn kf_parts(scene: &Scene, rays: &Rays, cfg: &evseg_sim::SceneConfig) {
     );
 }
 
-#[allow(dead_code)]
 fn kf_lanes(scene: &Scene, rays: &Rays, cfg: &evseg_sim::SceneConfig) {
     let (w, h) = (rays.width, rays.height);
     let frames = 20;
+    let times = || (0..frames).map(|f| 0.2 + f as f64 * 0.001);
     let mut sum = 0.0f32;
     let t0 = cpu_now();
-    for f in 0..frames {
-        let geom = FrameGeom::new(scene, &cfg.camera, 0.2 + f as f64 * 0.001);
-        for v in 0..h {
-            for u in (0..w).step_by(8) {
-                let i = v * w + u;
-                let x: &[f32; 8] = rays.x[i..i + 8].try_into().unwrap();
-                let y: &[f32; 8] = rays.y[i..i + 8].try_into().unwrap();
-                let px = std::array::from_fn(|l| (u + l) as i32);
-                let hits = geom.cast_lanes(scene, x, y, &px, &[v as i32; 8]);
-                sum += hits.l.iter().sum::<f32>();
-            }
-        }
-    }
+    for_each_lane_group(scene, rays, cfg, times(), |geom, g| {
+        let hits = geom.cast_lanes(scene, g.x, g.y, &g.px, &g.py);
+        sum += hits.l.iter().sum::<f32>();
+    });
     let t1 = cpu_now();
     let n = (frames * w * h) as f64;
     println!("cast_lanes {:.1} ns per pixel ({sum})", (t1 - t0) / n * 1e9);
@@ -188,28 +196,19 @@ fn kf_lanes(scene: &Scene, rays: &Rays, cfg: &evseg_sim::SceneConfig) {
     let mut fp = vec![0.0f32; w * h];
     let mut ps = vec![0.0f32; w * h];
     let t0 = cpu_now();
-    for f in 0..frames {
-        let geom = FrameGeom::new(scene, &cfg.camera, 0.2 + f as f64 * 0.001);
-        for v in 0..h {
-            for u in (0..w).step_by(8) {
-                let i = v * w + u;
-                let x: &[f32; 8] = rays.x[i..i + 8].try_into().unwrap();
-                let y: &[f32; 8] = rays.y[i..i + 8].try_into().unwrap();
-                let px = std::array::from_fn(|l| (u + l) as i32);
-                let hits = geom.cast_lanes(scene, x, y, &px, &[v as i32; 8]);
-                for k in 0..8 {
-                    let hit = hits.get(k);
-                    l[i + k] = hit.l;
-                    key[i + k] = hit.key;
-                    id[i + k] = hit.id;
-                    uu[i + k] = hit.u;
-                    vv[i + k] = hit.v;
-                    fp[i + k] = hit.footprint;
-                    ps[i + k] = hit.z * 0.001;
-                }
-            }
+    for_each_lane_group(scene, rays, cfg, times(), |geom, g| {
+        let hits = geom.cast_lanes(scene, g.x, g.y, &g.px, &g.py);
+        for k in 0..8 {
+            let (hit, i) = (hits.get(k), g.i + k);
+            l[i] = hit.l;
+            key[i] = hit.key;
+            id[i] = hit.id;
+            uu[i] = hit.u;
+            vv[i] = hit.v;
+            fp[i] = hit.footprint;
+            ps[i] = hit.z * 0.001;
         }
-    }
+    });
     let t1 = cpu_now();
     println!(
         "cast_lanes with stores {:.1} ns per pixel ({})",
@@ -218,19 +217,10 @@ fn kf_lanes(scene: &Scene, rays: &Rays, cfg: &evseg_sim::SceneConfig) {
     );
     for t in [0.0, 0.1, 0.3, 0.45] {
         let t0 = cpu_now();
-        for _ in 0..5 {
-            let geom = FrameGeom::new(scene, &cfg.camera, t);
-            for v in 0..h {
-                for u in (0..w).step_by(8) {
-                    let i = v * w + u;
-                    let x: &[f32; 8] = rays.x[i..i + 8].try_into().unwrap();
-                    let y: &[f32; 8] = rays.y[i..i + 8].try_into().unwrap();
-                    let px = std::array::from_fn(|l| (u + l) as i32);
-                    let hits = geom.cast_lanes(scene, x, y, &px, &[v as i32; 8]);
-                    sum += hits.l.iter().sum::<f32>();
-                }
-            }
-        }
+        for_each_lane_group(scene, rays, cfg, std::iter::repeat_n(t, 5), |geom, g| {
+            let hits = geom.cast_lanes(scene, g.x, g.y, &g.px, &g.py);
+            sum += hits.l.iter().sum::<f32>();
+        });
         let t1 = cpu_now();
         println!(
             "cast_lanes at t {t}: {:.1} ns per pixel ({sum})",
