@@ -158,13 +158,9 @@ mod tests {
         if let serde_json::Value::Object(o) = params {
             p.extend(o);
         }
-        serde_json::from_value(serde_json::json!({
-            "instance": "i", "node": "eval", "mode": "lockstep", "window": 4, "queue": 4,
-            "zenoh": {"mode": "client", "connect": []},
-            "params": p, "inputs": [], "outputs": [],
-            "ack_key": "a", "live_key": "l", "stats_key": "s", "run_dir": "/runs/r1"
-        }))
-        .unwrap()
+        let mut cfg = NodeConfig::with_params("eval", p);
+        cfg.run_dir = PathBuf::from("/runs/r1");
+        cfg
     }
 
     #[test]

@@ -89,26 +89,7 @@ mod tests {
     use super::*;
 
     fn config(params: serde_json::Map<String, serde_json::Value>) -> NodeConfig {
-        NodeConfig {
-            instance: "i".into(),
-            node: "merger".into(),
-            mode: evseg_runtime::Mode::Lockstep,
-            window: 1,
-            queue: 1,
-            zenoh: evseg_runtime::config::ZenohSettings {
-                mode: "peer".into(),
-                connect: vec![],
-                listen: vec![],
-                shared_memory: Default::default(),
-            },
-            params,
-            inputs: vec![],
-            outputs: vec![],
-            ack_key: String::new(),
-            live_key: String::new(),
-            stats_key: String::new(),
-            run_dir: std::path::PathBuf::new(),
-        }
+        NodeConfig::with_params("merger", params)
     }
 
     #[test]

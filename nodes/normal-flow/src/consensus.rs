@@ -18,10 +18,10 @@
 //! `n0_i . u` by more than `max_deviation` of it takes the prediction, keeping its direction (a
 //! negative prediction turns the vector round: the sign was wrong). Events that are outliers
 //! against the first prediction are left out of the second, which decides. Cost: six sums per
-//! cell and nine cells per event.
+//! cell, the 3 x 3 block sums once per cell, one block lookup per event.
 
 use evseg_runtime::describe::Describe;
-use evseg_runtime::{NodeConfig, RuntimeError};
+use evseg_runtime::{BoxError, NodeConfig};
 use evseg_schemas::{Events, NormalFlow, Slice};
 
 /// Settings of [`consensus`].
@@ -68,7 +68,7 @@ impl Default for ConsensusParams {
 }
 
 impl ConsensusParams {
-    /// Checks the ranges: `max_deviation` and `ridge` finite and >= 0.
+    /// Checks the ranges: `max_deviation`, `min_deviation` and `ridge` finite and >= 0.
     pub fn validate(&self) -> Result<(), evseg_schemas::params::ParamError> {
         use evseg_schemas::params::finite_non_negative as nonneg;
         nonneg("consensus_max_deviation", self.max_deviation)?;
@@ -109,15 +109,17 @@ pub fn describe_consensus(d: Describe, defaults: &ConsensusParams) -> Describe {
 }
 
 /// Reads the parameters declared by [`describe_consensus`] from the node's config (the launcher
-/// fills in the defaults).
-pub fn consensus_from_config(cfg: &NodeConfig) -> Result<ConsensusParams, RuntimeError> {
-    Ok(ConsensusParams {
+/// fills in the defaults) and checks their ranges ([`ConsensusParams::validate`]).
+pub fn consensus_from_config(cfg: &NodeConfig) -> Result<ConsensusParams, BoxError> {
+    let p = ConsensusParams {
         cell_px: cfg.param("consensus_cell_px")?,
         min_neighbours: cfg.param("consensus_min_neighbours")?,
         max_deviation: cfg.param("consensus_max_deviation")?,
         min_deviation: cfg.param("consensus_min_deviation")?,
         ridge: cfg.param("consensus_ridge")?,
-    })
+    };
+    p.validate()?;
+    Ok(p)
 }
 
 /// What [`consensus`] did.
@@ -418,6 +420,38 @@ mod tests {
         assert_eq!(stats.valid, 300);
         assert_eq!(stats.replaced, 0);
         assert_eq!(f, before);
+    }
+
+    #[test]
+    fn node_parameters_read_back_and_bad_ones_are_refused_with_their_name() {
+        let description =
+            describe_consensus(Describe::new("evseg-test", "test"), &ConsensusParams::default()).build();
+        let defaults: serde_json::Map<_, _> = description
+            .params
+            .iter()
+            .map(|p| (p.name.clone(), p.default.clone()))
+            .collect();
+        let read = |changes: serde_json::Value| {
+            let mut params = defaults.clone();
+            if let serde_json::Value::Object(o) = changes {
+                params.extend(o);
+            }
+            consensus_from_config(&NodeConfig::with_params("flow", params))
+        };
+        assert_eq!(read(serde_json::json!({})).unwrap(), ConsensusParams::default());
+        assert_eq!(
+            read(serde_json::json!({"consensus_cell_px": 0})).unwrap().cell_px,
+            0
+        );
+        for (name, bad) in [
+            ("consensus_max_deviation", serde_json::json!(-0.5)),
+            ("consensus_ridge", serde_json::json!("big")),
+            ("consensus_cell_px", serde_json::json!(-1)),
+            ("consensus_min_deviation", serde_json::json!(-1.0)),
+        ] {
+            let err = read(serde_json::json!({ name: bad })).unwrap_err().to_string();
+            assert!(err.contains(name), "{name}: {err}");
+        }
     }
 
     #[test]

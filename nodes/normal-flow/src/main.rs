@@ -211,7 +211,6 @@ fn main() -> ExitCode {
         };
         params.validate()?;
         let consensus = consensus_from_config(cfg)?;
-        consensus.validate()?;
         Ok(NormalFlowNode {
             node: cfg.node.clone(),
             run_dir: cfg.run_dir.clone(),

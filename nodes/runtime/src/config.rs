@@ -128,6 +128,32 @@ pub struct NodeConfig {
 }
 
 impl NodeConfig {
+    /// A config of node `node` with `params` and nothing else (no inputs, outputs or peers,
+    /// lock-step, window 1, an empty run folder): for checking a node's parameter handling
+    /// without a graph.
+    pub fn with_params(node: &str, params: serde_json::Map<String, serde_json::Value>) -> Self {
+        Self {
+            instance: "i".into(),
+            node: node.into(),
+            mode: Mode::Lockstep,
+            window: 1,
+            queue: 1,
+            zenoh: ZenohSettings {
+                mode: "peer".into(),
+                connect: vec![],
+                listen: vec![],
+                shared_memory: ShmSettings::default(),
+            },
+            params,
+            inputs: vec![],
+            outputs: vec![],
+            ack_key: String::new(),
+            live_key: String::new(),
+            stats_key: String::new(),
+            run_dir: PathBuf::new(),
+        }
+    }
+
     /// Reads a config file written by the launcher.
     pub fn load(path: &Path) -> Result<Self, RuntimeError> {
         let text = std::fs::read_to_string(path)

@@ -168,7 +168,10 @@ fn drop_once_from_env(node: &str) -> Option<(String, u64)> {
     let v = std::env::var(DROP_FRAME_ENV).ok()?;
     let mut parts = v.splitn(3, '/');
     let (n, port, seq) = (parts.next()?, parts.next()?, parts.next()?);
-    (n == node).then(|| seq.parse().ok().map(|s| (port.to_string(), s)))?
+    if n != node {
+        return None;
+    }
+    Some((port.to_string(), seq.parse().ok()?))
 }
 
 impl Outputs {
