@@ -220,18 +220,22 @@ fn main() -> anyhow::Result<()> {
                 ..PlaneFitParams::default()
             },
         )?;
+        // The simulator's optical flow of event `i`, normalized units/s.
+        let true_flow = |s: &Slice, truth: &Truth, i: usize| {
+            cam.pixel_flow_to_normalized(
+                f64::from(s.events.x[i]),
+                f64::from(s.events.y[i]),
+                f64::from(truth.flow_x[i]),
+                f64::from(truth.flow_y[i]),
+            )
+        };
         let flows: Vec<NormalFlow> = slices
             .iter()
             .map(|(s, truth, _)| {
                 if ideal {
                     let mut f = NormalFlow::default();
                     for i in 0..s.events.len() {
-                        let v = cam.pixel_flow_to_normalized(
-                            f64::from(s.events.x[i]),
-                            f64::from(s.events.y[i]),
-                            f64::from(truth.flow_x[i]),
-                            f64::from(truth.flow_y[i]),
-                        );
+                        let v = true_flow(s, truth, i);
                         f.nx.push(v[0] as f32);
                         f.ny.push(v[1] as f32);
                         f.confidence.push(1.0);
@@ -245,12 +249,7 @@ fn main() -> anyhow::Result<()> {
                         if !(f.confidence[i] > 0.0 && len > 0.0) {
                             continue;
                         }
-                        let v = cam.pixel_flow_to_normalized(
-                            f64::from(s.events.x[i]),
-                            f64::from(s.events.y[i]),
-                            f64::from(truth.flow_x[i]),
-                            f64::from(truth.flow_y[i]),
-                        );
+                        let v = true_flow(s, truth, i);
                         let (ux, uy) = (nx / len, ny / len);
                         let m = v[0] * ux + v[1] * uy;
                         let e = (len / m - 1.0).abs();
@@ -307,12 +306,7 @@ fn main() -> anyhow::Result<()> {
                     if f.confidence[i] <= 0.0 || len <= 0.0 {
                         continue;
                     }
-                    let v = cam.pixel_flow_to_normalized(
-                        f64::from(s.events.x[i]),
-                        f64::from(s.events.y[i]),
-                        f64::from(truth.flow_x[i]),
-                        f64::from(truth.flow_y[i]),
-                    );
+                    let v = true_flow(s, truth, i);
                     let m = (v[0] * nx + v[1] * ny) / len;
                     let tail = (len / m - 1.0).abs().is_nan() || (len / m - 1.0).abs() > 0.3;
                     c[usize::from(truth.event_object[i] != 0)][usize::from(tail)] += 1;
