@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-use evseg_tests::{Launcher, free_port, read_json, wait_no_processes, write};
+use evseg_tests::{Finished, Launcher, free_port, read_json, wait_no_processes, write};
 
 /// Writes `text` as `dir/graph.yaml`; returns it and the run folder to use.
 fn graph_file(dir: &Path, text: &str) -> (PathBuf, PathBuf) {
@@ -291,29 +291,43 @@ fn an_evimo2_folder_runs_through_the_graph_into_the_evaluator() {
     );
 }
 
+/// Runs the repository's `graph.yaml` on loopback for `seconds` of simulator time, with extra
+/// environment variables `env` for the launcher and its nodes, waiting at most `timeout`;
+/// returns the finished run and its output folder (inside `dir`).
+fn run_default_graph(
+    dir: &Path,
+    seconds: f64,
+    env: &[(&str, &str)],
+    timeout: Duration,
+) -> (Finished, PathBuf) {
+    let graph = repo_graph_on_loopback("graph.yaml", free_port());
+    let (g, out) = graph_file(dir, &graph);
+    let seconds = format!("source.seconds={seconds}");
+    let run = Launcher::start_with_env(
+        dir,
+        &[
+            "run",
+            g.to_str().unwrap(),
+            "--set",
+            &seconds,
+            "--out",
+            out.to_str().unwrap(),
+            "-q",
+        ],
+        "a",
+        env,
+    )
+    .wait(timeout);
+    (run, out)
+}
+
 /// The README's main job: the default graph (the paper's method on the simulator) runs end to
 /// end, every stage processes every slice, and the evaluator scores real output: tracks with
 /// object labels, a valid egomotion on most slices.
 #[test]
 fn the_default_graph_runs_the_method_end_to_end() {
     let dir = tempfile::tempdir().unwrap();
-    let port = free_port();
-    let graph = repo_graph_on_loopback("graph.yaml", port);
-    let (g, out) = graph_file(dir.path(), &graph);
-    let run = Launcher::start(
-        dir.path(),
-        &[
-            "run",
-            g.to_str().unwrap(),
-            "--set",
-            "source.seconds=0.4",
-            "--out",
-            out.to_str().unwrap(),
-            "-q",
-        ],
-        "a",
-    )
-    .wait(Duration::from_secs(300));
+    let (run, out) = run_default_graph(dir.path(), 0.4, &[], Duration::from_secs(300));
     assert!(run.status.success(), "run failed:\n{}", run.stderr);
     let report = read_json(&out.join("report").join("report.json"));
     let seq = &report["sequence"];
@@ -337,25 +351,9 @@ fn the_default_graph_runs_the_method_end_to_end() {
 #[test]
 fn a_lost_feedback_frame_is_published_again_and_the_run_completes() {
     let dir = tempfile::tempdir().unwrap();
-    let port = free_port();
-    let graph = repo_graph_on_loopback("graph.yaml", port);
-    let (g, out) = graph_file(dir.path(), &graph);
-    let run = Launcher::start_with_env(
-        dir.path(),
-        &[
-            "run",
-            g.to_str().unwrap(),
-            "--set",
-            "source.seconds=0.2",
-            "--out",
-            out.to_str().unwrap(),
-            "-q",
-        ],
-        "a",
-        // evseg_runtime::node::DROP_FRAME_ENV
-        &[("EVSEG_TEST_DROP_FRAME", "tracker/tracks/0")],
-    )
-    .wait(Duration::from_secs(120));
+    // evseg_runtime::node::DROP_FRAME_ENV
+    let env = [("EVSEG_TEST_DROP_FRAME", "tracker/tracks/0")];
+    let (run, out) = run_default_graph(dir.path(), 0.2, &env, Duration::from_secs(120));
     assert!(run.status.success(), "run failed:\n{}", run.stderr);
     let log = std::fs::read_to_string(out.join("logs").join("tracker.log")).unwrap_or_default();
     assert!(
