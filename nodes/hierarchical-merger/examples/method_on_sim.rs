@@ -377,6 +377,8 @@ fn main() -> anyhow::Result<()> {
             let (mut ious, mut dirs, mut planar_ious) = (Vec::new(), Vec::new(), Vec::new());
             let mut coarse_ious = Vec::new();
             let (mut inter_all, mut union_all) = (0usize, 0usize);
+            let (mut predicted_all, mut truth_all) = (0usize, 0usize);
+            let (mut planar_pred_all, mut planar_inter_all) = (0usize, 0usize);
             for (dump_k, (((s, truth, span), f), c)) in slices.iter().zip(&flows).zip(&clusters).enumerate() {
                 let clusters_k = c.clone();
                 let rate =
@@ -566,11 +568,27 @@ fn main() -> anyhow::Result<()> {
                         let (p, g) = (*l != 0, truth.event_object[k] != 0);
                         i += usize::from(p && g);
                         u += usize::from(p || g);
+                        predicted_all += usize::from(p);
+                        truth_all += usize::from(g);
                         let pp = !r.residuals.background[k];
                         pi += usize::from(pp && g);
+                        planar_pred_all += usize::from(pp);
+                        planar_inter_all += usize::from(pp && g);
                         pu += usize::from(pp || g);
                     }
                     ious.push(i as f64 / u.max(1) as f64);
+                    if std::env::var("SLICE_IOU").is_ok() {
+                        let g = truth.event_object.iter().filter(|&&o| o != 0).count();
+                        let p = label.iter().filter(|&&l| l != 0).count();
+                        println!(
+                            "  slice t {:.2} iou {:.2} object share {:.2} prec {:.2} rec {:.2}",
+                            span.0,
+                            i as f64 / u.max(1) as f64,
+                            g as f64 / label.len().max(1) as f64,
+                            i as f64 / p.max(1) as f64,
+                            i as f64 / g.max(1) as f64
+                        );
+                    }
                     planar_ious.push(pi as f64 / pu.max(1) as f64);
                     inter_all += i;
                     union_all += u;
@@ -592,7 +610,7 @@ fn main() -> anyhow::Result<()> {
             dirs.sort_by(f64::total_cmp);
             let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
             println!(
-                "{name:14} seed {seed} flow {} [{set}] slices {:3} IoU mean {:.3} pooled {:.3} (planar {:.3}, coarse {:.3}) dir median {:.1} deg (n {})",
+                "{name:14} seed {seed} flow {} [{set}] slices {:3} IoU mean {:.3} pooled {:.3} prec {:.2} rec {:.2} (planar {:.3} prec {:.2} rec {:.2}, coarse {:.3}) dir median {:.1} deg (n {})",
                 if ideal {
                     "ideal"
                 } else if truemag {
@@ -603,7 +621,11 @@ fn main() -> anyhow::Result<()> {
                 ious.len(),
                 mean(&ious),
                 inter_all as f64 / union_all.max(1) as f64,
+                inter_all as f64 / predicted_all.max(1) as f64,
+                inter_all as f64 / truth_all.max(1) as f64,
                 mean(&planar_ious),
+                planar_inter_all as f64 / planar_pred_all.max(1) as f64,
+                planar_inter_all as f64 / truth_all.max(1) as f64,
                 mean(&coarse_ious),
                 dirs.get(dirs.len() / 2).copied().unwrap_or(f64::NAN),
                 dirs.len()
