@@ -7,7 +7,9 @@
 //!    *warp score*: the previous slice's events are warped to now with the previous background's
 //!    planar motion ([`warp`]); the score is the fraction of the cluster's events that land on
 //!    warped previous background rather than warped previous foreground. The first slice, or a
-//!    cluster that lands on too few warped events, uses the planar vote alone ("Initialization").
+//!    cluster that lands on too few warped events, uses the planar vote alone ("Initialization");
+//!    a slice whose planar vote separated (almost) nothing uses the warp score alone
+//!    ([`BackgroundParams::planar_silent_share`]).
 //!    Clusters with a prior of at least [`BackgroundParams::candidate_threshold`] are background
 //!    candidates.
 //! 2. **Egomotion.** The linear SVM on the candidates' derotated normal flow gives the camera's
@@ -229,6 +231,7 @@ impl BackgroundMerger {
                 }
             }
         }
+        let planar_silent = planar_is_silent(&reports, &planar_bg, p.planar_silent_share);
         for (c, r) in reports.iter_mut().enumerate() {
             if r.events == 0 {
                 continue;
@@ -239,6 +242,7 @@ impl BackgroundMerger {
                 r.warp_score = Some(b / (b + f));
             }
             r.prior = match r.warp_score {
+                Some(s) if planar_silent => s,
                 Some(s) => (1.0 - p.warp_weight) * r.planar_background + p.warp_weight * s,
                 None => r.planar_background,
             };
@@ -371,6 +375,15 @@ impl BackgroundMerger {
             map: update,
         })
     }
+}
+
+/// True when `share` > 0 and the planar vote called at most `share` of the clustered events foreground
+/// (`reports[c].events` events of cluster `c`, `planar_bg[c]` of them planar background); see
+/// [`BackgroundParams::planar_silent_share`].
+fn planar_is_silent(reports: &[ClusterReport], planar_bg: &[usize], share: f64) -> bool {
+    let all: usize = reports.iter().map(|r| r.events).sum();
+    let background: usize = planar_bg.iter().sum();
+    share > 0.0 && all.saturating_sub(background) as f64 <= share * all as f64
 }
 
 fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {

@@ -119,6 +119,11 @@ fn main() -> ExitCode {
         "weight of the warp score against the planar vote",
     )
     .param(
+        "planar_silent_share",
+        d.planar_silent_share,
+        "planar foreground share of clustered events at or below which the warp score alone is the prior",
+    )
+    .param(
         "candidate_threshold",
         d.candidate_threshold,
         "background prior at or above which a cluster is a background candidate",
@@ -182,6 +187,7 @@ fn main() -> ExitCode {
             warp_cell_px: cfg.param("warp_cell_px")?,
             warp_min_hits: cfg.param("warp_min_hits")?,
             warp_weight: cfg.param("warp_weight")?,
+            planar_silent_share: cfg.param("planar_silent_share")?,
             candidate_threshold: cfg.param("candidate_threshold")?,
             consistency_ratio: cfg.param("consistency_ratio")?,
             consistency_floor: cfg.param("consistency_floor")?,

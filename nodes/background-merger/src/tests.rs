@@ -166,6 +166,38 @@ fn the_previous_segmentation_is_warped_in_and_corrects_a_wrong_planar_vote() {
 }
 
 #[test]
+fn when_the_planar_vote_separates_nothing_the_warp_alone_decides() {
+    // The object moves along the camera's translation: its flow is that of a nearer static
+    // surface, so no test of consistency with the translation can tell it apart; only the
+    // previous segmentation can.
+    let t = [0.4, 0.0, 0.1];
+    let t_obj = Some([0.8, 0.0, 0.2]);
+    let labels_of = |c: &Constructed| -> Vec<u32> { c.object.iter().map(|&o| u32::from(o)).collect() };
+    let verdict = |share: f64| {
+        let p = BackgroundParams {
+            planar_silent_share: share,
+            ..BackgroundParams::default()
+        };
+        let mut m = BackgroundMerger::new(p).unwrap();
+        let first = construct(t, t_obj, 0.0);
+        run(&mut m, &first, (0.0, 0.03), None);
+        // Second slice: the planar vote calls everything background (the fit followed the
+        // object, or the split failed).
+        let mut second = construct(t, t_obj, 0.03);
+        second.residuals.background.iter_mut().for_each(|b| *b = true);
+        let r = run(&mut m, &second, (0.03, 0.06), Some(&labels_of(&first)));
+        assert!(r.warped);
+        r.clusters[12].clone()
+    };
+    let silent = verdict(0.02);
+    assert!(silent.warp_score.is_some_and(|w| w < 0.5), "{silent:?}");
+    assert!(!silent.candidate && !silent.background, "{silent:?}");
+    // With the rule off the unanimous planar vote outweighs the warp and the object is lost.
+    let off = verdict(0.0);
+    assert!(off.candidate && off.background, "{off:?}");
+}
+
+#[test]
 fn malformed_input_is_an_error() {
     let c = construct([0.1, 0.0, 0.0], None, 0.0);
     let mut m = BackgroundMerger::new(BackgroundParams::default()).unwrap();
