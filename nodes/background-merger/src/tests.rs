@@ -187,7 +187,7 @@ fn when_the_planar_vote_separates_nothing_the_warp_alone_decides() {
         second.residuals.background.iter_mut().for_each(|b| *b = true);
         let r = run(&mut m, &second, (0.03, 0.06), Some(&labels_of(&first)));
         assert!(r.warped);
-        r.clusters[12].clone()
+        r.clusters[12]
     };
     let silent = verdict(0.02);
     assert!(silent.warp_score.is_some_and(|w| w < 0.5), "{silent:?}");
