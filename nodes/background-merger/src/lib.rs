@@ -33,7 +33,6 @@
 //!    Each group's mean map value (before this slice's update) is published for the hierarchical
 //!    merger's background penalty.
 
-pub mod grid;
 pub mod map;
 pub mod params;
 pub mod warp;
@@ -45,7 +44,7 @@ use evseg_geometry::{
 use evseg_schemas::align::AlignError;
 use evseg_schemas::{CameraInfo, Clusters, CoarseSegmentation, Egomotion, Events, NormalFlow, Residuals};
 
-pub use grid::CellGrid;
+pub use evseg_geometry::CellGrid;
 pub use map::{BackgroundMap, MapUpdate};
 pub use params::{BackgroundParams, ParamError};
 pub use warp::{PreviousSlice, WarpedPrevious, warp_previous};

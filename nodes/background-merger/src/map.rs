@@ -2,7 +2,7 @@
 //! the image, how much of the recent past was background, kept by an exponential moving average
 //! whose weight adapts to how similar the current background is to the map.
 
-use crate::grid::CellGrid;
+use evseg_geometry::CellGrid;
 
 /// The map and its update rule.
 #[derive(Debug, Clone, PartialEq)]

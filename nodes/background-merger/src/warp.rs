@@ -12,7 +12,7 @@ use evseg_geometry::{Camera, FlowSample, UndistortTable, planar_flow, rotational
 use evseg_planar_segmenter::{Equation, FitParams, fit_planar};
 use evseg_schemas::CameraInfo;
 
-use crate::grid::CellGrid;
+use evseg_geometry::CellGrid;
 
 /// What the merger keeps of a slice for the next one.
 #[derive(Debug, Clone)]

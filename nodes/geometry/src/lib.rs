@@ -16,6 +16,7 @@
 
 pub mod assignment;
 pub mod camera;
+pub mod cell_grid;
 pub mod density;
 pub mod direction;
 pub mod egomotion;
@@ -30,6 +31,7 @@ pub mod svm;
 pub mod translation;
 
 pub use camera::{Camera, TableCache, UndistortTable};
+pub use cell_grid::CellGrid;
 pub use density::density_weights;
 pub use direction::{FlowDirection, flow_direction};
 pub use egomotion::{

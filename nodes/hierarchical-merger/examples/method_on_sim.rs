@@ -14,6 +14,8 @@
 //! truth. Flow oracles: FLOW=truemag (true length along the estimated direction), with
 //! DROPTAIL=x (drop the estimates more than x off instead) or DROPTAIL=-x (only those take the
 //! true length).
+//! ORACLE_FIT: the plane fitted to the true background's events only (instead of leaving out
+//! the previous slice's foreground).
 //! Diagnostics that replace the final labels: ORACLE_CLUSTERS (each cluster labelled by its
 //! ground-truth majority: the over-segmentation's ceiling), ORACLE_T=ratio (a cluster is
 //! background when the true camera translation explains it with a depth of its own).
@@ -90,6 +92,11 @@ fn apply(
             "sigma_px" => planar.sigma_px = f,
             "min_center_gap" => planar.min_center_gap = f,
             "density_cell_px" => planar.density_cell_px = f as u16,
+            "previous_weight" => planar.previous.weight = f,
+            "previous_dilate_px" => planar.previous.dilate_px = f as u16,
+            "previous_cell_px" => planar.previous.cell_px = f as u16,
+            "previous_min_free_share" => planar.previous.min_free_share = f,
+            "planar_silent_share" => bg.planar_silent_share = f,
             other => bail!("unknown parameter {other}"),
         }
     }
@@ -383,7 +390,18 @@ fn main() -> anyhow::Result<()> {
                 let clusters_k = c.clone();
                 let rate =
                     evseg_geometry::RotationRate::of_slice(s, *span, evseg_geometry::rotation::SLOPE_DEFAULT);
-                let r = planar.segment(&s.camera, &s.events, f, rate)?;
+                // ORACLE_FIT: the plane fitted to the true background's events only.
+                let oracle_fit: Option<Vec<f64>> = std::env::var("ORACLE_FIT").is_ok().then(|| {
+                    truth
+                        .event_object
+                        .iter()
+                        .map(|&o| f64::from(u8::from(o == 0)))
+                        .collect()
+                });
+                let r = match oracle_fit {
+                    Some(w) => planar.segment_weighted(&s.camera, &s.events, f, rate, Some(&w))?,
+                    None => planar.segment_with_previous(&s.camera, &s.events, f, rate, prev.as_deref())?,
+                };
                 let m = bg.merge(&SliceInput {
                     camera: &s.camera,
                     events: &s.events,

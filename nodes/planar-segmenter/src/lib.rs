@@ -29,11 +29,15 @@
 //!   slices), pooled IoU one-object 0.37 (LS) / 0.34 (Huber) / 0.32 (Tukey), two-objects
 //!   0.18 / 0.11 / 0.11: the room is not a plane, and the robust fits follow the dominant
 //!   surface more tightly, calling more of the other background surfaces foreground.
+//! - With the previous slice's final labels (a feedback input), the equations of the events
+//!   where the previous foreground was are left out of the fit ([`previous`]): the paper's fit
+//!   assumes the background dominates every slice, which a large object breaks.
 //! - 2-means always splits in two; when the two centres are closer than
 //!   [`PlanarParams::min_center_gap`] the slice is taken as all background (a scene without a
 //!   moving object would otherwise have half its noise called foreground).
 
 pub mod fit;
+pub mod previous;
 pub mod smooth;
 pub mod two_means;
 
@@ -42,6 +46,7 @@ use evseg_schemas::align::AlignError;
 use evseg_schemas::{CameraInfo, Events, NormalFlow, Residuals};
 
 pub use fit::{Equation, FitParams, Robust, fit_planar, fit_planar_weighted};
+pub use previous::{PreviousForeground, PreviousParams};
 pub use smooth::SmoothGrid;
 pub use two_means::{TwoMeans, two_means};
 
@@ -108,6 +113,8 @@ pub struct PlanarParams {
     /// Support needed to classify an event without flow (Gaussian-weighted count of valid
     /// events around it, 1 = one event in the same cell; default 1).
     pub min_support: f64,
+    /// How the previous slice's foreground weighs in the fit ([`previous`]).
+    pub previous: PreviousParams,
 }
 
 impl Default for PlanarParams {
@@ -122,6 +129,7 @@ impl Default for PlanarParams {
             two_means_iter: 100,
             classify_invalid: true,
             min_support: 1.0,
+            previous: PreviousParams::default(),
             density_cell_px: 48,
             residual_length_k: 6.0,
         }
@@ -159,6 +167,8 @@ pub struct PlanarResult {
     pub fitted_events: usize,
     /// True when the IMU rotation was subtracted.
     pub derotated: bool,
+    /// True when the previous slice's foreground was left out of the fit ([`previous`]).
+    pub previous_applied: bool,
 }
 
 /// The planar segmenter; keeps the undistortion table of the last camera seen.
@@ -166,6 +176,17 @@ pub struct PlanarResult {
 pub struct PlanarSegmenter {
     params: PlanarParams,
     table: TableCache,
+    /// Sensor size and event pixels of the last slice segmented, to place its labels.
+    last: Option<LastSlice>,
+}
+
+/// Where the last slice's events were.
+#[derive(Debug, Clone)]
+struct LastSlice {
+    width: u16,
+    height: u16,
+    x: Vec<u16>,
+    y: Vec<u16>,
 }
 
 impl PlanarSegmenter {
@@ -207,12 +228,27 @@ impl PlanarSegmenter {
             }
             _ => {}
         }
+        let q = params.previous;
+        if !(q.weight.is_finite() && (0.0..=1.0).contains(&q.weight)) {
+            return bad("previous_weight", q.weight.to_string(), "must be in [0, 1]");
+        }
+        if !(q.min_free_share.is_finite() && (0.0..=1.0).contains(&q.min_free_share)) {
+            return bad(
+                "previous_min_free_share",
+                q.min_free_share.to_string(),
+                "must be in [0, 1]",
+            );
+        }
+        if q.cell_px == 0 {
+            return bad("previous_cell_px", "0".into(), "must be >= 1");
+        }
         if params.min_confidence.is_nan() || params.min_support.is_nan() {
             return bad("min_confidence/min_support", "NaN".into(), "must be numbers");
         }
         Ok(Self {
             params,
             table: TableCache::default(),
+            last: None,
         })
     }
 
@@ -229,6 +265,84 @@ impl PlanarSegmenter {
         events: &Events,
         flow: &NormalFlow,
         rate: Option<RotationRate>,
+    ) -> Result<PlanarResult, PlanarError> {
+        self.segment_weighted(camera, events, flow, rate, None)
+    }
+
+    /// [`PlanarSegmenter::segment`] with the final labels of the slice this segmenter saw last
+    /// (`previous_labels`, one per event of that slice, 0 = background): the events where
+    /// that foreground was weigh [`PreviousParams::weight`] in the fit. Labels that do not fit
+    /// the last slice (another length or sensor size, or no last slice) are not used
+    /// ([`PlanarResult::previous_applied`] false).
+    pub fn segment_with_previous(
+        &mut self,
+        camera: &CameraInfo,
+        events: &Events,
+        flow: &NormalFlow,
+        rate: Option<RotationRate>,
+        previous_labels: Option<&[u32]>,
+    ) -> Result<PlanarResult, PlanarError> {
+        let q = self.params.previous;
+        let mask = match (previous_labels, &self.last) {
+            (Some(labels), Some(last))
+                if q.weight < 1.0 && last.width == camera.width && last.height == camera.height =>
+            {
+                let mask = PreviousForeground::new(last.width, last.height, &last.x, &last.y, labels, &q);
+                if mask.is_none() {
+                    tracing::warn!(
+                        labels = labels.len(),
+                        events = last.x.len(),
+                        "previous labels do not fit the previous slice; fit without them"
+                    );
+                }
+                mask
+            }
+            _ => None,
+        };
+        self.segment_inner(camera, events, flow, rate, None, mask.as_ref())
+    }
+
+    /// [`PlanarSegmenter::segment`] with a prior weight per event (>= 0, one per event of
+    /// `events`) multiplying its equation's weight in the plane fit, e.g. the belief that it
+    /// is background from an earlier segmentation. `None`: every event alike.
+    pub fn segment_weighted(
+        &mut self,
+        camera: &CameraInfo,
+        events: &Events,
+        flow: &NormalFlow,
+        rate: Option<RotationRate>,
+        event_weight: Option<&[f64]>,
+    ) -> Result<PlanarResult, PlanarError> {
+        self.segment_inner(camera, events, flow, rate, event_weight, None)
+    }
+
+    fn segment_inner(
+        &mut self,
+        camera: &CameraInfo,
+        events: &Events,
+        flow: &NormalFlow,
+        rate: Option<RotationRate>,
+        event_weight: Option<&[f64]>,
+        previous: Option<&PreviousForeground>,
+    ) -> Result<PlanarResult, PlanarError> {
+        let result = self.segment_slice(camera, events, flow, rate, event_weight, previous);
+        self.last = Some(LastSlice {
+            width: camera.width,
+            height: camera.height,
+            x: events.x.clone(),
+            y: events.y.clone(),
+        });
+        result
+    }
+
+    fn segment_slice(
+        &mut self,
+        camera: &CameraInfo,
+        events: &Events,
+        flow: &NormalFlow,
+        rate: Option<RotationRate>,
+        event_weight: Option<&[f64]>,
+        previous: Option<&PreviousForeground>,
     ) -> Result<PlanarResult, PlanarError> {
         if let Some(r) = rate
             && !r.is_finite()
@@ -259,6 +373,29 @@ impl PlanarSegmenter {
                 p.density_cell_px,
             )
         });
+        let weights = match event_weight.filter(|w| w.len() == n) {
+            Some(prior) => {
+                let mut w = weights.unwrap_or_else(|| vec![1.0; samples.len()]);
+                for (w, s) in w.iter_mut().zip(&samples) {
+                    *w *= prior[s.index].max(0.0);
+                }
+                Some(w)
+            }
+            None => weights,
+        };
+        let mut previous_applied = false;
+        let weights = match previous {
+            Some(mask) => {
+                let mut w = weights.unwrap_or_else(|| vec![1.0; samples.len()]);
+                let pixels: Vec<(u16, u16)> = samples
+                    .iter()
+                    .map(|s| (events.x[s.index], events.y[s.index]))
+                    .collect();
+                previous_applied = mask.apply(&pixels, &mut w, &p.previous);
+                Some(w)
+            }
+            None => weights,
+        };
         let Some(a) = fit_planar_weighted(&eqs, weights.as_deref(), &p.fit) else {
             return Ok(PlanarResult {
                 residuals: Residuals {
@@ -271,6 +408,7 @@ impl PlanarSegmenter {
                 has_foreground: false,
                 fitted_events: eqs.len(),
                 derotated: w.is_some(),
+                previous_applied,
             });
         };
 
@@ -315,6 +453,7 @@ impl PlanarSegmenter {
             has_foreground,
             fitted_events: eqs.len(),
             derotated: w.is_some(),
+            previous_applied,
         })
     }
 }

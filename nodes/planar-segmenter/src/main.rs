@@ -5,10 +5,10 @@ use std::process::ExitCode;
 
 use evseg_geometry::RotationRate;
 use evseg_geometry::rotation::{SLOPE_DEFAULT, SLOPE_PARAM, SLOPE_PARAM_DOC};
-use evseg_planar_segmenter::{FitParams, PlanarParams, PlanarSegmenter, Robust};
+use evseg_planar_segmenter::{FitParams, PlanarParams, PlanarSegmenter, PreviousParams, Robust};
 use evseg_runtime::describe::Describe;
 use evseg_runtime::{BoxError, Inputs, NodeConfig, Outputs, Stage, run_stage};
-use evseg_schemas::{NormalFlow, Residuals, Slice};
+use evseg_schemas::{NormalFlow, Residuals, Slice, Tracks};
 
 struct Node {
     segmenter: PlanarSegmenter,
@@ -21,13 +21,19 @@ impl Stage for Node {
         let slice: Slice = input.get("slices")?;
         let flow: NormalFlow = input.get("flow")?;
         let rate = RotationRate::of_slice(&slice, input.span(), self.rate_slope);
-        let r = self
-            .segmenter
-            .segment(&slice.camera, &slice.events, &flow, rate)?;
+        let previous: Option<Tracks> = input.get_opt("previous")?;
+        let r = self.segmenter.segment_with_previous(
+            &slice.camera,
+            &slice.events,
+            &flow,
+            rate,
+            previous.as_ref().map(|t| t.label.as_slice()),
+        )?;
         tracing::debug!(
             slice = input.seq(),
             fitted = r.fitted_events,
             derotated = r.derotated,
+            previous_applied = r.previous_applied,
             foreground = r.has_foreground,
             "planar fit"
         );
@@ -61,6 +67,11 @@ fn main() -> ExitCode {
     )
     .input::<Slice>("slices", "event slices (omega: IMU rotation rate, camera frame)")
     .input::<NormalFlow>("flow", "per-event normal flow of the same slices")
+    .input::<Tracks>(
+        "previous",
+        "the tracker's output of the previous slice (wire with feedback: true; optional): its \
+         foreground is left out of the fit",
+    )
     .output::<Residuals>(
         "residuals",
         "residual per event (normalized units/s, NaN without flow), background flag, model = the \
@@ -117,6 +128,26 @@ fn main() -> ExitCode {
         "support needed to label an event without flow",
     )
     .param(
+        "previous_weight",
+        d.previous.weight,
+        "fit weight of the events where the previous slice's foreground was (1 = off, 0 = left out)",
+    )
+    .param(
+        "previous_cell_px",
+        d.previous.cell_px,
+        "cell of the previous-foreground mask, pixels",
+    )
+    .param(
+        "previous_dilate_px",
+        d.previous.dilate_px,
+        "dilation of the previous-foreground mask, pixels",
+    )
+    .param(
+        "previous_min_free_share",
+        d.previous.min_free_share,
+        "the mask is used only when at least this share of the fit's events lies outside it",
+    )
+    .param(
         "density_cell_px",
         d.density_cell_px,
         "cells over which the fit is density-normalized, pixels (0 = per-event weights)",
@@ -140,6 +171,12 @@ fn main() -> ExitCode {
             classify_invalid: cfg.param("classify_invalid")?,
             min_support: cfg.param("min_support")?,
             density_cell_px: cfg.param("density_cell_px")?,
+            previous: PreviousParams {
+                weight: cfg.param("previous_weight")?,
+                cell_px: cfg.param("previous_cell_px")?,
+                dilate_px: cfg.param("previous_dilate_px")?,
+                min_free_share: cfg.param("previous_min_free_share")?,
+            },
         };
         Ok(Node {
             segmenter: PlanarSegmenter::new(params)?,

@@ -202,13 +202,67 @@ fn robust_fit_recovers_the_background_model_despite_the_object() {
         .segment(&camera(), &ev, &fl, Some(W.into()))
         .unwrap();
     let a = &r.residuals.model;
-    let err: f64 = a
-        .iter()
+    assert!(model_error(a) < 0.01, "model {a:?} vs {:?}", expected_a());
+}
+
+/// Distance of a fitted model from [`expected_a`].
+fn model_error(a: &[f64]) -> f64 {
+    a.iter()
         .zip(expected_a())
         .map(|(a, e)| (a - e).powi(2))
         .sum::<f64>()
-        .sqrt();
-    assert!(err < 0.01, "model {a:?} vs {:?}", expected_a());
+        .sqrt()
+}
+
+#[test]
+fn the_previous_foreground_is_left_out_of_the_plain_fit() {
+    let (ev, fl, truth) = scene(6000, true, 0.0, flow_with_object);
+    let labels: Vec<u32> = truth.iter().map(|&o| u32::from(o)).collect();
+    let mut seg = PlanarSegmenter::new(ls()).unwrap();
+    // No previous slice yet: the labels cannot be placed and are not used.
+    let first = seg
+        .segment_with_previous(&camera(), &ev, &fl, Some(W.into()), Some(&labels))
+        .unwrap();
+    assert!(!first.previous_applied);
+    let pulled = model_error(&first.residuals.model);
+    assert!(pulled > 1e-3, "the plain fit is pulled by the object: {pulled}");
+    // The same slice again with its labels: the object's equations are out, the plane exact.
+    let second = seg
+        .segment_with_previous(&camera(), &ev, &fl, Some(W.into()), Some(&labels))
+        .unwrap();
+    assert!(second.previous_applied);
+    let clean = model_error(&second.residuals.model);
+    assert!(clean < 1e-5, "model error {clean} (f32 flow), pulled {pulled}");
+    // Every object event is foreground; the smoothing (sigma 12 px) spreads a little past it.
+    let mut spread = 0;
+    for (i, &o) in truth.iter().enumerate() {
+        let background = second.residuals.background[i];
+        assert!(!(o && background), "object event {i}");
+        spread += usize::from(!o && !background);
+    }
+    assert!(
+        spread * 20 < truth.len(),
+        "{spread} background events called foreground"
+    );
+    // Labels of another slice's length are ignored, not a crash; weight 1 turns it off.
+    let third = seg
+        .segment_with_previous(&camera(), &ev, &fl, Some(W.into()), Some(&labels[1..]))
+        .unwrap();
+    assert!(!third.previous_applied);
+    let mut off = PlanarSegmenter::new(PlanarParams {
+        previous: PreviousParams {
+            weight: 1.0,
+            ..PreviousParams::default()
+        },
+        ..ls()
+    })
+    .unwrap();
+    off.segment(&camera(), &ev, &fl, Some(W.into())).unwrap();
+    let r = off
+        .segment_with_previous(&camera(), &ev, &fl, Some(W.into()), Some(&labels))
+        .unwrap();
+    assert!(!r.previous_applied);
+    assert!((model_error(&r.residuals.model) - pulled).abs() < 1e-12);
 }
 
 #[test]

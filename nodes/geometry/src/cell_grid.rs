@@ -1,5 +1,5 @@
-//! A coarse pixel grid (cells of `cell_px` x `cell_px` pixels) used for the warped background
-//! occupancy and the persistent background map.
+//! A coarse pixel grid (cells of `cell_px` x `cell_px` pixels): the background merger's warped
+//! occupancy and persistent background map, the planar segmenter's previous-foreground mask.
 
 /// A grid of `f32` values over a `width` x `height` pixel sensor.
 #[derive(Debug, Clone, PartialEq)]
@@ -54,14 +54,31 @@ impl CellGrid {
 
     /// The maximum over each cell's 3x3 neighbourhood (a one-cell dilation).
     pub fn dilated(&self) -> Self {
+        self.dilated_by(1)
+    }
+
+    /// The maximum over each cell's `(2 r + 1)` x `(2 r + 1)` neighbourhood (an `r`-cell
+    /// dilation; `r = 0` is a copy). Separable: a row pass, then a column pass.
+    pub fn dilated_by(&self, r: usize) -> Self {
+        if r == 0 {
+            return self.clone();
+        }
+        let mut rows_done = self.clone();
+        for cy in 0..self.rows {
+            for cx in 0..self.cols {
+                let mut m = f32::MIN;
+                for nx in cx.saturating_sub(r)..=(cx + r).min(self.cols - 1) {
+                    m = m.max(self.values[cy * self.cols + nx]);
+                }
+                rows_done.values[cy * self.cols + cx] = m;
+            }
+        }
         let mut out = self.clone();
         for cy in 0..self.rows {
             for cx in 0..self.cols {
                 let mut m = f32::MIN;
-                for ny in cy.saturating_sub(1)..=(cy + 1).min(self.rows - 1) {
-                    for nx in cx.saturating_sub(1)..=(cx + 1).min(self.cols - 1) {
-                        m = m.max(self.values[ny * self.cols + nx]);
-                    }
+                for ny in cy.saturating_sub(r)..=(cy + r).min(self.rows - 1) {
+                    m = m.max(rows_done.values[ny * self.cols + cx]);
                 }
                 out.values[cy * self.cols + cx] = m;
             }
@@ -86,5 +103,11 @@ mod tests {
         let d = g.dilated();
         assert_eq!(d.values, vec![1.0, 1.0, 0.0, 1.0, 1.0, 0.0]);
         assert!(g.fits(10, 7, 4) && !g.fits(10, 9, 4));
+        let mut wide = CellGrid::new(40, 8, 4);
+        wide.values[2] = 1.0;
+        assert_eq!(wide.dilated_by(0), wide);
+        let two: Vec<f32> = wide.dilated_by(2).values;
+        assert_eq!(&two[..10], &[1.0, 1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0]);
+        assert_eq!(&two[10..], &two[..10], "the row below, within 2 cells");
     }
 }
