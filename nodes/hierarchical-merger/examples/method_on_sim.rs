@@ -381,6 +381,9 @@ fn main() -> anyhow::Result<()> {
             let mut bg = BackgroundMerger::new(bgp)?;
             let mut hier = HierarchicalMerger::new(hp)?;
             let mut prev: Option<Vec<u32>> = None;
+            // The planar segmenter's feedback: the final labels, or (PREV_COARSE) the background
+            // merger's coarse groups (group != 0 = foreground).
+            let mut prev_planar: Option<Vec<u32>> = None;
             let (mut ious, mut dirs, mut planar_ious) = (Vec::new(), Vec::new(), Vec::new());
             let mut coarse_ious = Vec::new();
             let (mut inter_all, mut union_all) = (0usize, 0usize);
@@ -400,7 +403,9 @@ fn main() -> anyhow::Result<()> {
                 });
                 let r = match oracle_fit {
                     Some(w) => planar.segment_weighted(&s.camera, &s.events, f, rate, Some(&w))?,
-                    None => planar.segment_with_previous(&s.camera, &s.events, f, rate, prev.as_deref())?,
+                    None => {
+                        planar.segment_with_previous(&s.camera, &s.events, f, rate, prev_planar.as_deref())?
+                    }
                 };
                 let m = bg.merge(&SliceInput {
                     camera: &s.camera,
@@ -624,6 +629,15 @@ fn main() -> anyhow::Result<()> {
                     }
                 }
                 prev = Some(label.clone());
+                prev_planar = Some(if std::env::var("PREV_COARSE").is_ok() {
+                    m.coarse
+                        .group
+                        .iter()
+                        .map(|&g| u32::from(g != 0 && g != evseg_schemas::CoarseSegmentation::UNASSIGNED))
+                        .collect()
+                } else {
+                    label.clone()
+                });
             }
             dirs.sort_by(f64::total_cmp);
             let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;

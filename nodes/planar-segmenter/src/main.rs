@@ -8,7 +8,7 @@ use evseg_geometry::rotation::{SLOPE_DEFAULT, SLOPE_PARAM, SLOPE_PARAM_DOC};
 use evseg_planar_segmenter::{FitParams, PlanarParams, PlanarSegmenter, PreviousParams, Robust};
 use evseg_runtime::describe::Describe;
 use evseg_runtime::{BoxError, Inputs, NodeConfig, Outputs, Stage, run_stage};
-use evseg_schemas::{NormalFlow, Residuals, Slice, Tracks};
+use evseg_schemas::{CoarseSegmentation, NormalFlow, Residuals, Slice};
 
 struct Node {
     segmenter: PlanarSegmenter,
@@ -21,13 +21,20 @@ impl Stage for Node {
         let slice: Slice = input.get("slices")?;
         let flow: NormalFlow = input.get("flow")?;
         let rate = RotationRate::of_slice(&slice, input.span(), self.rate_slope);
-        let previous: Option<Tracks> = input.get_opt("previous")?;
+        let previous: Option<CoarseSegmentation> = input.get_opt("previous")?;
+        // Group 0 is the merged background; unassigned events (no cluster) count as background.
+        let labels: Option<Vec<u32>> = previous.map(|c| {
+            c.group
+                .iter()
+                .map(|&g| u32::from(g != 0 && g != CoarseSegmentation::UNASSIGNED))
+                .collect()
+        });
         let r = self.segmenter.segment_with_previous(
             &slice.camera,
             &slice.events,
             &flow,
             rate,
-            previous.as_ref().map(|t| t.label.as_slice()),
+            labels.as_deref(),
         )?;
         tracing::debug!(
             slice = input.seq(),
@@ -67,10 +74,10 @@ fn main() -> ExitCode {
     )
     .input::<Slice>("slices", "event slices (omega: IMU rotation rate, camera frame)")
     .input::<NormalFlow>("flow", "per-event normal flow of the same slices")
-    .input::<Tracks>(
+    .optional_input::<CoarseSegmentation>(
         "previous",
-        "the tracker's output of the previous slice (wire with feedback: true; optional): its \
-         foreground is left out of the fit",
+        "the background merger's output of the previous slice (wire with feedback: true): its \
+         foreground (groups other than 0) is left out of the fit",
     )
     .output::<Residuals>(
         "residuals",
