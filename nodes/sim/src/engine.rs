@@ -20,9 +20,9 @@
 //!   first, 8 at a time (they do not depend on its reference level), and the threshold test
 //!   runs only when one of them reaches a threshold. (A bound of the pixel's own path before
 //!   sampling no longer paid once samples were taken 8 at a time; it decided the same.)
-//! - **unstable** (near a silhouette, crease or seam): ray cast every `stride` render steps,
-//!   the largest power of two that keeps its local image-speed bound within `max_px_per_step`
-//!   per render (see [`crate::local_speed`]), with edge anti-aliasing
+//! - **unstable** (near a silhouette, crease or seam): ray cast at the render steps that keep
+//!   its local image-speed bound within `max_px_per_step` per render (as late as that allows;
+//!   see [`crate::local_speed`]), with edge anti-aliasing
 //!   ([`FrameGeom::edge_sample`]).
 
 use crate::camera::{CameraConfig, Rays};
@@ -607,7 +607,7 @@ impl Engine {
         self.stats.skip_violations += violations;
         self.stats.interpolated_samples += samples;
 
-        // Unstable pixels: ray cast every `stride` steps (their local speed bound).
+        // Unstable pixels: ray cast at the steps their local speed bound needs.
         let speeds = self.local_speeds(cfg, &geoms);
         let u = &mut self.unstable;
         u.gather(
@@ -625,11 +625,10 @@ impl Engine {
             },
         );
         let w = self.rays.width;
-        let windows = local_speed::stride_windows(&times);
-        let max_px = cfg.render.max_px_per_step;
+        let mut schedules = local_speed::Schedules::new(&times, cfg.render.max_px_per_step);
         for (j, &p) in u.pixel.iter().enumerate() {
             let p = p as usize;
-            u.stride[j] = local_speed::stride_for(&windows, speeds.at(p % w, p / w), max_px) as u32;
+            u.steps[j] = schedules.steps(speeds.at(p % w, p / w));
         }
         for s in 1..=k {
             if s < k {

@@ -5,8 +5,8 @@
 //! scattered along edges, so their per-pixel state (rays, thresholds, reference levels, the
 //! previous step's intensity) is gathered into dense arrays at the start of the interval and
 //! the reference levels are scattered back at its end: every step then reads contiguous memory
-//! instead of a dozen image-sized arrays at scattered indices. Each pixel is rendered every
-//! `stride` steps of the interval (see `local_speed`).
+//! instead of a dozen image-sized arrays at scattered indices. Each pixel is rendered at the
+//! steps its local speed bound needs (see `local_speed::render_steps`).
 
 use crate::camera::Rays;
 use crate::render::FrameGeom;
@@ -53,9 +53,9 @@ pub struct UnstableList {
     pub key: Vec<u16>,
     /// Object id of the current render step.
     pub id: Vec<u16>,
-    /// Render stride: the pixel is rendered at the steps that are multiples of it (and at the
-    /// closing key frame); see `local_speed`.
-    pub stride: Vec<u32>,
+    /// Render steps: bit `s` set when the pixel is rendered at step `s` (always also at the
+    /// closing key frame); see `local_speed::render_steps`.
+    pub steps: Vec<u64>,
     /// Step index of the pixel's previous render (0: the opening key frame).
     pub s_prev: Vec<u32>,
     /// List indices of the pixels rendered at the current step.
@@ -129,8 +129,8 @@ impl UnstableList {
         self.l.resize(m, 0.0);
         self.key.clear();
         self.key.extend(pix.iter().map(|&p| src.key0[p as usize]));
-        self.stride.clear();
-        self.stride.resize(m, 1);
+        self.steps.clear();
+        self.steps.resize(m, u64::MAX);
         self.s_prev.clear();
         self.s_prev.resize(m, 0);
         self.id.clear();
@@ -158,15 +158,14 @@ impl UnstableList {
         }
     }
 
-    /// Lists in `active` the pixels whose stride divides step `s`.
+    /// Lists in `active` the pixels rendered at step `s` (`s < 64`).
     pub fn select(&mut self, s: usize) {
         self.active.clear();
-        let s = s as u32;
         self.active.extend(
-            self.stride
+            self.steps
                 .iter()
                 .enumerate()
-                .filter(|(_, st)| s.is_multiple_of(**st))
+                .filter(|(_, st)| *st >> s & 1 == 1)
                 .map(|(j, _)| j as u32),
         );
     }
