@@ -625,15 +625,44 @@ impl Engine {
             },
         );
         let w = self.rays.width;
+        // Every pixel waits in the bucket of its next render slot.
         let mut schedules = local_speed::Schedules::new(&times, cfg.render.max_px_per_step);
+        let key_slot = schedules.key_slot();
+        let mut buckets: Vec<Vec<u32>> = vec![Vec::new(); key_slot];
         for (j, &p) in u.pixel.iter().enumerate() {
             let p = p as usize;
-            u.steps[j] = schedules.steps(speeds.at(p % w, p / w));
+            let sch = schedules.of(speeds.at(p % w, p / w));
+            u.schedule[j] = sch;
+            let first = schedules.lists[sch as usize][0] as usize;
+            if first < key_slot {
+                buckets[first].push(j as u32);
+            }
         }
-        for s in 1..=k {
-            if s < k {
-                u.select(s);
-                let ss = u.render(&self.scene, &geoms[s], w, cfg.render.edge_supersampling);
+        // Geometry of the render slots inside steps that some schedule uses.
+        let mut sub_geoms: Vec<Option<FrameGeom>> = vec![None; key_slot];
+        for list in &schedules.lists {
+            for &q in list {
+                let q = q as usize;
+                if q % local_speed::SUBSTEPS != 0 && sub_geoms[q].is_none() {
+                    let t = local_speed::slot_time(&times, q);
+                    sub_geoms[q] = Some(FrameGeom::new(&self.scene, &cfg.camera, t));
+                }
+            }
+        }
+        let geom_at = |q: usize| -> &FrameGeom {
+            if q % local_speed::SUBSTEPS == 0 {
+                &geoms[q / local_speed::SUBSTEPS]
+            } else {
+                sub_geoms[q].as_ref().expect("geometry of a scheduled slot")
+            }
+        };
+        for q in 1..=key_slot {
+            if q < key_slot {
+                if buckets[q].is_empty() {
+                    continue;
+                }
+                u.active = std::mem::take(&mut buckets[q]);
+                let ss = u.render(&self.scene, geom_at(q), w, cfg.render.edge_supersampling);
                 self.stats.pixel_renders += u.active.len() as u64;
                 self.stats.supersampled += ss;
             }
@@ -643,11 +672,12 @@ impl Engine {
                 rays: &self.rays,
                 refractory: cfg.esim.refractory_s,
             };
-            let count = if s < k { u.active.len() } else { u.len() };
+            let count = if q < key_slot { u.active.len() } else { u.len() };
+            let tq = local_speed::slot_time(&times, q);
             for a in 0..count {
-                let j = if s < k { u.active[a] as usize } else { a };
+                let j = if q < key_slot { u.active[a] as usize } else { a };
                 let i = u.pixel[j] as usize;
-                let (l1, id1) = if s < k {
+                let (l1, id1) = if q < key_slot {
                     (u.l[j], u.id[j])
                 } else {
                     (self.kf1.l[i], self.kf1.id[i])
@@ -662,8 +692,8 @@ impl Engine {
                         i,
                         u.l_prev[j],
                         l1,
-                        (times[sp], times[s]),
-                        (&geoms[sp], &geoms[s]),
+                        (local_speed::slot_time(&times, sp), tq),
+                        (geom_at(sp), geom_at(q)),
                         (u.id_prev[j], id1),
                         (u.c_on[j], u.c_off[j]),
                         &mut batch,
@@ -672,7 +702,14 @@ impl Engine {
                 }
                 u.l_prev[j] = l1;
                 u.id_prev[j] = id1;
-                u.s_prev[j] = s as u32;
+                u.s_prev[j] = q as u32;
+                if q < key_slot {
+                    u.next[j] += 1;
+                    let nq = schedules.lists[u.schedule[j] as usize][u.next[j] as usize] as usize;
+                    if nq < key_slot {
+                        buckets[nq].push(j as u32);
+                    }
+                }
             }
         }
         u.scatter(&mut self.reference, &mut self.last_event);

@@ -493,7 +493,10 @@ mod tests {
                 angular: [rng.range(-2.0, 2.0), rng.range(-2.0, 2.0), rng.range(-2.0, 2.0)],
             };
             let pose = BoxPose {
-                r_cb: math::mul_mm(&math::rot_axis(0, rng.range(-3.0, 3.0)), &math::rot_axis(2, rng.range(-3.0, 3.0))),
+                r_cb: math::mul_mm(
+                    &math::rot_axis(0, rng.range(-3.0, 3.0)),
+                    &math::rot_axis(2, rng.range(-3.0, 3.0)),
+                ),
                 center: [rng.range(-0.8, 0.8), rng.range(-0.6, 0.6), rng.range(1.0, 3.0)],
             };
             let half = [rng.range(0.05, 0.4), rng.range(0.05, 0.4), rng.range(0.02, 0.3)];
@@ -501,7 +504,10 @@ mod tests {
             let Some(b) = m.speed_bound_box(&corners, 10.0) else {
                 continue;
             };
-            let v_max = corners.iter().map(|&c| math::norm(m.velocity(c))).fold(0.0, f64::max);
+            let v_max = corners
+                .iter()
+                .map(|&c| math::norm(m.velocity(c)))
+                .fold(0.0, f64::max);
             let z_min = corners.iter().map(|c| c[2]).fold(f64::INFINITY, f64::min);
             let r2 = corners
                 .iter()

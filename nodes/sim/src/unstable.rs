@@ -6,7 +6,7 @@
 //! previous step's intensity) is gathered into dense arrays at the start of the interval and
 //! the reference levels are scattered back at its end: every step then reads contiguous memory
 //! instead of a dozen image-sized arrays at scattered indices. Each pixel is rendered at the
-//! steps its local speed bound needs (see `local_speed::render_steps`).
+//! render slots its local speed bound needs (see `local_speed::render_slots`).
 
 use crate::camera::Rays;
 use crate::render::FrameGeom;
@@ -53,12 +53,14 @@ pub struct UnstableList {
     pub key: Vec<u16>,
     /// Object id of the current render step.
     pub id: Vec<u16>,
-    /// Render steps: bit `s` set when the pixel is rendered at step `s` (always also at the
-    /// closing key frame); see `local_speed::render_steps`.
-    pub steps: Vec<u64>,
-    /// Step index of the pixel's previous render (0: the opening key frame).
+    /// Render schedule: index into `local_speed::Schedules::lists`.
+    pub schedule: Vec<u32>,
+    /// Position of the pixel's next render in its schedule.
+    pub next: Vec<u32>,
+    /// Render slot of the pixel's previous render (0: the opening key frame; see
+    /// `local_speed::SUBSTEPS`).
     pub s_prev: Vec<u32>,
-    /// List indices of the pixels rendered at the current step.
+    /// List indices of the pixels rendered at the current slot.
     pub active: Vec<u32>,
     /// Image-sized map from pixel index to list index ([`NONE`] outside the list); all
     /// [`NONE`] between calls.
@@ -129,8 +131,10 @@ impl UnstableList {
         self.l.resize(m, 0.0);
         self.key.clear();
         self.key.extend(pix.iter().map(|&p| src.key0[p as usize]));
-        self.steps.clear();
-        self.steps.resize(m, u64::MAX);
+        self.schedule.clear();
+        self.schedule.resize(m, 0);
+        self.next.clear();
+        self.next.resize(m, 0);
         self.s_prev.clear();
         self.s_prev.resize(m, 0);
         self.id.clear();
@@ -156,18 +160,6 @@ impl UnstableList {
         for &p in pix {
             self.index_of[p as usize] = NONE;
         }
-    }
-
-    /// Lists in `active` the pixels rendered at step `s` (`s < 64`).
-    pub fn select(&mut self, s: usize) {
-        self.active.clear();
-        self.active.extend(
-            self.steps
-                .iter()
-                .enumerate()
-                .filter(|(_, st)| *st >> s & 1 == 1)
-                .map(|(j, _)| j as u32),
-        );
     }
 
     /// Ray casts the `active` pixels at `geom` into `l`, `key` and `id`; with `supersample`,
