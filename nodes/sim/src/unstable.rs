@@ -226,19 +226,26 @@ impl UnstableList {
                 .any(|&nb| nb != NONE && self.key[nb as usize] != k);
             if edge {
                 let i = self.pixel[j] as usize;
+                let (px, py) = ((i % w) as i32, (i / w) as i32);
+                count += 1;
+                // `edge_sample` in two parts: its shortcut inlined here (AVX2; the centre's
+                // value stands when the sub-samples certainly see its surface), the rest out
+                // of line.
+                if geom.edge_free(self.x[j], self.y[j], self.d_du[j], self.d_dv[j], px, py, k) {
+                    continue;
+                }
                 self.l[j] = geom
-                    .edge_sample(
+                    .edge_mix(
                         scene,
                         self.x[j],
                         self.y[j],
                         self.d_du[j],
                         self.d_dv[j],
-                        (i % w) as i32,
-                        (i / w) as i32,
+                        px,
+                        py,
                         (self.l[j], k),
                     )
                     .0;
-                count += 1;
             }
         }
         count
