@@ -658,14 +658,14 @@ impl Engine {
         for list in &schedules.lists {
             for &q in list {
                 let q = q as usize;
-                if q % local_speed::SUBSTEPS != 0 && sub_geoms[q].is_none() {
+                if !q.is_multiple_of(local_speed::SUBSTEPS) && sub_geoms[q].is_none() {
                     let t = local_speed::slot_time(&times, q);
                     sub_geoms[q] = Some(FrameGeom::new(&self.scene, &cfg.camera, t));
                 }
             }
         }
         let geom_at = |q: usize| -> &FrameGeom {
-            if q % local_speed::SUBSTEPS == 0 {
+            if q.is_multiple_of(local_speed::SUBSTEPS) {
                 &geoms[q / local_speed::SUBSTEPS]
             } else {
                 sub_geoms[q].as_ref().expect("geometry of a scheduled slot")

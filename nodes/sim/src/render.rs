@@ -312,7 +312,7 @@ impl Outline {
         // facing when the camera is outside its side.
         let front = |face: usize| {
             let k = face / 2;
-            if face % 2 == 0 {
+            if face.is_multiple_of(2) {
                 o_b[k] < -half[k]
             } else {
                 o_b[k] > half[k]
@@ -366,10 +366,9 @@ impl Outline {
 #[inline(always)]
 fn clear_of<const N: usize>(n: &[[f32; N]; 3], x: f32, y: f32, du: [f32; 2], dv: [f32; 2]) -> bool {
     let mut ok = true;
-    for l in 0..N {
-        let e = n[0][l] * x + n[1][l] * y + n[2][l];
-        let a = n[0][l] * du[0] + n[1][l] * du[1];
-        let b = n[0][l] * dv[0] + n[1][l] * dv[1];
+    for ((&nx, &ny), &nz) in n[0].iter().zip(&n[1]).zip(&n[2]) {
+        let e = nx * x + ny * y + nz;
+        let (a, b) = (nx * du[0] + ny * du[1], nx * dv[0] + ny * dv[1]);
         ok &= e.abs() > 0.25 * (a.abs() + b.abs()) + EDGE_EPS;
     }
     ok
