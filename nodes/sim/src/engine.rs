@@ -71,8 +71,9 @@ pub struct KeyFrame {
     pub v: Vec<f32>,
     /// Texture footprint, m.
     pub footprint: Vec<f32>,
-    /// Size of one pixel on the surface across the ray, m.
-    pub px_size: Vec<f32>,
+    /// Depth along the optical axis, m (infinite where nothing was hit; one pixel across the
+    /// ray measures `z * geom.inv_f()` on the surface).
+    pub z: Vec<f32>,
     /// True where a 4-neighbour sees another surface.
     pub edge: Vec<bool>,
     /// True where the pixel's value mixes surfaces (edge sub-samples on another surface).
@@ -89,7 +90,7 @@ impl KeyFrame {
             u: vec![0.0; n],
             v: vec![0.0; n],
             footprint: vec![0.0; n],
-            px_size: vec![0.0; n],
+            z: vec![0.0; n],
             edge: vec![false; n],
             mixed: vec![false; n],
         }
@@ -419,8 +420,7 @@ impl Engine {
             }
         }
         let mut block_z = vec![f32::INFINITY; bw * bh];
-        let inv_f = (2.0 / (cfg.camera.fx + cfg.camera.fy)) as f32;
-        cast_keyframe(&mut self.kf1, &self.scene, &self.rays, inv_f, &mut block_z);
+        cast_keyframe(&mut self.kf1, &self.scene, &self.rays, &mut block_z);
         let kf = &mut self.kf1;
         let mut zmin = f32::INFINITY;
         for (b, z) in self.blocks.iter_mut().zip(&block_z) {
@@ -572,7 +572,6 @@ impl Engine {
                     let r = self.reference[i];
                     let disp = stable_displacement(kf0, kf1, i, w_img, du, dv);
                     let m = ((disp / max_px).ceil() as usize).clamp(1, 4096);
-                    let id = kf0.id[i];
                     let mf = m as f32;
                     tex.sample_path([u0, v0, fp0, s0], [du, dv, dfp, s1 - s0], m, &mut path);
                     path.push(kf1.l[i]);
@@ -604,8 +603,7 @@ impl Engine {
                                 l,
                                 (t_prev, t),
                                 (t0, t1),
-                                (&kf0.geom, &kf1.geom),
-                                id,
+                                (kf0, kf1),
                                 (c_on, c_off),
                                 &mut batch,
                             );
@@ -863,25 +861,25 @@ impl Engine {
 /// `block_z` (per `BLOCK` x `BLOCK` block) to the background depths seen. With AVX2 (detected
 /// at run time) the same code is compiled for it: the same arithmetic, so the same values
 /// (no fused multiply-adds), with the lane samples inlined.
-fn cast_keyframe(kf: &mut KeyFrame, scene: &Scene, rays: &Rays, inv_f: f32, block_z: &mut [f32]) {
+fn cast_keyframe(kf: &mut KeyFrame, scene: &Scene, rays: &Rays, block_z: &mut [f32]) {
     #[cfg(target_arch = "x86_64")]
     if std::is_x86_feature_detected!("avx2") {
         // SAFETY: AVX2 is available (checked just above).
-        return unsafe { cast_keyframe_avx2(kf, scene, rays, inv_f, block_z) };
+        return unsafe { cast_keyframe_avx2(kf, scene, rays, block_z) };
     }
-    cast_keyframe_with(kf, scene, rays, inv_f, block_z);
+    cast_keyframe_with(kf, scene, rays, block_z);
 }
 
 /// [`cast_keyframe`] compiled with AVX2.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-fn cast_keyframe_avx2(kf: &mut KeyFrame, scene: &Scene, rays: &Rays, inv_f: f32, block_z: &mut [f32]) {
-    cast_keyframe_with(kf, scene, rays, inv_f, block_z);
+fn cast_keyframe_avx2(kf: &mut KeyFrame, scene: &Scene, rays: &Rays, block_z: &mut [f32]) {
+    cast_keyframe_with(kf, scene, rays, block_z);
 }
 
 /// The body of [`cast_keyframe`].
 #[inline(always)]
-fn cast_keyframe_with(kf: &mut KeyFrame, scene: &Scene, rays: &Rays, inv_f: f32, block_z: &mut [f32]) {
+fn cast_keyframe_with(kf: &mut KeyFrame, scene: &Scene, rays: &Rays, block_z: &mut [f32]) {
     let (w, h) = (rays.width, rays.height);
     let bw = w.div_ceil(BLOCK);
     for v in 0..h {
@@ -908,9 +906,7 @@ fn cast_keyframe_with(kf: &mut KeyFrame, scene: &Scene, rays: &Rays, inv_f: f32,
             kf.u[span.clone()].copy_from_slice(&h.u);
             kf.v[span.clone()].copy_from_slice(&h.v);
             kf.footprint[span.clone()].copy_from_slice(&h.footprint);
-            for (o, z) in kf.px_size[span].iter_mut().zip(&h.z) {
-                *o = z * inv_f;
-            }
+            kf.z[span].copy_from_slice(&h.z);
             for l in 0..KEY_LANES {
                 if h.id[l] == 0 {
                     let b = &mut block_z[brow + (u + l) / BLOCK];
@@ -930,7 +926,7 @@ fn cast_keyframe_with(kf: &mut KeyFrame, scene: &Scene, rays: &Rays, inv_f: f32,
             kf.u[i] = hit.u;
             kf.v[i] = hit.v;
             kf.footprint[i] = hit.footprint;
-            kf.px_size[i] = hit.z * inv_f;
+            kf.z[i] = hit.z;
             if hit.id == 0 {
                 let b = &mut block_z[brow + u / BLOCK];
                 *b = b.min(hit.z);
@@ -1005,7 +1001,10 @@ fn shaded_bounds(texels: Option<(f32, f32)>, s0: f32, s1: f32) -> Option<(f32, f
 /// any angle). Image borders use that bound alone.
 #[inline]
 fn stable_displacement(kf0: &KeyFrame, kf1: &KeyFrame, i: usize, w: usize, du: f32, dv: f32) -> f32 {
-    let size = kf0.px_size[i].min(kf1.px_size[i]).max(1e-9);
+    // The pixel's size on the surface across the ray at either key frame.
+    let size = (kf0.z[i] * kf0.geom.inv_f())
+        .min(kf1.z[i] * kf1.geom.inv_f())
+        .max(1e-9);
     let any_direction = (du * du + dv * dv).sqrt() / size;
     let n = kf0.u.len();
     let (x, y) = (i % w, i / w);
@@ -1097,8 +1096,9 @@ fn fire(
     );
 }
 
-/// Like [`fire`] for a sub-segment `span` of a key-frame interval `whole` on one surface `id`;
-/// the truth interpolates between the key frames.
+/// Like [`fire`] for a sub-segment `span` of a key-frame interval `whole` of a stable pixel
+/// (one surface at both key frames `kfs`); the truth interpolates between the key frames, with
+/// the surface and depth they located at the pixel (what `FrameGeom::flow` would locate).
 #[allow(clippy::too_many_arguments)]
 fn fire_segment(
     ctx: &FireCtx,
@@ -1109,13 +1109,13 @@ fn fire_segment(
     l1: f32,
     span: (f64, f64),
     whole: (f64, f64),
-    geoms: (&FrameGeom, &FrameGeom),
-    id: u16,
+    kfs: (&KeyFrame, &KeyFrame),
     thresholds: (f32, f32),
     batch: &mut Vec<RawEvent>,
 ) {
     let (ta, tb) = span;
     let (wa, wb) = whole;
+    let id = kfs.0.id[i];
     esim::crossings(
         reference,
         last_event,
@@ -1132,7 +1132,9 @@ fn fire_segment(
             } else {
                 0.0
             };
-            let (id, fx, fy) = event_truth(ctx, i, geoms.0, geoms.1, id, id, frac);
+            let (x, y) = (ctx.rays.x[i], ctx.rays.y[i]);
+            let flow = |kf: &KeyFrame| kf.geom.flow_at(ctx.cam, x, y, kf.key[i], kf.z[i], id);
+            let (fx, fy) = interpolate_flow(flow(kfs.0), flow(kfs.1), frac);
             batch.push(RawEvent {
                 t,
                 pixel: i as u32,
@@ -1174,6 +1176,14 @@ fn event_truth(
     let (x, y, u, v) = (ctx.rays.x[i], ctx.rays.y[i], (i % w) as i32, (i / w) as i32);
     let fa = ga.flow(ctx.scene, ctx.cam, x, y, u, v, id);
     let fb = gb.flow(ctx.scene, ctx.cam, x, y, u, v, id);
+    let (fx, fy) = interpolate_flow(fa, fb, frac);
+    (id, fx, fy)
+}
+
+/// The flow (px/s) a fraction `frac` of the way from flow `fa` to `fb` (either alone when the
+/// other is missing, zero when both are).
+#[inline]
+fn interpolate_flow(fa: Option<(f64, f64)>, fb: Option<(f64, f64)>, frac: f32) -> (f32, f32) {
     let (fx, fy) = match (fa, fb) {
         (Some(a), Some(b)) => {
             let f = frac as f64;
@@ -1183,7 +1193,7 @@ fn event_truth(
         (None, Some(b)) => b,
         (None, None) => (0.0, 0.0),
     };
-    (id, fx as f32, fy as f32)
+    (fx as f32, fy as f32)
 }
 
 #[cfg(test)]
@@ -1194,11 +1204,12 @@ mod tests {
     /// Key frames of a 5 x 5 image whose texture coordinates are the affine map `(a, b, c, d)`
     /// of the pixel position (u = a x + b y, v = c x + d y), shifted by `shift`.
     fn affine(kf: &mut KeyFrame, w: usize, j: [f32; 4], shift: (f32, f32), px_size: f32) {
+        let z = px_size / kf.geom.inv_f();
         for i in 0..w * w {
             let (x, y) = ((i % w) as f32, (i / w) as f32);
             kf.u[i] = j[0] * x + j[1] * y + shift.0;
             kf.v[i] = j[2] * x + j[3] * y + shift.1;
-            kf.px_size[i] = px_size;
+            kf.z[i] = z;
         }
     }
 

@@ -481,6 +481,11 @@ impl FrameGeom {
         }
     }
 
+    /// Size of one pixel across the ray per metre of depth (1 / focal length, px).
+    pub fn inv_f(&self) -> f32 {
+        self.inv_f
+    }
+
     /// Pixel bounding boxes `[u0, v0, u1, v1]` of the visible moving objects, with their ids.
     pub fn object_bboxes(&self) -> impl Iterator<Item = (u16, [i32; 4])> + '_ {
         self.boxes.iter().filter(|b| b.id != 0).map(|b| (b.id, b.bbox))
@@ -1063,7 +1068,23 @@ impl FrameGeom {
         id: u16,
     ) -> Option<(f64, f64)> {
         let hit = self.locate(x, y, px, py, Some(id));
-        if !hit.z.is_finite() || hit.key == u16::MAX {
+        self.flow_at(cam, x, y, hit.key, hit.z, id)
+    }
+
+    /// [`FrameGeom::flow`] of the surface `key` of object `id` found at depth `z` (m) on the
+    /// ray `(x, y)` (as `locate` with `only` that id would find it; e.g. the surface a key
+    /// frame located at the pixel, whose object it is: the nearest surface of all is the
+    /// nearest of its object's, at the same depth).
+    pub fn flow_at(
+        &self,
+        cam: &CameraConfig,
+        x: f32,
+        y: f32,
+        key: u16,
+        z: f32,
+        id: u16,
+    ) -> Option<(f64, f64)> {
+        if !z.is_finite() || key == u16::MAX {
             return None;
         }
         let motion = if id == 0 {
@@ -1071,7 +1092,7 @@ impl FrameGeom {
             match self
                 .boxes
                 .iter()
-                .find(|b| b.id == 0 && (b.key_base..b.key_base + 6).contains(&hit.key))
+                .find(|b| b.id == 0 && (b.key_base..b.key_base + 6).contains(&key))
             {
                 Some(b) => &self.motions[b.motion],
                 None => &self.motions[0],
@@ -1080,7 +1101,7 @@ impl FrameGeom {
             let b = self.boxes.iter().find(|b| b.id == id)?;
             &self.motions[b.motion]
         };
-        let z = hit.z as f64;
+        let z = z as f64;
         let p = [x as f64 * z, y as f64 * z, z];
         let (ux, uy) = motion.normalized_flow(p);
         Some(cam.pixel_flow(x as f64, y as f64, ux, uy))
@@ -1168,6 +1189,31 @@ mod tests {
                             assert_eq!(found[k], g.locate(sub[k], y[0], u0 as i32, v as i32, None));
                         }
                     }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn flow_of_the_located_surface_equals_flow_locating_its_object() {
+        // What stable pixels' event truth relies on: the nearest surface of all, with its
+        // depth, is what `flow` locates among its object's surfaces.
+        for name in ["two-objects", "distorted-lens"] {
+            let cfg = crate::presets::preset(name, 3).unwrap();
+            let scene = Scene::new(&cfg.scene, cfg.camera_trajectory.clone(), 3, 0.01);
+            let rays = crate::camera::Rays::new(&cfg.camera);
+            let w = rays.width;
+            for t in [0.0, 0.37, 1.1] {
+                let g = FrameGeom::new(&scene, &cfg.camera, t);
+                for i in (0..w * rays.height).step_by(7) {
+                    let (x, y, u, v) = (rays.x[i], rays.y[i], (i % w) as i32, (i / w) as i32);
+                    let hit = g.locate(x, y, u, v, None);
+                    let at = g.flow_at(&cfg.camera, x, y, hit.key, hit.z, hit.id);
+                    assert_eq!(
+                        at,
+                        g.flow(&scene, &cfg.camera, x, y, u, v, hit.id),
+                        "{name} {t} {i}"
+                    );
                 }
             }
         }
