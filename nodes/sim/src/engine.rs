@@ -20,9 +20,9 @@
 //!   first, 8 at a time (they do not depend on its reference level), and the threshold test
 //!   runs only when one of them reaches a threshold. (A bound of the pixel's own path before
 //!   sampling no longer paid once samples were taken 8 at a time; it decided the same.)
-//! - **unstable** (near a silhouette, crease or seam): ray cast every `stride` render steps,
-//!   the largest power of two that keeps its local image-speed bound within `max_px_per_step`
-//!   per render (see [`crate::local_speed`]), with edge anti-aliasing
+//! - **unstable** (near a silhouette, crease or seam): ray cast at the render steps that keep
+//!   its local image-speed bound within `max_px_per_step` per render (as late as that allows;
+//!   see [`crate::local_speed`]), with edge anti-aliasing
 //!   ([`FrameGeom::edge_sample`]).
 
 use crate::camera::{CameraConfig, Rays};
@@ -71,8 +71,9 @@ pub struct KeyFrame {
     pub v: Vec<f32>,
     /// Texture footprint, m.
     pub footprint: Vec<f32>,
-    /// Size of one pixel on the surface across the ray, m.
-    pub px_size: Vec<f32>,
+    /// Depth along the optical axis, m (infinite where nothing was hit; one pixel across the
+    /// ray measures `z * geom.inv_f()` on the surface).
+    pub z: Vec<f32>,
     /// True where a 4-neighbour sees another surface.
     pub edge: Vec<bool>,
     /// True where the pixel's value mixes surfaces (edge sub-samples on another surface).
@@ -89,7 +90,7 @@ impl KeyFrame {
             u: vec![0.0; n],
             v: vec![0.0; n],
             footprint: vec![0.0; n],
-            px_size: vec![0.0; n],
+            z: vec![0.0; n],
             edge: vec![false; n],
             mixed: vec![false; n],
         }
@@ -419,8 +420,7 @@ impl Engine {
             }
         }
         let mut block_z = vec![f32::INFINITY; bw * bh];
-        let inv_f = (2.0 / (cfg.camera.fx + cfg.camera.fy)) as f32;
-        cast_keyframe(&mut self.kf1, &self.scene, &self.rays, inv_f, &mut block_z);
+        cast_keyframe(&mut self.kf1, &self.scene, &self.rays, &mut block_z);
         let kf = &mut self.kf1;
         let mut zmin = f32::INFINITY;
         for (b, z) in self.blocks.iter_mut().zip(&block_z) {
@@ -443,14 +443,29 @@ impl Engine {
                 row
             };
             let edge = &mut kf.edge[y * w..(y + 1) * w];
-            for x in 0..w {
+            // Interior columns as shifted slices (vectorised), then the border columns.
+            let inner = w.saturating_sub(2);
+            let cols = edge[1..1 + inner]
+                .iter_mut()
+                .zip(&row[1..1 + inner])
+                .zip(row[..inner].iter().zip(&row[2.min(w)..]))
+                .zip(up[1..1 + inner].iter().zip(&down[1..1 + inner]));
+            for (((e, &k), (&left, &right)), (&u, &d)) in cols {
+                *e = (left != k) | (right != k) | (u != k) | (d != k);
+            }
+            for x in [0, w - 1] {
                 let k = row[x];
                 let (left, right) = (row[x.saturating_sub(1)], row[(x + 1).min(w - 1)]);
                 edge[x] = (left != k) | (right != k) | (up[x] != k) | (down[x] != k);
             }
         }
         if cfg.render.edge_supersampling {
-            for i in 0..w * h {
+            // Edge pixels are a few percent: blocks of 64 without one are skipped whole.
+            let n = w * h;
+            let blocks = (0..n)
+                .step_by(64)
+                .filter(|&b| kf.edge[b..(b + 64).min(n)].contains(&true));
+            for i in blocks.flat_map(|b| b..(b + 64).min(n)) {
                 if kf.edge[i] {
                     let r = &self.rays;
                     let (x, y) = ((i % w) as i32, (i / w) as i32);
@@ -557,7 +572,6 @@ impl Engine {
                     let r = self.reference[i];
                     let disp = stable_displacement(kf0, kf1, i, w_img, du, dv);
                     let m = ((disp / max_px).ceil() as usize).clamp(1, 4096);
-                    let id = kf0.id[i];
                     let mf = m as f32;
                     tex.sample_path([u0, v0, fp0, s0], [du, dv, dfp, s1 - s0], m, &mut path);
                     path.push(kf1.l[i]);
@@ -589,8 +603,7 @@ impl Engine {
                                 l,
                                 (t_prev, t),
                                 (t0, t1),
-                                (&kf0.geom, &kf1.geom),
-                                id,
+                                (kf0, kf1),
                                 (c_on, c_off),
                                 &mut batch,
                             );
@@ -607,7 +620,7 @@ impl Engine {
         self.stats.skip_violations += violations;
         self.stats.interpolated_samples += samples;
 
-        // Unstable pixels: ray cast every `stride` steps (their local speed bound).
+        // Unstable pixels: ray cast at the steps their local speed bound needs.
         let speeds = self.local_speeds(cfg, &geoms);
         let u = &mut self.unstable;
         u.gather(
@@ -625,16 +638,44 @@ impl Engine {
             },
         );
         let w = self.rays.width;
-        let windows = local_speed::stride_windows(&times);
-        let max_px = cfg.render.max_px_per_step;
+        // Every pixel waits in the bucket of its next render slot.
+        let mut schedules = local_speed::Schedules::new(&times, cfg.render.max_px_per_step);
+        let key_slot = schedules.key_slot();
+        let mut buckets: Vec<Vec<u32>> = vec![Vec::new(); key_slot];
         for (j, &p) in u.pixel.iter().enumerate() {
             let p = p as usize;
-            u.stride[j] = local_speed::stride_for(&windows, speeds.at(p % w, p / w), max_px) as u32;
+            let sch = schedules.of(speeds.at(p % w, p / w));
+            u.schedule[j] = sch;
+            let first = schedules.lists[sch as usize][0] as usize;
+            if first < key_slot {
+                buckets[first].push(j as u32);
+            }
         }
-        for s in 1..=k {
-            if s < k {
-                u.select(s);
-                let ss = u.render(&self.scene, &geoms[s], w, cfg.render.edge_supersampling);
+        // Geometry of the render slots inside steps that some schedule uses.
+        let mut sub_geoms: Vec<Option<FrameGeom>> = vec![None; key_slot];
+        for list in &schedules.lists {
+            for &q in list {
+                let q = q as usize;
+                if !q.is_multiple_of(local_speed::SUBSTEPS) && sub_geoms[q].is_none() {
+                    let t = local_speed::slot_time(&times, q);
+                    sub_geoms[q] = Some(FrameGeom::new(&self.scene, &cfg.camera, t));
+                }
+            }
+        }
+        let geom_at = |q: usize| -> &FrameGeom {
+            if q.is_multiple_of(local_speed::SUBSTEPS) {
+                &geoms[q / local_speed::SUBSTEPS]
+            } else {
+                sub_geoms[q].as_ref().expect("geometry of a scheduled slot")
+            }
+        };
+        for q in 1..=key_slot {
+            if q < key_slot {
+                if buckets[q].is_empty() {
+                    continue;
+                }
+                u.active = std::mem::take(&mut buckets[q]);
+                let ss = u.render(&self.scene, geom_at(q), w, cfg.render.edge_supersampling);
                 self.stats.pixel_renders += u.active.len() as u64;
                 self.stats.supersampled += ss;
             }
@@ -644,11 +685,12 @@ impl Engine {
                 rays: &self.rays,
                 refractory: cfg.esim.refractory_s,
             };
-            let count = if s < k { u.active.len() } else { u.len() };
+            let count = if q < key_slot { u.active.len() } else { u.len() };
+            let tq = local_speed::slot_time(&times, q);
             for a in 0..count {
-                let j = if s < k { u.active[a] as usize } else { a };
+                let j = if q < key_slot { u.active[a] as usize } else { a };
                 let i = u.pixel[j] as usize;
-                let (l1, id1) = if s < k {
+                let (l1, id1) = if q < key_slot {
                     (u.l[j], u.id[j])
                 } else {
                     (self.kf1.l[i], self.kf1.id[i])
@@ -663,8 +705,8 @@ impl Engine {
                         i,
                         u.l_prev[j],
                         l1,
-                        (times[sp], times[s]),
-                        (&geoms[sp], &geoms[s]),
+                        (local_speed::slot_time(&times, sp), tq),
+                        (geom_at(sp), geom_at(q)),
                         (u.id_prev[j], id1),
                         (u.c_on[j], u.c_off[j]),
                         &mut batch,
@@ -673,7 +715,14 @@ impl Engine {
                 }
                 u.l_prev[j] = l1;
                 u.id_prev[j] = id1;
-                u.s_prev[j] = s as u32;
+                u.s_prev[j] = q as u32;
+                if q < key_slot {
+                    u.next[j] += 1;
+                    let nq = schedules.lists[u.schedule[j] as usize][u.next[j] as usize] as usize;
+                    if nq < key_slot {
+                        buckets[nq].push(j as u32);
+                    }
+                }
             }
         }
         u.scatter(&mut self.reference, &mut self.last_event);
@@ -812,25 +861,25 @@ impl Engine {
 /// `block_z` (per `BLOCK` x `BLOCK` block) to the background depths seen. With AVX2 (detected
 /// at run time) the same code is compiled for it: the same arithmetic, so the same values
 /// (no fused multiply-adds), with the lane samples inlined.
-fn cast_keyframe(kf: &mut KeyFrame, scene: &Scene, rays: &Rays, inv_f: f32, block_z: &mut [f32]) {
+fn cast_keyframe(kf: &mut KeyFrame, scene: &Scene, rays: &Rays, block_z: &mut [f32]) {
     #[cfg(target_arch = "x86_64")]
     if std::is_x86_feature_detected!("avx2") {
         // SAFETY: AVX2 is available (checked just above).
-        return unsafe { cast_keyframe_avx2(kf, scene, rays, inv_f, block_z) };
+        return unsafe { cast_keyframe_avx2(kf, scene, rays, block_z) };
     }
-    cast_keyframe_with(kf, scene, rays, inv_f, block_z);
+    cast_keyframe_with(kf, scene, rays, block_z);
 }
 
 /// [`cast_keyframe`] compiled with AVX2.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-fn cast_keyframe_avx2(kf: &mut KeyFrame, scene: &Scene, rays: &Rays, inv_f: f32, block_z: &mut [f32]) {
-    cast_keyframe_with(kf, scene, rays, inv_f, block_z);
+fn cast_keyframe_avx2(kf: &mut KeyFrame, scene: &Scene, rays: &Rays, block_z: &mut [f32]) {
+    cast_keyframe_with(kf, scene, rays, block_z);
 }
 
 /// The body of [`cast_keyframe`].
 #[inline(always)]
-fn cast_keyframe_with(kf: &mut KeyFrame, scene: &Scene, rays: &Rays, inv_f: f32, block_z: &mut [f32]) {
+fn cast_keyframe_with(kf: &mut KeyFrame, scene: &Scene, rays: &Rays, block_z: &mut [f32]) {
     let (w, h) = (rays.width, rays.height);
     let bw = w.div_ceil(BLOCK);
     for v in 0..h {
@@ -857,9 +906,7 @@ fn cast_keyframe_with(kf: &mut KeyFrame, scene: &Scene, rays: &Rays, inv_f: f32,
             kf.u[span.clone()].copy_from_slice(&h.u);
             kf.v[span.clone()].copy_from_slice(&h.v);
             kf.footprint[span.clone()].copy_from_slice(&h.footprint);
-            for (o, z) in kf.px_size[span].iter_mut().zip(&h.z) {
-                *o = z * inv_f;
-            }
+            kf.z[span].copy_from_slice(&h.z);
             for l in 0..KEY_LANES {
                 if h.id[l] == 0 {
                     let b = &mut block_z[brow + (u + l) / BLOCK];
@@ -879,7 +926,7 @@ fn cast_keyframe_with(kf: &mut KeyFrame, scene: &Scene, rays: &Rays, inv_f: f32,
             kf.u[i] = hit.u;
             kf.v[i] = hit.v;
             kf.footprint[i] = hit.footprint;
-            kf.px_size[i] = hit.z * inv_f;
+            kf.z[i] = hit.z;
             if hit.id == 0 {
                 let b = &mut block_z[brow + u / BLOCK];
                 *b = b.min(hit.z);
@@ -954,7 +1001,10 @@ fn shaded_bounds(texels: Option<(f32, f32)>, s0: f32, s1: f32) -> Option<(f32, f
 /// any angle). Image borders use that bound alone.
 #[inline]
 fn stable_displacement(kf0: &KeyFrame, kf1: &KeyFrame, i: usize, w: usize, du: f32, dv: f32) -> f32 {
-    let size = kf0.px_size[i].min(kf1.px_size[i]).max(1e-9);
+    // The pixel's size on the surface across the ray at either key frame.
+    let size = (kf0.z[i] * kf0.geom.inv_f())
+        .min(kf1.z[i] * kf1.geom.inv_f())
+        .max(1e-9);
     let any_direction = (du * du + dv * dv).sqrt() / size;
     let n = kf0.u.len();
     let (x, y) = (i % w, i / w);
@@ -1046,8 +1096,9 @@ fn fire(
     );
 }
 
-/// Like [`fire`] for a sub-segment `span` of a key-frame interval `whole` on one surface `id`;
-/// the truth interpolates between the key frames.
+/// Like [`fire`] for a sub-segment `span` of a key-frame interval `whole` of a stable pixel
+/// (one surface at both key frames `kfs`); the truth interpolates between the key frames, with
+/// the surface and depth they located at the pixel (what `FrameGeom::flow` would locate).
 #[allow(clippy::too_many_arguments)]
 fn fire_segment(
     ctx: &FireCtx,
@@ -1058,13 +1109,13 @@ fn fire_segment(
     l1: f32,
     span: (f64, f64),
     whole: (f64, f64),
-    geoms: (&FrameGeom, &FrameGeom),
-    id: u16,
+    kfs: (&KeyFrame, &KeyFrame),
     thresholds: (f32, f32),
     batch: &mut Vec<RawEvent>,
 ) {
     let (ta, tb) = span;
     let (wa, wb) = whole;
+    let id = kfs.0.id[i];
     esim::crossings(
         reference,
         last_event,
@@ -1081,7 +1132,9 @@ fn fire_segment(
             } else {
                 0.0
             };
-            let (id, fx, fy) = event_truth(ctx, i, geoms.0, geoms.1, id, id, frac);
+            let (x, y) = (ctx.rays.x[i], ctx.rays.y[i]);
+            let flow = |kf: &KeyFrame| kf.geom.flow_at(ctx.cam, x, y, kf.key[i], kf.z[i], id);
+            let (fx, fy) = interpolate_flow(flow(kfs.0), flow(kfs.1), frac);
             batch.push(RawEvent {
                 t,
                 pixel: i as u32,
@@ -1123,6 +1176,14 @@ fn event_truth(
     let (x, y, u, v) = (ctx.rays.x[i], ctx.rays.y[i], (i % w) as i32, (i / w) as i32);
     let fa = ga.flow(ctx.scene, ctx.cam, x, y, u, v, id);
     let fb = gb.flow(ctx.scene, ctx.cam, x, y, u, v, id);
+    let (fx, fy) = interpolate_flow(fa, fb, frac);
+    (id, fx, fy)
+}
+
+/// The flow (px/s) a fraction `frac` of the way from flow `fa` to `fb` (either alone when the
+/// other is missing, zero when both are).
+#[inline]
+fn interpolate_flow(fa: Option<(f64, f64)>, fb: Option<(f64, f64)>, frac: f32) -> (f32, f32) {
     let (fx, fy) = match (fa, fb) {
         (Some(a), Some(b)) => {
             let f = frac as f64;
@@ -1132,7 +1193,7 @@ fn event_truth(
         (None, Some(b)) => b,
         (None, None) => (0.0, 0.0),
     };
-    (id, fx as f32, fy as f32)
+    (fx as f32, fy as f32)
 }
 
 #[cfg(test)]
@@ -1143,11 +1204,12 @@ mod tests {
     /// Key frames of a 5 x 5 image whose texture coordinates are the affine map `(a, b, c, d)`
     /// of the pixel position (u = a x + b y, v = c x + d y), shifted by `shift`.
     fn affine(kf: &mut KeyFrame, w: usize, j: [f32; 4], shift: (f32, f32), px_size: f32) {
+        let z = px_size / kf.geom.inv_f();
         for i in 0..w * w {
             let (x, y) = ((i % w) as f32, (i / w) as f32);
             kf.u[i] = j[0] * x + j[1] * y + shift.0;
             kf.v[i] = j[2] * x + j[3] * y + shift.1;
-            kf.px_size[i] = px_size;
+            kf.z[i] = z;
         }
     }
 

@@ -4,9 +4,10 @@
 //! Render steps are short enough for the fastest scene point anywhere in the image (see
 //! `Engine::plan`). Most unstable pixels lie on seams of the static room, whose image motion
 //! comes from the camera alone and is often several times slower. Each unstable pixel is
-//! therefore rendered every `stride` steps, the largest power of two for which its local speed
-//! bound times the longest `stride`-step window of the interval stays within
-//! `max_px_per_step`: the ESIM sampling rule holds for every pixel, with fewer renders.
+//! therefore rendered only at the steps it needs: as late as its local speed bound allows, so
+//! that it moves at most `max_px_per_step` between renders, at quarter steps (see
+//! [`render_slots`]): the ESIM
+//! sampling rule holds for every pixel, with fewer renders.
 //!
 //! The local bound of a pixel is the largest background bound of the 3 x 3 blocks around its
 //! block (each with the smallest background depth of its own 3 x 3 blocks at the last key
@@ -43,36 +44,88 @@ impl LocalSpeed {
     }
 }
 
-/// Render strides: for each power of two `stride` (1, 2, 4, ...), the longest time (s)
-/// between renders `stride` steps apart (aligned at multiples of `stride`, the last window
-/// ending at the key frame) of the interval with render times `times`.
-pub fn stride_windows(times: &[f64]) -> Vec<(usize, f64)> {
-    let k = times.len() - 1;
-    let mut out = Vec::new();
-    let mut stride = 1;
-    loop {
-        let longest = (0..k)
-            .step_by(stride)
-            .map(|s| times[(s + stride).min(k)] - times[s])
-            .fold(0.0, f64::max);
-        out.push((stride, longest));
-        if stride >= k {
-            break;
-        }
-        stride *= 2;
+/// Render slots per render step: unstable pixels may be rendered at `SUBSTEPS` evenly spaced
+/// times inside each step (slot `q` is step `q / SUBSTEPS` plus `q % SUBSTEPS` quarters of the
+/// step), so that a pixel whose bound is just over half the fastest one renders about every
+/// 1.75 steps instead of every step.
+pub const SUBSTEPS: usize = 4;
+
+/// Time (s) of render slot `q` of the interval with render times `times` (slot
+/// `SUBSTEPS * k` is the closing key frame).
+#[inline]
+pub fn slot_time(times: &[f64], q: usize) -> f64 {
+    let (s, r) = (q / SUBSTEPS, q % SUBSTEPS);
+    if r == 0 {
+        times[s]
+    } else {
+        times[s] + (times[s + 1] - times[s]) * (r as f64 / SUBSTEPS as f64)
     }
+}
+
+/// The render slots (see [`SUBSTEPS`]) of a pixel with speed bound `speed` (px/s) in the
+/// interval with render times `times`, ascending, ending with the closing key frame's
+/// (`SUBSTEPS * k`). Greedy: a pixel is rendered at slot `q` when waiting for slot `q + 1`
+/// would take it more than `max_px` pixels of motion from its previous render, unless both
+/// lie in one step (the steps themselves keep every point within `max_px`). Both rules allow
+/// every sub-gap of an allowed gap, so greedy covering renders least often among all schedules
+/// on these slots that keep them; in particular never more often than at every step or than
+/// power-of-two strides of whole steps (which wasted up to half the renders of a pixel whose
+/// bound is just over half the fastest one).
+pub fn render_slots(times: &[f64], speed: f32, max_px: f64) -> Vec<u32> {
+    let last_slot = SUBSTEPS * (times.len() - 1);
+    let budget = max_px / speed as f64;
+    let mut out = Vec::new();
+    let (mut last, mut last_q) = (times[0], 0);
+    for q in 1..last_slot {
+        // A gap inside one step is always short enough: the steps keep every scene point
+        // within `max_px` (`Engine::plan`, from the bound at the step's own times, which the
+        // local bound, the largest over the interval, may exceed).
+        let one_step = last_q / SUBSTEPS == q / SUBSTEPS;
+        if !one_step && slot_time(times, q + 1) - last > budget {
+            out.push(q as u32);
+            (last, last_q) = (slot_time(times, q), q);
+        }
+    }
+    out.push(last_slot as u32);
     out
 }
 
-/// The largest stride of `windows` whose longest window keeps a pixel with speed bound `speed`
-/// (px/s) within `max_px` pixels of motion between renders (1 when none does).
-#[inline]
-pub fn stride_for(windows: &[(usize, f64)], speed: f32, max_px: f64) -> usize {
-    windows
-        .iter()
-        .rev()
-        .find(|(_, w)| speed as f64 * w <= max_px)
-        .map_or(1, |(s, _)| *s)
+/// The render schedules of one interval's unstable pixels: one [`render_slots`] list per
+/// distinct speed bound (neighbouring pixels share one per block).
+#[derive(Debug, Clone)]
+pub struct Schedules<'a> {
+    times: &'a [f64],
+    max_px: f64,
+    by_speed: std::collections::HashMap<u32, u32>,
+    /// Render slots of every schedule (see [`render_slots`]).
+    pub lists: Vec<Vec<u32>>,
+}
+
+impl<'a> Schedules<'a> {
+    /// No schedules yet for the interval with render times `times`, `max_px` pixels per render.
+    pub fn new(times: &'a [f64], max_px: f64) -> Self {
+        Self {
+            times,
+            max_px,
+            by_speed: std::collections::HashMap::new(),
+            lists: Vec::new(),
+        }
+    }
+
+    /// Index in [`Schedules::lists`] of the schedule of a pixel with speed bound `speed`
+    /// (px/s).
+    pub fn of(&mut self, speed: f32) -> u32 {
+        let (times, max_px, lists) = (self.times, self.max_px, &mut self.lists);
+        *self.by_speed.entry(speed.to_bits()).or_insert_with(|| {
+            lists.push(render_slots(times, speed, max_px));
+            (lists.len() - 1) as u32
+        })
+    }
+
+    /// The last slot: the closing key frame.
+    pub fn key_slot(&self) -> usize {
+        SUBSTEPS * (self.times.len() - 1)
+    }
 }
 
 #[cfg(test)]
@@ -80,27 +133,59 @@ mod tests {
     use super::*;
 
     #[test]
-    fn strides_keep_every_window_within_the_step_budget() {
-        let times: Vec<f64> = (0..=16)
+    fn render_slots_keep_every_gap_within_the_budget_and_beat_whole_steps() {
+        let times: Vec<f64> = (0..=20)
             .map(|i| i as f64 * 0.001 + (i as f64).powi(2) * 1e-5)
             .collect();
-        let w = stride_windows(&times);
-        assert_eq!(w.iter().map(|x| x.0).collect::<Vec<_>>(), vec![1, 2, 4, 8, 16]);
-        // The longest single step is the last one.
-        assert!((w[0].1 - (times[16] - times[15])).abs() < 1e-12);
-        assert!((w[4].1 - times[16]).abs() < 1e-12);
-        // A pixel as fast as the global bound (0.5 px in the longest step) gets stride 1;
-        // one 4x slower gets at most 4, and 0 px/s renders only at the key frame.
-        let global = 0.5 / w[0].1;
-        assert_eq!(stride_for(&w, global as f32, 0.5), 1);
-        let s = stride_for(&w, (global / 4.0) as f32, 0.5);
-        assert!((2..=4).contains(&s), "{s}");
-        assert!((global / 4.0) * w.iter().find(|x| x.0 == s).unwrap().1 <= 0.5);
-        assert_eq!(stride_for(&w, 0.0, 0.5), 16);
-        // Uneven step counts: the last window is cut at the key frame.
-        let w = stride_windows(&times[..7]);
-        assert_eq!(w.iter().map(|x| x.0).collect::<Vec<_>>(), vec![1, 2, 4, 8]);
-        assert!((w[3].1 - times[6]).abs() < 1e-12);
+        let k = times.len() - 1;
+        let key = SUBSTEPS * k;
+        assert_eq!(slot_time(&times, key), times[k]);
+        assert_eq!(slot_time(&times, 2 * SUBSTEPS), times[2]);
+        assert!((slot_time(&times, 1) - 0.25 * times[1]).abs() < 1e-15);
+        let longest_step = (0..k).map(|s| times[s + 1] - times[s]).fold(0.0, f64::max);
+        let global = 0.5 / longest_step;
+        let mut rng = crate::rng::Rng::new(5, 1);
+        for j in 0..2000 {
+            let speed = (global * if j == 0 { 1.0 } else { 1.2 * rng.uniform() }) as f32;
+            let slots = render_slots(&times, speed, 0.5);
+            assert_eq!(*slots.last().unwrap(), key as u32);
+            assert!(slots.windows(2).all(|w| w[0] < w[1]) && slots[0] > 0);
+            // Every gap within 0.5 px or inside one step.
+            let mut prev = 0;
+            for &q in &slots {
+                let g = slot_time(&times, q as usize) - slot_time(&times, prev);
+                let one_step = prev / SUBSTEPS == (q as usize - 1) / SUBSTEPS;
+                assert!(one_step || speed as f64 * g <= 0.5, "{speed} {g}");
+                prev = q as usize;
+            }
+            assert!(slots.len() <= k, "{speed}: {}", slots.len());
+            // Never more renders than rendering at every step the speed needs (greedy over
+            // whole steps; an upper bound of any power-of-two stride too).
+            let mut whole = 1;
+            let (mut last, mut last_s) = (times[0], 0);
+            for s in 1..k {
+                if s > last_s && speed as f64 * (times[s + 1] - last) > 0.5 {
+                    last_s = s;
+                    whole += 1;
+                    last = times[s];
+                }
+            }
+            assert!(slots.len() <= whole, "{speed}: {} > {whole}", slots.len());
+        }
+        // A pixel faster than the steps allow renders at every step; a still one only at the
+        // key frame.
+        let every: Vec<u32> = (1..=k).map(|s| (SUBSTEPS * s) as u32).collect();
+        assert_eq!(render_slots(&times, (2.0 * global) as f32, 0.5), every);
+        assert_eq!(render_slots(&times, 0.0, 0.5), vec![key as u32]);
+        // Just over half the global speed: about every 1.75 steps instead of every step.
+        let n = render_slots(&times, (0.55 * global) as f32, 0.5).len();
+        assert!((11..=13).contains(&n), "{n}");
+        // Schedules are shared per speed.
+        let mut sch = Schedules::new(&times, 0.5);
+        let (a, b, c) = (sch.of(100.0), sch.of(250.0), sch.of(100.0));
+        assert!(a == c && a != b && sch.lists.len() == 2);
+        assert_eq!(sch.lists[b as usize], render_slots(&times, 250.0, 0.5));
+        assert_eq!(sch.key_slot(), key);
     }
 
     #[test]

@@ -31,6 +31,14 @@ const MIN_COS: f32 = 0.25;
 /// Fewest lanes of [`FrameGeom::shade_lanes`] on one texture sampled together (fewer are
 /// sampled one by one).
 const MIN_GROUP: u32 = 3;
+/// Allowance (normalized image units, about 0.03 px at f = 550) of [`FrameGeom::edge_free`]
+/// against the f32 rounding of `locate`: its slab and plane tests place an edge within about
+/// 1e-6 of the exact geometry.
+const EDGE_EPS: f32 = 5e-5;
+/// Deepest (m) a box's corner may reach through a background plane for
+/// [`FrameGeom::edge_free`] to treat the box as in front of the planes (furniture stands on
+/// the floor: its corners lie on it up to rounding).
+const ROOM_TOLERANCE: f64 = 1e-5;
 
 /// Where a ray meets a surface's texture (see [`FrameGeom::shade`]).
 #[derive(Debug, Clone, Copy)]
@@ -257,6 +265,113 @@ struct BoxGeom {
     bbox: [i32; 4],
     /// Index of the box's motion in [`FrameGeom::motions`].
     motion: usize,
+    /// Projected edges for [`FrameGeom::edge_free`] (`None` when a corner is near or behind
+    /// the camera, the camera is inside the box, or the box reaches through a background plane
+    /// by more than `ROOM_TOLERANCE`).
+    outline: Option<Outline>,
+}
+
+/// A box's projected edges: each edge as the unit normal of the plane through the camera centre
+/// and the edge (the edge's image line is `n . (x, y, 1) = 0`), four per face and the
+/// silhouette's (padded with `(0, 0, 1)`, which no pixel crosses), field by field in lanes.
+#[derive(Debug, Clone)]
+struct Outline {
+    /// Edges of each face (the boundary of its projection).
+    face: [[[f32; 4]; 3]; 6],
+    /// Edges between a front-facing and a back-facing face (the boundary of the box's
+    /// projection), padded.
+    silhouette: [[f32; 8]; 3],
+    /// Smallest and largest distance (m) of a corner from the camera centre.
+    dist: (f32, f32),
+}
+
+impl Outline {
+    /// The outline of a box with camera-frame `corners` (ordered as [`BoxPose::corners`]),
+    /// camera-frame origin `o_b` in box coordinates and half extents `half`, or `None` (see
+    /// [`BoxGeom::outline`]); `planes` are the background planes (`a . X < 1` on the camera's
+    /// side).
+    fn new(corners: &[V3; 8], o_b: V3, half: V3, planes: &[PlaneGeom]) -> Option<Self> {
+        if corners.iter().any(|c| c[2] <= 0.05) || (0..3).all(|k| o_b[k].abs() <= half[k]) {
+            return None;
+        }
+        for p in planes {
+            // Distance to the plane on the camera's side: (1 - a . c) |h| with |a| = 1 / |h|.
+            let inv_h = math::norm([p.a[0] as f64, p.a[1] as f64, p.a[2] as f64]);
+            for c in corners {
+                let ac = p.a[0] as f64 * c[0] + p.a[1] as f64 * c[1] + p.a[2] as f64 * c[2];
+                if (1.0 - ac) < -ROOM_TOLERANCE * inv_h {
+                    return None;
+                }
+            }
+        }
+        let normal = |a: usize, b: usize| {
+            let n = math::cross(corners[a], corners[b]);
+            math::scale(n, 1.0 / math::norm(n))
+        };
+        // Faces 2k (side -half[k], corner bit k clear) and 2k + 1 (bit k set); a face is front
+        // facing when the camera is outside its side.
+        let front = |face: usize| {
+            let k = face / 2;
+            if face.is_multiple_of(2) {
+                o_b[k] < -half[k]
+            } else {
+                o_b[k] > half[k]
+            }
+        };
+        let mut face = [[[0.0f32; 4]; 3]; 6];
+        let mut silhouette = [[0.0f32, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], [0.0; 8], [1.0; 8]];
+        let mut n_sil = 0;
+        let mut n_face = [0usize; 6];
+        for axis in 0..3 {
+            for c in 0..8usize {
+                if c >> axis & 1 == 1 {
+                    continue;
+                }
+                let n = normal(c, c | 1 << axis);
+                // The two faces along this edge: one per other axis, on the side of `c`'s bits.
+                let mut faces = [0usize; 2];
+                for (i, other) in [(axis + 1) % 3, (axis + 2) % 3].into_iter().enumerate() {
+                    faces[i] = 2 * other + (c >> other & 1);
+                }
+                for &f in &faces {
+                    for k in 0..3 {
+                        face[f][k][n_face[f]] = n[k] as f32;
+                    }
+                    n_face[f] += 1;
+                }
+                if front(faces[0]) != front(faces[1]) {
+                    if n_sil == 8 {
+                        return None;
+                    }
+                    for k in 0..3 {
+                        silhouette[k][n_sil] = n[k] as f32;
+                    }
+                    n_sil += 1;
+                }
+            }
+        }
+        let d = corners.iter().map(|c| math::norm(*c));
+        let (lo, hi) = d.fold((f64::INFINITY, 0.0f64), |(lo, hi), d| (lo.min(d), hi.max(d)));
+        Some(Self {
+            face,
+            silhouette,
+            dist: (lo as f32, hi as f32),
+        })
+    }
+}
+
+/// True when no line `n . (x, y, 1) = 0` of the `N` lanes `n` (normals field by field) passes
+/// within `EDGE_EPS` of the parallelogram of the edge sub-samples around `(x, y)` (offsets
+/// +-1/4 of `du` and `dv`): the sub-samples' side of every line is the centre's.
+#[inline(always)]
+fn clear_of<const N: usize>(n: &[[f32; N]; 3], x: f32, y: f32, du: [f32; 2], dv: [f32; 2]) -> bool {
+    let mut ok = true;
+    for ((&nx, &ny), &nz) in n[0].iter().zip(&n[1]).zip(&n[2]) {
+        let e = nx * x + ny * y + nz;
+        let (a, b) = (nx * du[0] + ny * du[1], nx * dv[0] + ny * dv[1]);
+        ok &= e.abs() > 0.25 * (a.abs() + b.abs()) + EDGE_EPS;
+    }
+    ok
 }
 
 /// Everything needed to cast rays at one instant, in the camera frame.
@@ -269,6 +384,8 @@ pub struct FrameGeom {
     planes: Vec<PlaneGeom>,
     boxes: Vec<BoxGeom>,
     inv_f: f32,
+    /// Allowance of [`FrameGeom::edge_free`] for the f32 rounding of the planes' inverse depths.
+    plane_eps: f32,
     /// Relative motion of the background (index 0) and of every box (index 1 + box index).
     pub motions: Vec<RelativeMotion>,
     /// Camera-frame pose of every box.
@@ -332,6 +449,7 @@ impl FrameGeom {
             let Some(bbox) = box_bbox(cam, &pose, b.half) else {
                 continue;
             };
+            let outline = Outline::new(&pose.corners(b.half), o_b, b.half, &planes);
             boxes.push(BoxGeom {
                 r_bc: [f3(r_bc[0]), f3(r_bc[1]), f3(r_bc[2])],
                 o_b: f3(o_b),
@@ -342,19 +460,30 @@ impl FrameGeom {
                 id: b.id,
                 bbox,
                 motion: j + 1,
+                outline,
             });
         }
         let inv_f = (2.0 / (cam.fx + cam.fy)) as f32;
+        let a_max = planes
+            .iter()
+            .map(|p| p.a.iter().map(|a| a.abs()).sum::<f32>())
+            .fold(0.0f32, f32::max);
         Self {
             t,
             cam: cs,
             planes,
             boxes,
             inv_f,
+            plane_eps: 1e-5 * a_max,
             motions,
             box_poses,
             shade_by_key,
         }
+    }
+
+    /// Size of one pixel across the ray per metre of depth (1 / focal length, px).
+    pub fn inv_f(&self) -> f32 {
+        self.inv_f
     }
 
     /// Pixel bounding boxes `[u0, v0, u1, v1]` of the visible moving objects, with their ids.
@@ -793,6 +922,72 @@ impl FrameGeom {
         (0.25 * acc).ln()
     }
 
+    /// True when all four edge sub-samples of pixel `(px, py)` (offsets +-1/4 of `du` and `dv`
+    /// around the centre ray `(x, y)`) certainly see the surface `key` the centre sees, from
+    /// the geometry alone (no sub-ray located). The surface seen is the same across a region
+    /// that no projected edge crosses: for a plane, the margin of its inverse depth over every
+    /// other plane's (and over 0) exceeds their largest change over the sub-samples (affine
+    /// in the ray), and no silhouette edge of a box whose pixel box holds the pixel passes
+    /// near them (the centre, on a plane, misses every such box, so they miss it too); for a
+    /// box face, none of the face's four edges passes near them, and every other box whose
+    /// pixel box holds the pixel lies wholly farther from the camera. Boxes must lie inside
+    /// the room (every corner on the camera's side of every plane, up to `ROOM_TOLERANCE`:
+    /// a ray meets a box before any plane, except where the box touches a plane, which lies
+    /// along its edges) with every corner in front of the camera (else `false`). The margins
+    /// (`EDGE_EPS`, `plane_eps`) are far above the f32 rounding of [`FrameGeom::locate`] (an
+    /// edge in about 1e-6 of its place), so it agrees: a `true` here means locating the four
+    /// sub-rays would return `key` four times (tested on random rays near edges).
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    pub fn edge_free(&self, x: f32, y: f32, du: [f32; 2], dv: [f32; 2], px: i32, py: i32, key: u16) -> bool {
+        let holds = |b: &BoxGeom| px >= b.bbox[0] && px <= b.bbox[2] && py >= b.bbox[1] && py <= b.bbox[3];
+        if let Some(p) = self.planes.get(key as usize) {
+            // Inverse depths a . (x, y, 1): the plane stays ahead of every other and of 0.
+            let margin = |g: [f32; 3]| {
+                let d = g[0] * x + g[1] * y + g[2];
+                let (a, b) = (g[0] * du[0] + g[1] * du[1], g[0] * dv[0] + g[1] * dv[1]);
+                d > 0.25 * (a.abs() + b.abs()) + self.plane_eps
+            };
+            let mut ok = margin(p.a);
+            for q in &self.planes {
+                if q.key != key {
+                    ok &= margin([p.a[0] - q.a[0], p.a[1] - q.a[1], p.a[2] - q.a[2]]);
+                }
+            }
+            if !ok {
+                return false;
+            }
+            for b in self.boxes.iter().filter(|b| holds(b)) {
+                match &b.outline {
+                    Some(o) if clear_of(&o.silhouette, x, y, du, dv) => {}
+                    _ => return false,
+                }
+            }
+            return true;
+        }
+        let Some(b) = self
+            .boxes
+            .iter()
+            .find(|b| (b.key_base..b.key_base + 6).contains(&key))
+        else {
+            return false;
+        };
+        let Some(o) = &b.outline else {
+            return false;
+        };
+        if !clear_of(&o.face[(key - b.key_base) as usize], x, y, du, dv) {
+            return false;
+        }
+        self.boxes
+            .iter()
+            .filter(|c| holds(c) && c.key_base != b.key_base)
+            .all(|c| {
+                c.outline
+                    .as_ref()
+                    .is_some_and(|oc| oc.dist.0 > o.dist.1 * (1.0 + 1e-4) + 1e-3)
+            })
+    }
+
     /// Log intensity of an edge pixel `(px, py)` whose centre ray `(x, y)` hit `centre` (log
     /// intensity, surface key): the 2x2 sub-samples of [`FrameGeom::supersample`] averaged in
     /// linear intensity, where sub-samples on the centre's surface take the centre's value (so
@@ -804,6 +999,29 @@ impl FrameGeom {
     #[allow(clippy::too_many_arguments)]
     #[inline]
     pub fn edge_sample(
+        &self,
+        scene: &Scene,
+        x: f32,
+        y: f32,
+        du: [f32; 2],
+        dv: [f32; 2],
+        px: i32,
+        py: i32,
+        centre: (f32, u16),
+    ) -> (f32, bool) {
+        if self.edge_free(x, y, du, dv, px, py, centre.1) {
+            // What locating the sub-rays would conclude (see `edge_mix`), without locating them.
+            return (centre.0, false);
+        }
+        self.edge_mix(scene, x, y, du, dv, px, py, centre)
+    }
+
+    /// [`FrameGeom::edge_sample`] without its [`FrameGeom::edge_free`] shortcut (for callers
+    /// that tested it): the four sub-rays located, those on other surfaces than the centre's
+    /// textured.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(never)]
+    pub fn edge_mix(
         &self,
         scene: &Scene,
         x: f32,
@@ -850,7 +1068,23 @@ impl FrameGeom {
         id: u16,
     ) -> Option<(f64, f64)> {
         let hit = self.locate(x, y, px, py, Some(id));
-        if !hit.z.is_finite() || hit.key == u16::MAX {
+        self.flow_at(cam, x, y, hit.key, hit.z, id)
+    }
+
+    /// [`FrameGeom::flow`] of the surface `key` of object `id` found at depth `z` (m) on the
+    /// ray `(x, y)` (as `locate` with `only` that id would find it; e.g. the surface a key
+    /// frame located at the pixel, whose object it is: the nearest surface of all is the
+    /// nearest of its object's, at the same depth).
+    pub fn flow_at(
+        &self,
+        cam: &CameraConfig,
+        x: f32,
+        y: f32,
+        key: u16,
+        z: f32,
+        id: u16,
+    ) -> Option<(f64, f64)> {
+        if !z.is_finite() || key == u16::MAX {
             return None;
         }
         let motion = if id == 0 {
@@ -858,7 +1092,7 @@ impl FrameGeom {
             match self
                 .boxes
                 .iter()
-                .find(|b| b.id == 0 && (b.key_base..b.key_base + 6).contains(&hit.key))
+                .find(|b| b.id == 0 && (b.key_base..b.key_base + 6).contains(&key))
             {
                 Some(b) => &self.motions[b.motion],
                 None => &self.motions[0],
@@ -867,7 +1101,7 @@ impl FrameGeom {
             let b = self.boxes.iter().find(|b| b.id == id)?;
             &self.motions[b.motion]
         };
-        let z = hit.z as f64;
+        let z = z as f64;
         let p = [x as f64 * z, y as f64 * z, z];
         let (ux, uy) = motion.normalized_flow(p);
         Some(cam.pixel_flow(x as f64, y as f64, ux, uy))
@@ -957,6 +1191,91 @@ mod tests {
                     }
                 }
             }
+        }
+    }
+
+    #[test]
+    fn flow_of_the_located_surface_equals_flow_locating_its_object() {
+        // What stable pixels' event truth relies on: the nearest surface of all, with its
+        // depth, is what `flow` locates among its object's surfaces.
+        for name in ["two-objects", "distorted-lens"] {
+            let cfg = crate::presets::preset(name, 3).unwrap();
+            let scene = Scene::new(&cfg.scene, cfg.camera_trajectory.clone(), 3, 0.01);
+            let rays = crate::camera::Rays::new(&cfg.camera);
+            let w = rays.width;
+            for t in [0.0, 0.37, 1.1] {
+                let g = FrameGeom::new(&scene, &cfg.camera, t);
+                for i in (0..w * rays.height).step_by(7) {
+                    let (x, y, u, v) = (rays.x[i], rays.y[i], (i % w) as i32, (i / w) as i32);
+                    let hit = g.locate(x, y, u, v, None);
+                    let at = g.flow_at(&cfg.camera, x, y, hit.key, hit.z, hit.id);
+                    assert_eq!(
+                        at,
+                        g.flow(&scene, &cfg.camera, x, y, u, v, hit.id),
+                        "{name} {t} {i}"
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn edge_free_sub_samples_locate_to_the_centre_surface() {
+        // Every pixel near an edge (centre key differs from a 4-neighbour's) of three presets
+        // at several instants, with random sub-pixel shifts of the centre: whenever
+        // `edge_free` holds, the four sub-rays locate to the centre's surface. It must also
+        // hold for most sub-sample squares that confirm the centre.
+        let mut rng = crate::rng::Rng::new(7, 2);
+        for name in ["one-object", "two-objects", "distorted-lens"] {
+            let cfg = crate::presets::preset(name, 3).unwrap();
+            let scene = Scene::new(&cfg.scene, cfg.camera_trajectory.clone(), 3, 0.01);
+            let rays = crate::camera::Rays::new(&cfg.camera);
+            let (w, h) = (rays.width, rays.height);
+            let (mut free, mut confirmed) = (0usize, 0usize);
+            for t in [0.0, 0.21, 0.37, 0.8, 1.1] {
+                let g = FrameGeom::new(&scene, &cfg.camera, t);
+                let keys: Vec<u16> = (0..w * h)
+                    .map(|i| {
+                        g.locate(rays.x[i], rays.y[i], (i % w) as i32, (i / w) as i32, None)
+                            .key
+                    })
+                    .collect();
+                for i in 0..w * h {
+                    let (u, v) = (i % w, i / w);
+                    let k = keys[i];
+                    let near = [(1, 0), (-1, 0), (0, 1), (0, -1), (2, 0), (-2, 0), (0, 2), (0, -2)]
+                        .iter()
+                        .any(|&(dx, dy): &(i64, i64)| {
+                            let (a, b) = (u as i64 + dx, v as i64 + dy);
+                            a >= 0
+                                && b >= 0
+                                && a < w as i64
+                                && b < h as i64
+                                && keys[b as usize * w + a as usize] != k
+                        });
+                    if !near {
+                        continue;
+                    }
+                    let (du, dv) = (rays.d_du[i], rays.d_dv[i]);
+                    for _ in 0..4 {
+                        let (su, sv) = (rng.range(-0.5, 0.5) as f32, rng.range(-0.5, 0.5) as f32);
+                        let x = rays.x[i] + su * du[0] + sv * dv[0];
+                        let y = rays.y[i] + su * du[1] + sv * dv[1];
+                        let centre = g.locate(x, y, u as i32, v as i32, None).key;
+                        let mut all = true;
+                        for (ou, ov) in SUBSAMPLES {
+                            let (sx, sy) = (x + ou * du[0] + ov * dv[0], y + ou * du[1] + ov * dv[1]);
+                            all &= g.locate(sx, sy, u as i32, v as i32, None).key == centre;
+                        }
+                        let f = g.edge_free(x, y, du, dv, u as i32, v as i32, centre);
+                        assert!(!f || all, "{name} t {t} pixel {u} {v} key {centre}");
+                        confirmed += usize::from(all);
+                        free += usize::from(f);
+                    }
+                }
+            }
+            assert!(free * 2 > confirmed, "{name}: {free} of {confirmed}");
+            eprintln!("{name}: edge_free {free} of {confirmed} confirming");
         }
     }
 

@@ -270,24 +270,26 @@ impl RelativeMotion {
     /// camera-frame `corners`, seen at image radius `<= r_max` (normalized); `None` unless
     /// every corner is at depth > 0.1 m. The image speed of a point `P` is at most
     /// `sqrt(1 + x^2 + y^2) |V(P)| / Z` (the largest singular value of the projection's
-    /// Jacobian); `|V|` is convex and `Z` affine in `P`, so their extremes over the box are at
-    /// corners, and so is the largest image radius of its projection (the convex hull of the
-    /// projected corners).
+    /// Jacobian). `|V|` is convex and `Z` affine and positive over the box, so every sublevel
+    /// set `{P : |V(P)| <= c Z(P)}` is convex: `|V| / Z` is quasiconvex and its largest value
+    /// over the box is at a corner (not the largest `|V|` over the smallest `Z`, which may be
+    /// at different corners). The largest image radius of the projection (the convex hull of
+    /// the projected corners) is at a corner too.
     pub fn speed_bound_box(&self, corners: &[V3; 8], r_max: f64) -> Option<f64> {
         let z_min = corners.iter().map(|c| c[2]).fold(f64::INFINITY, f64::min);
         if z_min.is_nan() || z_min <= 0.1 {
             return None;
         }
-        let v_max = corners
+        let v_over_z = corners
             .iter()
-            .map(|&c| math::norm(self.velocity(c)))
+            .map(|&c| math::norm(self.velocity(c)) / c[2])
             .fold(0.0, f64::max);
         let r2 = corners
             .iter()
             .map(|c| (c[0] * c[0] + c[1] * c[1]) / (c[2] * c[2]))
             .fold(0.0, f64::max)
             .min(r_max * r_max);
-        Some((1.0 + r2).sqrt() * v_max / z_min)
+        Some((1.0 + r2).sqrt() * v_over_z)
     }
 
     /// Upper bound of the normalized image speed (1/s) of static points (this motion is the
@@ -482,6 +484,47 @@ mod tests {
         );
         // Not far from the true maximum either (the corners and centre of the image).
         assert!(b < 1.6 * fastest, "fastest {fastest}, box {b}");
+        // Random boxes and motions: sampled points never exceed the bound, and it is never
+        // looser than the largest corner speed over the smallest corner depth.
+        let mut rng = crate::rng::Rng::new(11, 3);
+        for _ in 0..200 {
+            let m = RelativeMotion {
+                linear: [rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1.0, 1.0)],
+                angular: [rng.range(-2.0, 2.0), rng.range(-2.0, 2.0), rng.range(-2.0, 2.0)],
+            };
+            let pose = BoxPose {
+                r_cb: math::mul_mm(
+                    &math::rot_axis(0, rng.range(-3.0, 3.0)),
+                    &math::rot_axis(2, rng.range(-3.0, 3.0)),
+                ),
+                center: [rng.range(-0.8, 0.8), rng.range(-0.6, 0.6), rng.range(1.0, 3.0)],
+            };
+            let half = [rng.range(0.05, 0.4), rng.range(0.05, 0.4), rng.range(0.02, 0.3)];
+            let corners = pose.corners(half);
+            let Some(b) = m.speed_bound_box(&corners, 10.0) else {
+                continue;
+            };
+            let v_max = corners
+                .iter()
+                .map(|&c| math::norm(m.velocity(c)))
+                .fold(0.0, f64::max);
+            let z_min = corners.iter().map(|c| c[2]).fold(f64::INFINITY, f64::min);
+            let r2 = corners
+                .iter()
+                .map(|c| (c[0] * c[0] + c[1] * c[1]) / (c[2] * c[2]))
+                .fold(0.0, f64::max);
+            assert!(b <= (1.0 + r2).sqrt() * v_max / z_min * (1.0 + 1e-12));
+            for _ in 0..300 {
+                let local = [
+                    rng.range(-half[0], half[0]),
+                    rng.range(-half[1], half[1]),
+                    rng.range(-half[2], half[2]),
+                ];
+                let p = math::add(pose.center, math::mul_mv(&pose.r_cb, local));
+                let (fx, fy) = m.normalized_flow(p);
+                assert!(fx.hypot(fy) <= b * (1.0 + 1e-12), "{} > {b}", fx.hypot(fy));
+            }
+        }
         // A corner behind the camera: no box bound.
         let near = BoxPose {
             r_cb: math::IDENTITY,

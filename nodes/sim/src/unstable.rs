@@ -5,8 +5,8 @@
 //! scattered along edges, so their per-pixel state (rays, thresholds, reference levels, the
 //! previous step's intensity) is gathered into dense arrays at the start of the interval and
 //! the reference levels are scattered back at its end: every step then reads contiguous memory
-//! instead of a dozen image-sized arrays at scattered indices. Each pixel is rendered every
-//! `stride` steps of the interval (see `local_speed`).
+//! instead of a dozen image-sized arrays at scattered indices. Each pixel is rendered at the
+//! render slots its local speed bound needs (see `local_speed::render_slots`).
 
 use crate::camera::Rays;
 use crate::render::FrameGeom;
@@ -53,12 +53,14 @@ pub struct UnstableList {
     pub key: Vec<u16>,
     /// Object id of the current render step.
     pub id: Vec<u16>,
-    /// Render stride: the pixel is rendered at the steps that are multiples of it (and at the
-    /// closing key frame); see `local_speed`.
-    pub stride: Vec<u32>,
-    /// Step index of the pixel's previous render (0: the opening key frame).
+    /// Render schedule: index into `local_speed::Schedules::lists`.
+    pub schedule: Vec<u32>,
+    /// Position of the pixel's next render in its schedule.
+    pub next: Vec<u32>,
+    /// Render slot of the pixel's previous render (0: the opening key frame; see
+    /// `local_speed::SUBSTEPS`).
     pub s_prev: Vec<u32>,
-    /// List indices of the pixels rendered at the current step.
+    /// List indices of the pixels rendered at the current slot.
     pub active: Vec<u32>,
     /// Image-sized map from pixel index to list index ([`NONE`] outside the list); all
     /// [`NONE`] between calls.
@@ -129,8 +131,10 @@ impl UnstableList {
         self.l.resize(m, 0.0);
         self.key.clear();
         self.key.extend(pix.iter().map(|&p| src.key0[p as usize]));
-        self.stride.clear();
-        self.stride.resize(m, 1);
+        self.schedule.clear();
+        self.schedule.resize(m, 0);
+        self.next.clear();
+        self.next.resize(m, 0);
         self.s_prev.clear();
         self.s_prev.resize(m, 0);
         self.id.clear();
@@ -156,19 +160,6 @@ impl UnstableList {
         for &p in pix {
             self.index_of[p as usize] = NONE;
         }
-    }
-
-    /// Lists in `active` the pixels whose stride divides step `s`.
-    pub fn select(&mut self, s: usize) {
-        self.active.clear();
-        let s = s as u32;
-        self.active.extend(
-            self.stride
-                .iter()
-                .enumerate()
-                .filter(|(_, st)| s.is_multiple_of(**st))
-                .map(|(j, _)| j as u32),
-        );
     }
 
     /// Ray casts the `active` pixels at `geom` into `l`, `key` and `id`; with `supersample`,
@@ -235,19 +226,26 @@ impl UnstableList {
                 .any(|&nb| nb != NONE && self.key[nb as usize] != k);
             if edge {
                 let i = self.pixel[j] as usize;
+                let (px, py) = ((i % w) as i32, (i / w) as i32);
+                count += 1;
+                // `edge_sample` in two parts: its shortcut inlined here (AVX2; the centre's
+                // value stands when the sub-samples certainly see its surface), the rest out
+                // of line.
+                if geom.edge_free(self.x[j], self.y[j], self.d_du[j], self.d_dv[j], px, py, k) {
+                    continue;
+                }
                 self.l[j] = geom
-                    .edge_sample(
+                    .edge_mix(
                         scene,
                         self.x[j],
                         self.y[j],
                         self.d_du[j],
                         self.d_dv[j],
-                        (i % w) as i32,
-                        (i / w) as i32,
+                        px,
+                        py,
                         (self.l[j], k),
                     )
                     .0;
-                count += 1;
             }
         }
         count
