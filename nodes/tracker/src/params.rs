@@ -63,11 +63,14 @@ pub struct TrackerParams {
     /// track's filter is corrected with it only when nothing else matched the track). 0 = off.
     /// The hierarchical merger does not always join an object's clusters, and each piece
     /// opening a track of its own was most of the id switches the evaluator counted on the
-    /// simulator. Default 0.3 (a fragment need not lie mostly inside: the box is predicted from
-    /// pieces that change from slice to slice). Chosen together with `merge_velocity_px_s` on
-    /// `evseg bench` (evseg-bench-v1, fdbc78d; mean per-object IoU %, mean of the worst
-    /// object's id switches): 0.5 and 30 px/s 29.15 / 59.3; 0.3 and 30 30.83 / 51.8; 0.2 and 30
-    /// 31.01 / 49.8; 0.5 and 60 29.30 / 50.7; 0.3 and 60 31.89 / 36.8.
+    /// simulator. Default 0.1 (was 0.3; a fragment need not lie mostly inside: the box is
+    /// predicted from pieces that change from slice to slice). With the segmentation of
+    /// 02cf208 (more of each object found, in more pieces), `evseg bench` (evseg-bench-v1; mean
+    /// per-object IoU %, mean of the worst object's id switches): 0.3 47.43 / 32.3, 0.1 53.40 /
+    /// 22.3, 0.05 53.37 / 23.3, 0 (off) 36.57 / 60.8; 0.1 raised every scene's per-object IoU
+    /// (two-objects, whose objects cross, 39.5 -> 43.0 %). Earlier, chosen together with
+    /// `merge_velocity_px_s` (fdbc78d): 0.5 and 30 px/s 29.15 / 59.3; 0.3 and 30 30.83 / 51.8;
+    /// 0.2 and 30 31.01 / 49.8; 0.5 and 60 29.30 / 50.7; 0.3 and 60 31.89 / 36.8.
     pub absorb_overlap: f64,
     /// Two tracks matched in the same slice, each matched at least `min_hits_to_merge` times,
     /// whose segments' boxes lie within `merge_gap_px` of each other and whose filtered image
@@ -104,7 +107,7 @@ impl Default for TrackerParams {
             min_events: 30,
             max_missing_s: 0.5,
             min_hits: 1,
-            absorb_overlap: 0.3,
+            absorb_overlap: 0.1,
             merge_velocity_px_s: 60.0,
             merge_gap_px: 4.0,
             min_hits_to_merge: 3,
