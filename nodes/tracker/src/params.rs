@@ -76,9 +76,15 @@ pub struct TrackerParams {
     /// whose segments' boxes lie within `merge_gap_px` of each other and whose filtered image
     /// velocities differ by at most this (px/s), are one object seen in pieces: the younger
     /// track's segments take the older one's id, the older track's box grows to cover both, and
-    /// the younger track ends. 0 = off. Default 60 px/s (2 px per 30 ms slice; the objects of
-    /// EVIMO2 and of the simulator move at hundreds of px/s relative to the background, and a
-    /// fragment's filtered velocity is noisy because its centroid jumps with the pieces). The
+    /// the younger track ends. 0 = off. Default 120 px/s (was 60; 4 px per 30 ms slice; the
+    /// objects of EVIMO2 and of the simulator move at hundreds of px/s relative to the
+    /// background, and a fragment's filtered velocity is noisy because its centroid jumps with
+    /// the pieces). With the segmentation of ad9c0c4, `evseg bench` (mean per-object IoU %,
+    /// worst object's id switches) 30 / 60 / 120 / 200 / 400 px/s: 49.92 / 32.3, 53.40 / 22.3,
+    /// 55.89 / 16.3, 57.21 / 13.8, 58.95 / 10.0; two-objects (crossing objects) 43.0 / 43.2 /
+    /// 40.2 / 41.5 % at 60 / 120 / 200 / 400. Above 120 the test stops looking at velocity at
+    /// all (it merges any two touching tracks), which only suits scenes of one object per
+    /// neighbourhood, so the default stays at the smallest step that helped every scene. The
     /// risk is merging two objects that cross: on `graph.yaml`'s 1 s of two-objects, with
     /// `absorb_overlap` 0.3, per-object IoU 25.4 -> 24.2 % against 30 px/s (and, with the
     /// segmentation of 906957c, 29.6 -> 21.0 %); on `evseg bench` (see `absorb_overlap`) 0.3 and
@@ -108,7 +114,7 @@ impl Default for TrackerParams {
             max_missing_s: 0.5,
             min_hits: 1,
             absorb_overlap: 0.1,
-            merge_velocity_px_s: 60.0,
+            merge_velocity_px_s: 120.0,
             merge_gap_px: 4.0,
             min_hits_to_merge: 3,
         }
