@@ -145,6 +145,14 @@ pub enum PlanarError {
     /// A per-event input does not fit its slice.
     #[error(transparent)]
     Input(#[from] AlignError),
+    /// [`PlanarSegmenter::segment_weighted`] got a number of weights other than one per event.
+    #[error("{weights} event weights for {events} events")]
+    EventWeights {
+        /// Weights given.
+        weights: usize,
+        /// Events in the slice.
+        events: usize,
+    },
     /// The slice's rotation rate is not finite.
     #[error("rotation rate {0:?} (rad/s, rad/s^2) is not finite")]
     Omega(RotationRate),
@@ -299,12 +307,13 @@ impl PlanarSegmenter {
             }
             _ => None,
         };
-        self.segment_inner(camera, events, flow, rate, None, mask.as_ref())
+        self.segment_slice(camera, events, flow, rate, None, mask.as_ref())
     }
 
     /// [`PlanarSegmenter::segment`] with a prior weight per event (>= 0, one per event of
     /// `events`) multiplying its equation's weight in the plane fit, e.g. the belief that it
-    /// is background from an earlier segmentation. `None`: every event alike.
+    /// is background from an earlier segmentation. `None`: every event alike; another length
+    /// than the events' is an error.
     pub fn segment_weighted(
         &mut self,
         camera: &CameraInfo,
@@ -313,26 +322,7 @@ impl PlanarSegmenter {
         rate: Option<RotationRate>,
         event_weight: Option<&[f64]>,
     ) -> Result<PlanarResult, PlanarError> {
-        self.segment_inner(camera, events, flow, rate, event_weight, None)
-    }
-
-    fn segment_inner(
-        &mut self,
-        camera: &CameraInfo,
-        events: &Events,
-        flow: &NormalFlow,
-        rate: Option<RotationRate>,
-        event_weight: Option<&[f64]>,
-        previous: Option<&PreviousForeground>,
-    ) -> Result<PlanarResult, PlanarError> {
-        let result = self.segment_slice(camera, events, flow, rate, event_weight, previous);
-        self.last = Some(LastSlice {
-            width: camera.width,
-            height: camera.height,
-            x: events.x.clone(),
-            y: events.y.clone(),
-        });
-        result
+        self.segment_slice(camera, events, flow, rate, event_weight, None)
     }
 
     fn segment_slice(
@@ -344,6 +334,14 @@ impl PlanarSegmenter {
         event_weight: Option<&[f64]>,
         previous: Option<&PreviousForeground>,
     ) -> Result<PlanarResult, PlanarError> {
+        // Where this slice's events are, for the next slice's previous-foreground mask (only
+        // needed while that weighting is on).
+        self.last = (self.params.previous.weight < 1.0).then(|| LastSlice {
+            width: camera.width,
+            height: camera.height,
+            x: events.x.clone(),
+            y: events.y.clone(),
+        });
         if let Some(r) = rate
             && !r.is_finite()
         {
@@ -365,38 +363,34 @@ impl PlanarSegmenter {
         let mut residual = vec![f32::NAN; n];
         let mut background = vec![true; n];
         let mut smoothed = vec![f32::NAN; n];
-        let weights = (p.density_cell_px > 0).then(|| {
+        // Fit weights: density, times the caller's prior, times the previous-foreground mask.
+        let pixels: Vec<(u16, u16)> = samples
+            .iter()
+            .map(|s| (events.x[s.index], events.y[s.index]))
+            .collect();
+        let mut weights = if p.density_cell_px > 0 {
             density_weights(
-                samples.iter().map(|s| (events.x[s.index], events.y[s.index])),
+                pixels.iter().copied(),
                 camera.width,
                 camera.height,
                 p.density_cell_px,
             )
-        });
-        let weights = match event_weight.filter(|w| w.len() == n) {
-            Some(prior) => {
-                let mut w = weights.unwrap_or_else(|| vec![1.0; samples.len()]);
-                for (w, s) in w.iter_mut().zip(&samples) {
-                    *w *= prior[s.index].max(0.0);
-                }
-                Some(w)
-            }
-            None => weights,
+        } else {
+            vec![1.0; samples.len()]
         };
-        let mut previous_applied = false;
-        let weights = match previous {
-            Some(mask) => {
-                let mut w = weights.unwrap_or_else(|| vec![1.0; samples.len()]);
-                let pixels: Vec<(u16, u16)> = samples
-                    .iter()
-                    .map(|s| (events.x[s.index], events.y[s.index]))
-                    .collect();
-                previous_applied = mask.apply(&pixels, &mut w, &p.previous);
-                Some(w)
+        if let Some(prior) = event_weight {
+            if prior.len() != n {
+                return Err(PlanarError::EventWeights {
+                    weights: prior.len(),
+                    events: n,
+                });
             }
-            None => weights,
-        };
-        let Some(a) = fit_planar_weighted(&eqs, weights.as_deref(), &p.fit) else {
+            for (w, s) in weights.iter_mut().zip(&samples) {
+                *w *= prior[s.index].max(0.0);
+            }
+        }
+        let previous_applied = previous.is_some_and(|mask| mask.apply(&pixels, &mut weights, &p.previous));
+        let Some(a) = fit_planar_weighted(&eqs, Some(&weights), &p.fit) else {
             return Ok(PlanarResult {
                 residuals: Residuals {
                     residual,

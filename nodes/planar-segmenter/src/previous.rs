@@ -97,8 +97,8 @@ impl PreviousForeground {
     }
 
     /// Multiplies `weights[k]` by `p.weight` for the samples at pixels `pixels[k]` inside the
-    /// mask, unless fewer than `p.min_free_share` of them lie outside it. Returns whether the
-    /// weighting was applied.
+    /// mask, unless fewer than `p.min_free_share` of them, or fewer than 8 (the planar model's
+    /// parameters), lie outside it. Returns whether the weighting was applied.
     pub fn apply(&self, pixels: &[(u16, u16)], weights: &mut [f64], p: &PreviousParams) -> bool {
         let inside: Vec<bool> = pixels.iter().map(|&(x, y)| self.contains(x, y)).collect();
         let free = inside.iter().filter(|&&i| !i).count();

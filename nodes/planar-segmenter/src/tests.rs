@@ -352,7 +352,35 @@ fn malformed_input_is_an_error() {
         s.segment(&camera(), &ev, &fl, None),
         Err(PlanarError::Input(AlignError::EventColumns))
     );
+    let (ev, fl, _) = scene(20, false, 0.0, camera_flow);
+    assert_eq!(
+        s.segment_weighted(&camera(), &ev, &fl, None, Some(&[1.0; 19])),
+        Err(PlanarError::EventWeights {
+            weights: 19,
+            events: 20
+        })
+    );
+    let previous = |q: PreviousParams| PlanarParams {
+        previous: q,
+        ..Default::default()
+    };
     for p in [
+        previous(PreviousParams {
+            weight: 1.5,
+            ..Default::default()
+        }),
+        previous(PreviousParams {
+            weight: f64::NAN,
+            ..Default::default()
+        }),
+        previous(PreviousParams {
+            min_free_share: -0.1,
+            ..Default::default()
+        }),
+        previous(PreviousParams {
+            cell_px: 0,
+            ..Default::default()
+        }),
         PlanarParams {
             cell_px: 0,
             ..Default::default()
