@@ -60,31 +60,31 @@ impl CellGrid {
     /// The maximum over each cell's `(2 r + 1)` x `(2 r + 1)` neighbourhood (an `r`-cell
     /// dilation; `r = 0` is a copy). Separable: a row pass, then a column pass.
     pub fn dilated_by(&self, r: usize) -> Self {
-        if r == 0 {
-            return self.clone();
+        let rows_done = running_max(&self.values, self.rows, self.cols, self.cols, 1, r);
+        let values = running_max(&rows_done, self.cols, self.rows, 1, self.cols, r);
+        Self {
+            cell_px: self.cell_px,
+            cols: self.cols,
+            rows: self.rows,
+            values,
         }
-        let mut rows_done = self.clone();
-        for cy in 0..self.rows {
-            for cx in 0..self.cols {
-                let mut m = f32::MIN;
-                for nx in cx.saturating_sub(r)..=(cx + r).min(self.cols - 1) {
-                    m = m.max(self.values[cy * self.cols + nx]);
-                }
-                rows_done.values[cy * self.cols + cx] = m;
-            }
-        }
-        let mut out = self.clone();
-        for cy in 0..self.rows {
-            for cx in 0..self.cols {
-                let mut m = f32::MIN;
-                for ny in cy.saturating_sub(r)..=(cy + r).min(self.rows - 1) {
-                    m = m.max(rows_done.values[ny * self.cols + cx]);
-                }
-                out.values[cy * self.cols + cx] = m;
-            }
-        }
-        out
     }
+}
+
+/// The maximum within `r` entries along each of `lines` lines of `len` entries of `src`; line
+/// `l`'s entry `k` is `src[l * line_stride + k * step]`.
+fn running_max(src: &[f32], lines: usize, len: usize, line_stride: usize, step: usize, r: usize) -> Vec<f32> {
+    let mut out = src.to_vec();
+    for l in 0..lines {
+        for k in 0..len {
+            let mut m = f32::MIN;
+            for j in k.saturating_sub(r)..=(k + r).min(len - 1) {
+                m = m.max(src[l * line_stride + j * step]);
+            }
+            out[l * line_stride + k * step] = m;
+        }
+    }
+    out
 }
 
 #[cfg(test)]
