@@ -1156,14 +1156,20 @@ mod tests {
     use super::*;
     use evseg_schemas::Distortion;
 
+    /// Preset `name` (seed 3), its scene and its camera's rays.
+    fn preset_scene(name: &str) -> (crate::SceneConfig, Scene, crate::camera::Rays) {
+        let cfg = crate::presets::preset(name, 3).unwrap();
+        let scene = Scene::new(&cfg.scene, cfg.camera_trajectory.clone(), 3, 0.01);
+        let rays = crate::camera::Rays::new(&cfg.camera);
+        (cfg, scene, rays)
+    }
+
     #[test]
     fn locating_and_casting_rays_in_lanes_matches_doing_it_one_by_one() {
         // Every pixel of two presets (moving boxes, furniture, a distorted lens) at a few
         // instants, in lanes of 8 along rows and of 4 sub-rays inside a pixel.
         for name in ["two-objects", "distorted-lens"] {
-            let cfg = crate::presets::preset(name, 3).unwrap();
-            let scene = Scene::new(&cfg.scene, cfg.camera_trajectory.clone(), 3, 0.01);
-            let rays = crate::camera::Rays::new(&cfg.camera);
+            let (cfg, scene, rays) = preset_scene(name);
             let w = rays.width;
             for t in [0.0, 0.37, 1.1] {
                 let g = FrameGeom::new(&scene, &cfg.camera, t);
@@ -1199,9 +1205,7 @@ mod tests {
         // What stable pixels' event truth relies on: the nearest surface of all, with its
         // depth, is what `flow` locates among its object's surfaces.
         for name in ["two-objects", "distorted-lens"] {
-            let cfg = crate::presets::preset(name, 3).unwrap();
-            let scene = Scene::new(&cfg.scene, cfg.camera_trajectory.clone(), 3, 0.01);
-            let rays = crate::camera::Rays::new(&cfg.camera);
+            let (cfg, scene, rays) = preset_scene(name);
             let w = rays.width;
             for t in [0.0, 0.37, 1.1] {
                 let g = FrameGeom::new(&scene, &cfg.camera, t);
@@ -1227,9 +1231,7 @@ mod tests {
         // hold for most sub-sample squares that confirm the centre.
         let mut rng = crate::rng::Rng::new(7, 2);
         for name in ["one-object", "two-objects", "distorted-lens"] {
-            let cfg = crate::presets::preset(name, 3).unwrap();
-            let scene = Scene::new(&cfg.scene, cfg.camera_trajectory.clone(), 3, 0.01);
-            let rays = crate::camera::Rays::new(&cfg.camera);
+            let (cfg, scene, rays) = preset_scene(name);
             let (w, h) = (rays.width, rays.height);
             let (mut free, mut confirmed) = (0usize, 0usize);
             for t in [0.0, 0.21, 0.37, 0.8, 1.1] {
