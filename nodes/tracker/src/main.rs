@@ -120,6 +120,18 @@ fn description() -> NodeDescription {
         d.min_hits_to_merge,
         "matches each track needs before it can be merged with another",
     )
+    .param(
+        "merge_inside",
+        d.merge_inside,
+        "two tracks where one's box lies at least this fraction inside the other's are one object (0 = off)",
+    )
+
+    .param(
+        "merge_inside_max_hits",
+        d.merge_inside_max_hits,
+        "most matches of the younger track for the containment merge (a fresh piece, not a tracked object)",
+    )
+
     .build()
 }
 
@@ -140,6 +152,8 @@ fn main() -> ExitCode {
             merge_velocity_px_s: cfg.param("merge_velocity_px_s")?,
             merge_gap_px: cfg.param("merge_gap_px")?,
             min_hits_to_merge: cfg.param("min_hits_to_merge")?,
+            merge_inside: cfg.param("merge_inside")?,
+            merge_inside_max_hits: cfg.param("merge_inside_max_hits")?,
         };
         Ok(Node(Tracker::new(params)?))
     })
@@ -180,6 +194,8 @@ mod tests {
                 "merge_velocity_px_s",
                 "merge_gap_px",
                 "min_hits_to_merge",
+                "merge_inside",
+                "merge_inside_max_hits",
             ]
         );
         let default_of = |n: &str| d.params.iter().find(|p| p.name == n).map(|p| p.default.clone());

@@ -481,6 +481,14 @@ fn invalid_parameters_are_refused() {
             max_distance_px: -5.0,
             ..Default::default()
         },
+        TrackerParams {
+            merge_inside: 1.5,
+            ..Default::default()
+        },
+        TrackerParams {
+            merge_inside: f64::NAN,
+            ..Default::default()
+        },
     ];
     for p in bad {
         assert!(
@@ -492,65 +500,72 @@ fn invalid_parameters_are_refused() {
 
 #[test]
 fn fragments_of_a_tracked_object_take_its_id_and_a_distant_segment_does_not() -> Result<(), TrackerError> {
-    let run = |absorb_overlap: f64| -> Result<(u32, u32, u32, Vec<u32>, u32), TrackerError> {
-        let mut tracker = Tracker::new(TrackerParams {
-            absorb_overlap,
-            ..TrackerParams::default()
-        })?;
-        let mut id = 0;
-        for k in 0..4 {
+    let run =
+        |absorb_overlap: f64, merge_inside: f64| -> Result<(u32, u32, u32, Vec<u32>, u32), TrackerError> {
+            let mut tracker = Tracker::new(TrackerParams {
+                absorb_overlap,
+                merge_inside,
+                ..TrackerParams::default()
+            })?;
+            let mut id = 0;
+            for k in 0..4 {
+                let (n, seg) = frame(
+                    &[Obj {
+                        label: 1,
+                        centroid: [100.0 + k as f64, 100.0],
+                        events: 200,
+                    }],
+                    50,
+                );
+                id = id_of(&seg, &tracker.update(span(k), n, &seg)?, 1);
+            }
+            // The object comes in two pieces, 4 px either side of where it is expected, and a
+            // separate object appears far away.
             let (n, seg) = frame(
-                &[Obj {
-                    label: 1,
-                    centroid: [100.0 + k as f64, 100.0],
-                    events: 200,
-                }],
+                &[
+                    Obj {
+                        label: 1,
+                        centroid: [100.0, 100.0],
+                        events: 120,
+                    },
+                    Obj {
+                        label: 2,
+                        centroid: [108.0, 100.0],
+                        events: 80,
+                    },
+                    Obj {
+                        label: 3,
+                        centroid: [300.0, 200.0],
+                        events: 100,
+                    },
+                ],
                 50,
             );
-            id = id_of(&seg, &tracker.update(span(k), n, &seg)?, 1);
-        }
-        // The object comes in two pieces, 4 px either side of where it is expected, and a
-        // separate object appears far away.
-        let (n, seg) = frame(
-            &[
-                Obj {
-                    label: 1,
-                    centroid: [100.0, 100.0],
-                    events: 120,
-                },
-                Obj {
-                    label: 2,
-                    centroid: [108.0, 100.0],
-                    events: 80,
-                },
-                Obj {
-                    label: 3,
-                    centroid: [300.0, 200.0],
-                    events: 100,
-                },
-            ],
-            50,
-        );
-        let out = tracker.update(span(4), n, &seg)?;
-        let ids = out.tracks.iter().map(|t| t.id).collect();
-        let listed_events = out.tracks.iter().find(|t| t.id == id).map_or(0, |t| t.events);
-        Ok((
-            id_of(&seg, &out, 1),
-            id_of(&seg, &out, 2),
-            id_of(&seg, &out, 3),
-            ids,
-            listed_events,
-        ))
-    };
-    let (a, b, c, ids, events) = run(0.5)?;
+            let out = tracker.update(span(4), n, &seg)?;
+            let ids = out.tracks.iter().map(|t| t.id).collect();
+            let listed_events = out.tracks.iter().find(|t| t.id == id).map_or(0, |t| t.events);
+            Ok((
+                id_of(&seg, &out, 1),
+                id_of(&seg, &out, 2),
+                id_of(&seg, &out, 3),
+                ids,
+                listed_events,
+            ))
+        };
+    let (a, b, c, ids, events) = run(0.5, 0.0)?;
     assert_eq!(a, b, "both pieces carry the object's id");
     assert!(c != a && c != 0, "the distant object has its own track");
     assert_eq!(ids.len(), 2, "one listed track per id: {ids:?}");
     assert_eq!(events, 200, "the listed track counts both pieces");
-    // Off: the second piece opens a track of its own.
-    let (a, b, _, ids, _) = run(0.0)?;
+    // Off: the second piece opens a track of its own...
+    let (a, b, _, ids, _) = run(0.0, 0.0)?;
     assert!(a != b && b != 0);
     assert_eq!(ids.len(), 3);
+    // ...which the containment merge joins to the object at once (its box lies 13/21 inside).
+    let (a, b, c, ids, _) = run(0.0, 0.5)?;
+    assert_eq!(a, b, "merged by containment");
+    assert!(c != a && c != 0);
+    assert_eq!(ids.len(), 2, "{ids:?}");
     Ok(())
 }
 
@@ -583,6 +598,10 @@ fn touching_tracks_that_move_alike_become_one_and_others_stay_apart() -> Result<
         Ok(ids)
     };
     let alike = run(150.0, 150.0)?;
+    assert!(
+        TrackerParams::default().min_hits_to_merge == 3,
+        "the assertions below count on it"
+    );
     // Separate until both tracks have three matches, then one id from there on.
     assert!(alike[0].0 != alike[0].1, "{alike:?}");
     assert!(
@@ -592,5 +611,87 @@ fn touching_tracks_that_move_alike_become_one_and_others_stay_apart() -> Result<
     // Moving apart at 100 px/s relative: never merged (they touch only at first).
     let apart = run(150.0, 250.0)?;
     assert!(apart.iter().all(|&(a, b)| a != b), "{apart:?}");
+    Ok(())
+}
+
+#[test]
+fn a_piece_inside_another_tracks_box_is_merged_whatever_its_velocity() -> Result<(), TrackerError> {
+    // A large piece (40 x 40 px box) and a small one (20 x 20) inside it whose centroid swings
+    // 10 px either way from slice to slice (a fragment's centroid jumps with the pieces): their
+    // filtered velocities differ by far more than `merge_velocity_px_s`.
+    let run = |merge_inside: f64| -> Result<Vec<(u32, u32)>, TrackerError> {
+        let mut tracker = Tracker::new(TrackerParams {
+            merge_inside,
+            absorb_overlap: 0.0,
+            ..TrackerParams::default()
+        })?;
+        let mut ids = Vec::new();
+        for k in 0..6 {
+            let swing = if k % 2 == 0 { -10.0 } else { 10.0 };
+            let (n, mut seg) = frame(
+                &[
+                    Obj {
+                        label: 1,
+                        centroid: [200.0 + 3.0 * k as f64, 100.0],
+                        events: 300,
+                    },
+                    Obj {
+                        label: 2,
+                        centroid: [200.0 + 3.0 * k as f64 + swing, 100.0],
+                        events: 100,
+                    },
+                ],
+                50,
+            );
+            let b = &mut seg.segments[0].bbox;
+            *b = [b[0] - 10.0, b[1] - 10.0, b[2] + 10.0, b[3] + 10.0];
+            let out = tracker.update(span(k), n, &seg)?;
+            ids.push((id_of(&seg, &out, 1), id_of(&seg, &out, 2)));
+        }
+        Ok(ids)
+    };
+    let on = run(0.5)?;
+    assert!(on.iter().all(|&(a, b)| a == b && a == on[0].0), "{on:?}");
+    // Off: two tracks until the velocity rule may look at them (three matches each).
+    let off = run(0.0)?;
+    assert!(off[..2].iter().all(|&(a, b)| a != b), "{off:?}");
+    Ok(())
+}
+
+#[test]
+fn two_objects_tracked_apart_stay_apart_when_one_passes_inside_the_others_box() -> Result<(), TrackerError> {
+    // A large object (40 x 40 px box) still, a small one coming from 200 px away at 300 px/s
+    // and passing across it: tracked apart for longer than `merge_inside_max_hits` before
+    // their boxes overlap.
+    let p = TrackerParams::default();
+    let mut tracker = Tracker::new(p.clone())?;
+    let mut overlapped = 0;
+    for k in 0..30 {
+        let small = [100.0 + 300.0 * k as f64 * DT, 300.0];
+        let (n, mut seg) = frame(
+            &[
+                Obj {
+                    label: 1,
+                    centroid: [300.0, 300.0],
+                    events: 300,
+                },
+                Obj {
+                    label: 2,
+                    centroid: small,
+                    events: 100,
+                },
+            ],
+            50,
+        );
+        let b = &mut seg.segments[0].bbox;
+        *b = [b[0] - 10.0, b[1] - 10.0, b[2] + 10.0, b[3] + 10.0];
+        overlapped += usize::from((small[0] - 300.0).abs() <= 10.0);
+        let out = tracker.update(span(k), n, &seg)?;
+        assert_eq!((id_of(&seg, &out, 1), id_of(&seg, &out, 2)), (1, 2), "slice {k}");
+    }
+    assert!(
+        overlapped >= 2 && p.merge_inside_max_hits < 20,
+        "the small box must lie inside the large one in some slices after both are established"
+    );
     Ok(())
 }

@@ -396,9 +396,10 @@ impl Tracker {
 }
 
 impl Tracker {
-    /// Merges tracks that are pieces of one object (see `TrackerParams::merge_velocity_px_s`):
-    /// repeatedly takes the closest-moving pair of tracks matched in this slice whose segments'
-    /// boxes touch; the younger one's segments become fragments of the older one
+    /// Merges tracks that are pieces of one object (see `TrackerParams::merge_velocity_px_s`
+    /// and `TrackerParams::merge_inside`): repeatedly takes the pair of tracks matched in this
+    /// slice whose segments' boxes lie one inside the other (a young piece), else the
+    /// closest-moving pair whose boxes touch; the younger one's segments become fragments of the older one
     /// (`absorbed`) and the younger one is marked `ended` (the caller grows the older one's box
     /// over all its pieces).
     fn merge_pieces(
@@ -408,32 +409,47 @@ impl Tracker {
         absorbed: &mut [bool],
         ended: &mut [bool],
     ) {
-        let p = &self.params;
-        loop {
-            // Union box of each track's segments in this slice.
-            let mut boxes: Vec<Option<[f64; 4]>> = vec![None; self.tracks.len()];
+        let union_boxes = |track_of_segment: &[Option<usize>], tracks: usize| {
+            let mut boxes: Vec<Option<[f64; 4]>> = vec![None; tracks];
             for (k, m) in track_of_segment.iter().enumerate() {
                 if let Some(ti) = *m {
                     let b = bbox_f64(segments[k].bbox);
                     boxes[ti] = Some(boxes[ti].map_or(b, |u| box_union(u, b)));
                 }
             }
+            boxes
+        };
+        let p = &self.params;
+        loop {
+            // Union box of each track's segments in this slice.
+            let boxes = union_boxes(track_of_segment, self.tracks.len());
             let mut best: Option<(usize, usize, f64)> = None;
             for a in 0..self.tracks.len() {
                 for b in a + 1..self.tracks.len() {
                     let (Some(ba), Some(bb)) = (boxes[a], boxes[b]) else {
                         continue;
                     };
+                    if ended[a] || ended[b] {
+                        continue;
+                    }
+                    // Containment: one piece's box mostly inside the other's (any velocity).
+                    // Otherwise touching boxes and alike velocities of trusted filters.
                     let (ta, tb) = (&self.tracks[a], &self.tracks[b]);
-                    if ended[a] || ended[b] || ta.hits < p.min_hits_to_merge || tb.hits < p.min_hits_to_merge
-                    {
-                        continue;
-                    }
-                    if box_gap(ba, bb) > p.merge_gap_px {
-                        continue;
-                    }
-                    let (va, vb) = (ta.kf.velocity(), tb.kf.velocity());
-                    let dv = (va[0] - vb[0]).hypot(va[1] - vb[1]);
+                    let contained = p.merge_inside > 0.0
+                        && ta.hits.min(tb.hits) <= p.merge_inside_max_hits
+                        && inside_fraction(ba, bb).max(inside_fraction(bb, ba)) >= p.merge_inside;
+                    let dv = if contained {
+                        0.0
+                    } else {
+                        if ta.hits < p.min_hits_to_merge
+                            || tb.hits < p.min_hits_to_merge
+                            || box_gap(ba, bb) > p.merge_gap_px
+                        {
+                            continue;
+                        }
+                        let (va, vb) = (ta.kf.velocity(), tb.kf.velocity());
+                        (va[0] - vb[0]).hypot(va[1] - vb[1])
+                    };
                     if dv <= p.merge_velocity_px_s && best.is_none_or(|(_, _, d)| dv < d) {
                         best = Some((a, b, dv));
                     }
