@@ -111,7 +111,13 @@ pub struct TrackerParams {
     /// too, 61.01 / 2.5 without; 0.3 61.02 / 4.0; 0.8 61.05 / 5.2 (with the match count); a
     /// velocity cap of 300 px/s on it 59.20 / 9.7; required in 3 / 6 slices in a row 60.14 /
     /// 6.7, 58.71 / 13.3 (and that did not keep crossing objects apart, see
-    /// `merge_inside_max_hits`, which does).
+    /// `merge_inside_max_hits`, which does); only when the two tracks' segment translations
+    /// (hierarchical merger) point within 20 / 30 deg: 57.53 / 13.5, 58.72 / 12.7 (the pieces
+    /// the hierarchical merger left apart disagree in translation too); only when the younger
+    /// track has at most half the older one's matches: 57.46 / 12.0. The cost is on scenes
+    /// whose objects are close: the younger object's pieces join the older one's track while
+    /// both are young (two-objects 43.15 -> 39.35 %; `graph.yaml`'s 1 s of it 40.47 -> 31.35 %,
+    /// its second object matched in 4 of 34 windows, no id switch on either).
     pub merge_inside: f64,
     /// See `merge_inside`: the younger of the two tracks must have been matched at most this
     /// many times (default 10, 0.3 s of 30 ms slices): a piece of an object opens a track of its
