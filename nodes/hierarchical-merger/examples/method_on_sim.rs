@@ -7,7 +7,7 @@
 //! makes the SVM degenerate), SET ("name=value,...": background-merger, hierarchical-merger and
 //! planar parameters, several variants separated by ';'), VERBOSE (per-slice cluster reports),
 //! FLOW_MIN_CONF (the plane-fit estimator's min_confidence; default 0 as in graph.yaml),
-//! NF_LOOKAHEAD_MS / NF_RADIUS / NF_DT_MAX_MS / NF_OUTLIER_MS (its other settings), CONS
+//! NF_LOOKAHEAD_MS / NF_RADIUS / NF_DT_MAX_MS / NF_OUTLIER_MS / NF_MAX_SD_DEG (its other settings), CONS
 //! ("cell,min_neighbours,max_deviation[,ridge]" of the normal-flow consensus, default as the
 //! node; "0" = off), DUMP=k (PNG panels of slice k: truth, planar, coarse, final, in
 //! /tmp/dump-<scene>.png). It prints the share of normal-flow lengths more than 30 % off the
@@ -224,6 +224,7 @@ fn main() -> anyhow::Result<()> {
                 radius: env_or("NF_RADIUS", PlaneFitParams::default().radius)?,
                 dt_max_s: env_or("NF_DT_MAX_MS", PlaneFitParams::default().dt_max_s * 1e3)? * 1e-3,
                 outlier_s: env_or("NF_OUTLIER_MS", PlaneFitParams::default().outlier_s * 1e3)? * 1e-3,
+                max_direction_sd_rad: env_or("NF_MAX_SD_DEG", f64::INFINITY)?.to_radians(),
                 ..PlaneFitParams::default()
             },
         )?;
