@@ -1037,7 +1037,8 @@ fn stable_displacement(kf0: &KeyFrame, kf1: &KeyFrame, i: usize, w: usize, du: f
 
 /// Bound of the normalized image speed (1/s) of a moving box with motion `m` relative to the
 /// camera, camera-frame `pose` and `corners`, half extents `half` (m), at image radius
-/// `<= r_max`: the smaller of the corner bound and the bound of its circumscribed ball.
+/// `<= r_max`: the smallest of the corner bound, the centred corner bound (see
+/// `RelativeMotion::speed_bound_box_centred`) and the bound of its circumscribed ball.
 fn object_speed(
     m: &scene::RelativeMotion,
     pose: &scene::BoxPose,
@@ -1047,7 +1048,8 @@ fn object_speed(
 ) -> f64 {
     let zmin = corners.iter().map(|c| c[2]).fold(f64::INFINITY, f64::min);
     let ball = m.speed_bound_ball(pose.center, math::norm(half), zmin.max(0.1), r_max);
-    m.speed_bound_box(corners, r_max).map_or(ball, |b| b.min(ball))
+    let b = m.speed_bound_box(corners, r_max).map_or(ball, |b| b.min(ball));
+    m.speed_bound_box_centred(corners).map_or(b, |c| c.min(b))
 }
 
 /// Threshold crossings of pixel `i` from `l0` to `l1` over `span`, with the truth of
