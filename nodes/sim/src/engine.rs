@@ -25,10 +25,11 @@
 //!   see [`crate::local_speed`]), with edge anti-aliasing
 //!   ([`FrameGeom::edge_sample`]).
 
-use crate::camera::{CameraConfig, Rays};
+use crate::camera::Rays;
 use crate::config::SceneConfig;
 use crate::esim::{self, NoiseSource, Thresholds};
 use crate::filters;
+use crate::firing::{FireCtx, PathEnd, fire, fire_path};
 use crate::local_speed::{self, LocalSpeed};
 use crate::math::{fmax, fmin};
 use crate::radix;
@@ -81,6 +82,22 @@ pub struct KeyFrame {
 }
 
 impl KeyFrame {
+    /// Pixel `i` as one end of a path on its surface, at time `t` (this key frame's).
+    fn path_end(&self, i: usize, t: f64) -> PathEnd<'_> {
+        let key = self.key[i];
+        PathEnd {
+            t,
+            l: self.l[i],
+            u: self.u[i],
+            v: self.v[i],
+            footprint: self.footprint[i],
+            shade: self.geom.shade_by_key[key as usize],
+            geom: &self.geom,
+            key,
+            z: self.z[i],
+        }
+    }
+
     fn new(geom: FrameGeom, n: usize) -> Self {
         Self {
             geom,
@@ -164,13 +181,6 @@ pub struct Engine {
     /// Time of `kf0`, s.
     pub(crate) t: f64,
     pub(crate) stats: SimStats,
-}
-
-struct FireCtx<'a> {
-    scene: &'a Scene,
-    cam: &'a CameraConfig,
-    rays: &'a Rays,
-    refractory: f64,
 }
 
 impl Engine {
@@ -556,62 +566,23 @@ impl Engine {
                 STABLE => {
                     let key = kf0.key[i] as usize;
                     let tex = &self.scene.textures[self.scene.key_texture[key]];
-                    let (s0, s1) = (kf0.geom.shade_by_key[key], kf1.geom.shade_by_key[key]);
                     let (du, dv) = (kf1.u[i] - kf0.u[i], kf1.v[i] - kf0.v[i]);
-                    // Log intensities at the grid points j/m, j = 1..m, of the interpolated
-                    // path (the last is the key frame's). They do not depend on the pixel's
-                    // reference level, so they are computed first, free of the serial chain of
-                    // the threshold test, and the test is skipped when none can reach a
-                    // threshold.
-                    let (u0, v0, fp0, dfp) = (
-                        kf0.u[i],
-                        kf0.v[i],
-                        kf0.footprint[i],
-                        kf1.footprint[i] - kf0.footprint[i],
-                    );
-                    let r = self.reference[i];
                     let disp = stable_displacement(kf0, kf1, i, w_img, du, dv);
                     let m = ((disp / max_px).ceil() as usize).clamp(1, 4096);
-                    let mf = m as f32;
-                    tex.sample_path([u0, v0, fp0, s0], [du, dv, dfp, s1 - s0], m, &mut path);
-                    path.push(kf1.l[i]);
-                    samples += (m - 1) as u64;
-                    let l_start = kf0.l[i];
-                    let (lo, hi) = path
-                        .iter()
-                        .fold((l_start, l_start), |(lo, hi), &l| (fmin(lo, l), fmax(hi, l)));
-                    if hi < r + c_on && lo > r - c_off {
-                        // Strictly inside both thresholds: no crossing, reference unchanged.
-                        continue;
-                    }
-                    let before = batch.len();
-                    let (mut l_prev, mut t_prev) = (l_start, t0);
-                    for (j, &l) in path.iter().enumerate() {
-                        let next = j + 1;
-                        let t = if next == m {
-                            t1
-                        } else {
-                            t0 + (t1 - t0) * (next as f32 / mf) as f64
-                        };
-                        if esim::may_cross(self.reference[i], l, c_on, c_off) {
-                            fire_segment(
-                                &ctx,
-                                &mut self.reference[i],
-                                &mut self.last_event[i],
-                                i,
-                                l_prev,
-                                l,
-                                (t_prev, t),
-                                (t0, t1),
-                                (kf0, kf1),
-                                (c_on, c_off),
-                                &mut batch,
-                            );
-                        }
-                        l_prev = l;
-                        t_prev = t;
-                    }
-                    fired += (batch.len() - before) as u64;
+                    let (n, f) = fire_path(
+                        &ctx,
+                        tex,
+                        (&kf0.path_end(i, t0), &kf1.path_end(i, t1)),
+                        m,
+                        i,
+                        kf0.id[i],
+                        (&mut self.reference[i], &mut self.last_event[i]),
+                        (c_on, c_off),
+                        &mut batch,
+                        &mut path,
+                    );
+                    samples += n;
+                    fired += f;
                 }
                 _ => {}
             }
@@ -1037,7 +1008,8 @@ fn stable_displacement(kf0: &KeyFrame, kf1: &KeyFrame, i: usize, w: usize, du: f
 
 /// Bound of the normalized image speed (1/s) of a moving box with motion `m` relative to the
 /// camera, camera-frame `pose` and `corners`, half extents `half` (m), at image radius
-/// `<= r_max`: the smaller of the corner bound and the bound of its circumscribed ball.
+/// `<= r_max`: the smallest of the corner bound, the centred corner bound (see
+/// `RelativeMotion::speed_bound_box_centred`) and the bound of its circumscribed ball.
 fn object_speed(
     m: &scene::RelativeMotion,
     pose: &scene::BoxPose,
@@ -1047,153 +1019,8 @@ fn object_speed(
 ) -> f64 {
     let zmin = corners.iter().map(|c| c[2]).fold(f64::INFINITY, f64::min);
     let ball = m.speed_bound_ball(pose.center, math::norm(half), zmin.max(0.1), r_max);
-    m.speed_bound_box(corners, r_max).map_or(ball, |b| b.min(ball))
-}
-
-/// Threshold crossings of pixel `i` from `l0` to `l1` over `span`, with the truth of
-/// [`event_truth`] between the renders `geoms` (object ids `ids` at the pixel centre).
-#[allow(clippy::too_many_arguments)]
-fn fire(
-    ctx: &FireCtx,
-    reference: &mut f32,
-    last_event: &mut f64,
-    i: usize,
-    l0: f32,
-    l1: f32,
-    span: (f64, f64),
-    geoms: (&FrameGeom, &FrameGeom),
-    ids: (u16, u16),
-    thresholds: (f32, f32),
-    batch: &mut Vec<RawEvent>,
-) {
-    let (ta, tb) = span;
-    esim::crossings(
-        reference,
-        last_event,
-        l0,
-        l1,
-        ta,
-        tb,
-        thresholds.0,
-        thresholds.1,
-        ctx.refractory,
-        |t, pol| {
-            let frac = if tb > ta {
-                ((t - ta) / (tb - ta)) as f32
-            } else {
-                0.0
-            };
-            let (id, fx, fy) = event_truth(ctx, i, geoms.0, geoms.1, ids.0, ids.1, frac);
-            batch.push(RawEvent {
-                t,
-                pixel: i as u32,
-                p: pol,
-                id,
-                fx,
-                fy,
-            });
-        },
-    );
-}
-
-/// Like [`fire`] for a sub-segment `span` of a key-frame interval `whole` of a stable pixel
-/// (one surface at both key frames `kfs`); the truth interpolates between the key frames, with
-/// the surface and depth they located at the pixel (what `FrameGeom::flow` would locate).
-#[allow(clippy::too_many_arguments)]
-fn fire_segment(
-    ctx: &FireCtx,
-    reference: &mut f32,
-    last_event: &mut f64,
-    i: usize,
-    l0: f32,
-    l1: f32,
-    span: (f64, f64),
-    whole: (f64, f64),
-    kfs: (&KeyFrame, &KeyFrame),
-    thresholds: (f32, f32),
-    batch: &mut Vec<RawEvent>,
-) {
-    let (ta, tb) = span;
-    let (wa, wb) = whole;
-    let id = kfs.0.id[i];
-    esim::crossings(
-        reference,
-        last_event,
-        l0,
-        l1,
-        ta,
-        tb,
-        thresholds.0,
-        thresholds.1,
-        ctx.refractory,
-        |t, pol| {
-            let frac = if wb > wa {
-                ((t - wa) / (wb - wa)) as f32
-            } else {
-                0.0
-            };
-            let (x, y) = (ctx.rays.x[i], ctx.rays.y[i]);
-            let flow = |kf: &KeyFrame| kf.geom.flow_at(ctx.cam, x, y, kf.key[i], kf.z[i], id);
-            let (fx, fy) = interpolate_flow(flow(kfs.0), flow(kfs.1), frac);
-            batch.push(RawEvent {
-                t,
-                pixel: i as u32,
-                p: pol,
-                id,
-                fx,
-                fy,
-            });
-        },
-    );
-}
-
-/// Object id and flow (px/s) of an event at pixel `i`, a fraction `frac` of the way from the
-/// render at `ga` (object `id_a` at the pixel centre) to the one at `gb` (object `id_b`).
-/// The id is the object's if it covers the pixel at either render (leading and trailing edges
-/// belong to the object); the flow is that surface's motion field at the pixel, interpolated
-/// between the two renders when both see it.
-fn event_truth(
-    ctx: &FireCtx,
-    i: usize,
-    ga: &FrameGeom,
-    gb: &FrameGeom,
-    id_a: u16,
-    id_b: u16,
-    frac: f32,
-) -> (u16, f32, f32) {
-    let id = match (id_a, id_b) {
-        (0, b) => b,
-        (a, 0) => a,
-        (a, b) => {
-            if frac < 0.5 {
-                a
-            } else {
-                b
-            }
-        }
-    };
-    let w = ctx.rays.width;
-    let (x, y, u, v) = (ctx.rays.x[i], ctx.rays.y[i], (i % w) as i32, (i / w) as i32);
-    let fa = ga.flow(ctx.scene, ctx.cam, x, y, u, v, id);
-    let fb = gb.flow(ctx.scene, ctx.cam, x, y, u, v, id);
-    let (fx, fy) = interpolate_flow(fa, fb, frac);
-    (id, fx, fy)
-}
-
-/// The flow (px/s) a fraction `frac` of the way from flow `fa` to `fb` (either alone when the
-/// other is missing, zero when both are).
-#[inline]
-fn interpolate_flow(fa: Option<(f64, f64)>, fb: Option<(f64, f64)>, frac: f32) -> (f32, f32) {
-    let (fx, fy) = match (fa, fb) {
-        (Some(a), Some(b)) => {
-            let f = frac as f64;
-            (a.0 + f * (b.0 - a.0), a.1 + f * (b.1 - a.1))
-        }
-        (Some(a), None) => a,
-        (None, Some(b)) => b,
-        (None, None) => (0.0, 0.0),
-    };
-    (fx as f32, fy as f32)
+    let b = m.speed_bound_box(corners, r_max).map_or(ball, |b| b.min(ball));
+    m.speed_bound_box_centred(corners).map_or(b, |c| c.min(b))
 }
 
 #[cfg(test)]

@@ -27,6 +27,7 @@ pub mod config;
 pub mod engine;
 pub mod esim;
 pub mod filters;
+mod firing;
 pub mod imu;
 pub mod local_speed;
 pub mod math;

@@ -1,0 +1,266 @@
+//! Threshold crossings of one pixel with their truth (object id and flow per event): between
+//! two renders ([`fire`]) and along the interpolated texture path of a pixel that keeps one
+//! surface ([`fire_path`]).
+
+use crate::camera::{CameraConfig, Rays};
+use crate::engine::RawEvent;
+use crate::esim;
+use crate::math::{fmax, fmin};
+use crate::render::FrameGeom;
+use crate::scene::Scene;
+use crate::texture::Texture;
+
+/// What firing needs besides the pixel's state.
+pub(crate) struct FireCtx<'a> {
+    /// The scene.
+    pub scene: &'a Scene,
+    /// The camera.
+    pub cam: &'a CameraConfig,
+    /// Rays of every pixel.
+    pub rays: &'a Rays,
+    /// Refractory period, s.
+    pub refractory: f64,
+}
+
+/// One end of a pixel's path on one surface: where the pixel's ray met it (a key frame, or a
+/// render of an unstable pixel).
+pub(crate) struct PathEnd<'a> {
+    /// Time, s.
+    pub t: f64,
+    /// Log intensity.
+    pub l: f32,
+    /// Texture coordinates, m.
+    pub u: f32,
+    /// Texture coordinates, m.
+    pub v: f32,
+    /// Texture footprint, m.
+    pub footprint: f32,
+    /// Log shading of the surface.
+    pub shade: f32,
+    /// The scene at `t`.
+    pub geom: &'a FrameGeom,
+    /// Surface key.
+    pub key: u16,
+    /// Depth along the optical axis, m.
+    pub z: f32,
+}
+
+/// Threshold crossings of pixel `i` (object `id`) along the straight texture path between
+/// `ends` on one surface (texture `tex`): log intensities at the grid points `j / m`,
+/// `j = 1..m`, of the interpolated path (the last is the end's own value). They do not depend
+/// on the pixel's reference level, so they are computed first, free of the serial chain of the
+/// threshold test, and the test is skipped when none can reach a threshold. `state` is the
+/// pixel's reference level and time of its last event; `path` is scratch. Returns the number
+/// of interpolated samples and of events.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+pub(crate) fn fire_path(
+    ctx: &FireCtx,
+    tex: &Texture,
+    ends: (&PathEnd, &PathEnd),
+    m: usize,
+    i: usize,
+    id: u16,
+    state: (&mut f32, &mut f64),
+    thresholds: (f32, f32),
+    batch: &mut Vec<RawEvent>,
+    path: &mut Vec<f32>,
+) -> (u64, u64) {
+    let (a, b) = ends;
+    let (reference, last_event) = state;
+    let (c_on, c_off) = thresholds;
+    let (t0, t1) = (a.t, b.t);
+    let (du, dv) = (b.u - a.u, b.v - a.v);
+    let dfp = b.footprint - a.footprint;
+    let r = *reference;
+    let mf = m as f32;
+    tex.sample_path(
+        [a.u, a.v, a.footprint, a.shade],
+        [du, dv, dfp, b.shade - a.shade],
+        m,
+        path,
+    );
+    path.push(b.l);
+    let samples = (m - 1) as u64;
+    let l_start = a.l;
+    let (lo, hi) = path
+        .iter()
+        .fold((l_start, l_start), |(lo, hi), &l| (fmin(lo, l), fmax(hi, l)));
+    if hi < r + c_on && lo > r - c_off {
+        // Strictly inside both thresholds: no crossing, reference unchanged.
+        return (samples, 0);
+    }
+    let before = batch.len();
+    let (mut l_prev, mut t_prev) = (l_start, t0);
+    for (j, &l) in path.iter().enumerate() {
+        let next = j + 1;
+        let t = if next == m {
+            t1
+        } else {
+            t0 + (t1 - t0) * (next as f32 / mf) as f64
+        };
+        if esim::may_cross(*reference, l, c_on, c_off) {
+            fire_segment(
+                ctx,
+                reference,
+                last_event,
+                i,
+                l_prev,
+                l,
+                (t_prev, t),
+                ends,
+                id,
+                (c_on, c_off),
+                batch,
+            );
+        }
+        l_prev = l;
+        t_prev = t;
+    }
+    (samples, (batch.len() - before) as u64)
+}
+
+/// Threshold crossings of pixel `i` from `l0` to `l1` over `span`, with the truth of
+/// [`event_truth`] between the renders `geoms` (object ids `ids` at the pixel centre).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn fire(
+    ctx: &FireCtx,
+    reference: &mut f32,
+    last_event: &mut f64,
+    i: usize,
+    l0: f32,
+    l1: f32,
+    span: (f64, f64),
+    geoms: (&FrameGeom, &FrameGeom),
+    ids: (u16, u16),
+    thresholds: (f32, f32),
+    batch: &mut Vec<RawEvent>,
+) {
+    let (ta, tb) = span;
+    esim::crossings(
+        reference,
+        last_event,
+        l0,
+        l1,
+        ta,
+        tb,
+        thresholds.0,
+        thresholds.1,
+        ctx.refractory,
+        |t, pol| {
+            let frac = if tb > ta {
+                ((t - ta) / (tb - ta)) as f32
+            } else {
+                0.0
+            };
+            let (id, fx, fy) = event_truth(ctx, i, geoms.0, geoms.1, ids.0, ids.1, frac);
+            batch.push(RawEvent {
+                t,
+                pixel: i as u32,
+                p: pol,
+                id,
+                fx,
+                fy,
+            });
+        },
+    );
+}
+
+/// Like [`fire`] for a sub-segment `span` of a path `ends` of pixel `i` on one surface of
+/// object `id` (see [`fire_path`]); the truth interpolates between the ends, with the surface
+/// and depth located there (what `FrameGeom::flow` would locate).
+#[allow(clippy::too_many_arguments)]
+fn fire_segment(
+    ctx: &FireCtx,
+    reference: &mut f32,
+    last_event: &mut f64,
+    i: usize,
+    l0: f32,
+    l1: f32,
+    span: (f64, f64),
+    ends: (&PathEnd, &PathEnd),
+    id: u16,
+    thresholds: (f32, f32),
+    batch: &mut Vec<RawEvent>,
+) {
+    let (ta, tb) = span;
+    let (wa, wb) = (ends.0.t, ends.1.t);
+    esim::crossings(
+        reference,
+        last_event,
+        l0,
+        l1,
+        ta,
+        tb,
+        thresholds.0,
+        thresholds.1,
+        ctx.refractory,
+        |t, pol| {
+            let frac = if wb > wa {
+                ((t - wa) / (wb - wa)) as f32
+            } else {
+                0.0
+            };
+            let (x, y) = (ctx.rays.x[i], ctx.rays.y[i]);
+            let flow = |e: &PathEnd| e.geom.flow_at(ctx.cam, x, y, e.key, e.z, id);
+            let (fx, fy) = interpolate_flow(flow(ends.0), flow(ends.1), frac);
+            batch.push(RawEvent {
+                t,
+                pixel: i as u32,
+                p: pol,
+                id,
+                fx,
+                fy,
+            });
+        },
+    );
+}
+
+/// Object id and flow (px/s) of an event at pixel `i`, a fraction `frac` of the way from the
+/// render at `ga` (object `id_a` at the pixel centre) to the one at `gb` (object `id_b`).
+/// The id is the object's if it covers the pixel at either render (leading and trailing edges
+/// belong to the object); the flow is that surface's motion field at the pixel, interpolated
+/// between the two renders when both see it.
+fn event_truth(
+    ctx: &FireCtx,
+    i: usize,
+    ga: &FrameGeom,
+    gb: &FrameGeom,
+    id_a: u16,
+    id_b: u16,
+    frac: f32,
+) -> (u16, f32, f32) {
+    let id = match (id_a, id_b) {
+        (0, b) => b,
+        (a, 0) => a,
+        (a, b) => {
+            if frac < 0.5 {
+                a
+            } else {
+                b
+            }
+        }
+    };
+    let w = ctx.rays.width;
+    let (x, y, u, v) = (ctx.rays.x[i], ctx.rays.y[i], (i % w) as i32, (i / w) as i32);
+    let fa = ga.flow(ctx.scene, ctx.cam, x, y, u, v, id);
+    let fb = gb.flow(ctx.scene, ctx.cam, x, y, u, v, id);
+    let (fx, fy) = interpolate_flow(fa, fb, frac);
+    (id, fx, fy)
+}
+
+/// The flow (px/s) a fraction `frac` of the way from flow `fa` to `fb` (either alone when the
+/// other is missing, zero when both are).
+#[inline]
+fn interpolate_flow(fa: Option<(f64, f64)>, fb: Option<(f64, f64)>, frac: f32) -> (f32, f32) {
+    let (fx, fy) = match (fa, fb) {
+        (Some(a), Some(b)) => {
+            let f = frac as f64;
+            (a.0 + f * (b.0 - a.0), a.1 + f * (b.1 - a.1))
+        }
+        (Some(a), None) => a,
+        (None, Some(b)) => b,
+        (None, None) => (0.0, 0.0),
+    };
+    (fx as f32, fy as f32)
+}
