@@ -14,6 +14,8 @@
 //! truth. Flow oracles: FLOW=truemag (true length along the estimated direction), with
 //! DROPTAIL=x (drop the estimates more than x off instead) or DROPTAIL=-x (only those take the
 //! true length).
+//! DEBUG_FIT: per slice, how many of the object's and of the background's events lie inside the
+//! planar segmenter's previous-foreground mask (whether the mask keeps the object out of the fit).
 //! ORACLE_FIT: the plane fitted to the true background's events only (instead of leaving out
 //! the previous slice's foreground).
 //! Diagnostics that replace the final labels: ORACLE_CLUSTERS (each cluster labelled by its
@@ -408,6 +410,38 @@ fn main() -> anyhow::Result<()> {
                         planar.segment_with_previous(&s.camera, &s.events, f, rate, prev_planar.as_deref())?
                     }
                 };
+                let debug_mask = match (std::env::var("DEBUG_FIT").is_ok(), prev_planar.as_deref()) {
+                    (true, Some(pl)) if dump_k > 0 => {
+                        let ps = &slices[dump_k - 1].0;
+                        let pp = planar.params().previous;
+                        evseg_planar_segmenter::PreviousForeground::new(
+                            s.camera.width,
+                            s.camera.height,
+                            &ps.events.x,
+                            &ps.events.y,
+                            pl,
+                            &pp,
+                        )
+                    }
+                    _ => None,
+                };
+                if let Some(mask) = debug_mask {
+                    let (mut oi, mut on, mut bi, mut bn) = (0usize, 0usize, 0usize, 0usize);
+                    for i in 0..s.events.len() {
+                        let inside = mask.contains(s.events.x[i], s.events.y[i]);
+                        if truth.event_object[i] != 0 {
+                            on += 1;
+                            oi += usize::from(inside);
+                        } else {
+                            bn += 1;
+                            bi += usize::from(inside);
+                        }
+                    }
+                    eprintln!(
+                        "DEBUG slice {dump_k}: applied {} fitted {} object in mask {oi}/{on} bg in mask {bi}/{bn}",
+                        r.previous_applied, r.fitted_events
+                    );
+                }
                 let m = bg.merge(&SliceInput {
                     camera: &s.camera,
                     events: &s.events,
