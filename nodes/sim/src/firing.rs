@@ -137,31 +137,22 @@ pub(crate) fn fire(
     batch: &mut Vec<RawEvent>,
 ) {
     let (ta, tb) = span;
-    esim::crossings(
+    crossings_to_events(
+        ctx,
         reference,
         last_event,
-        l0,
-        l1,
-        ta,
-        tb,
-        thresholds.0,
-        thresholds.1,
-        ctx.refractory,
-        |t, pol| {
+        i,
+        (l0, l1),
+        span,
+        thresholds,
+        batch,
+        |t| {
             let frac = if tb > ta {
                 ((t - ta) / (tb - ta)) as f32
             } else {
                 0.0
             };
-            let (id, fx, fy) = event_truth(ctx, i, geoms.0, geoms.1, ids.0, ids.1, frac);
-            batch.push(RawEvent {
-                t,
-                pixel: i as u32,
-                p: pol,
-                id,
-                fx,
-                fy,
-            });
+            event_truth(ctx, i, geoms.0, geoms.1, ids.0, ids.1, frac)
         },
     );
 }
@@ -183,19 +174,17 @@ fn fire_segment(
     thresholds: (f32, f32),
     batch: &mut Vec<RawEvent>,
 ) {
-    let (ta, tb) = span;
     let (wa, wb) = (ends.0.t, ends.1.t);
-    esim::crossings(
+    crossings_to_events(
+        ctx,
         reference,
         last_event,
-        l0,
-        l1,
-        ta,
-        tb,
-        thresholds.0,
-        thresholds.1,
-        ctx.refractory,
-        |t, pol| {
+        i,
+        (l0, l1),
+        span,
+        thresholds,
+        batch,
+        |t| {
             let frac = if wb > wa {
                 ((t - wa) / (wb - wa)) as f32
             } else {
@@ -204,6 +193,38 @@ fn fire_segment(
             let (x, y) = (ctx.rays.x[i], ctx.rays.y[i]);
             let flow = |e: &PathEnd| e.geom.flow_at(ctx.cam, x, y, e.key, e.z, id);
             let (fx, fy) = interpolate_flow(flow(ends.0), flow(ends.1), frac);
+            (id, fx, fy)
+        },
+    );
+}
+
+/// The ESIM threshold crossings of pixel `i` from log intensity `levels.0` to `levels.1` over
+/// `span` (seconds) as events in `batch`, each with the object id and flow (px/s) `truth`
+/// gives for its time.
+#[allow(clippy::too_many_arguments)]
+fn crossings_to_events(
+    ctx: &FireCtx,
+    reference: &mut f32,
+    last_event: &mut f64,
+    i: usize,
+    levels: (f32, f32),
+    span: (f64, f64),
+    thresholds: (f32, f32),
+    batch: &mut Vec<RawEvent>,
+    truth: impl Fn(f64) -> (u16, f32, f32),
+) {
+    esim::crossings(
+        reference,
+        last_event,
+        levels.0,
+        levels.1,
+        span.0,
+        span.1,
+        thresholds.0,
+        thresholds.1,
+        ctx.refractory,
+        |t, pol| {
+            let (id, fx, fy) = truth(t);
             batch.push(RawEvent {
                 t,
                 pixel: i as u32,
