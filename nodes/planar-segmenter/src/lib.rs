@@ -68,12 +68,17 @@ pub struct PlanarParams {
     pub cell_px: u16,
     /// Standard deviation of the Gaussian smoothing, pixels (not given in the paper). It
     /// removes per-event flow noise but spreads an object's residual past its edges and dilutes
-    /// small objects, so it must stay well below the smallest object's size. Default 12 (was
-    /// 5): `evseg bench` (evseg-bench-v1, with `density_cell_px` 48), IoU mask % for 5 / 8 / 12 /
-    /// 16 / 24 px: 36.91 / 38.01 / 38.93 / 39.57 / 40.89, but the scene with the smallest
-    /// objects (enter-leave, about 60 px wide) gives 41.86 / - / 42.72 / - / 42.08: it peaks
-    /// near 12, and larger values would trade small objects for the large ones of the other
-    /// scenes.
+    /// small objects, so it must stay well below the smallest object's size. Default 16 (was
+    /// 12, before that 5). At 7e3a71c (previous-foreground feedback, direction-sd test in the
+    /// flow node) `evseg bench` (evseg-bench-v2) IoU mask % at 12 / 16: 62.25 / 66.25, per-object
+    /// 59.87 / 64.60, 12.9 / 10.8 deg; nine of the twelve sequences gained (low-contrast 32.4 /
+    /// 37.0 -> 49.3 / 55.3), one-object 201, fast-rotation 203 and enter-leave 204 (the
+    /// smallest objects, about 60 px wide) lost 1-4 points. Unseen seeds (`method_on_sim`, 2 s,
+    /// six object presets, mean IoU): seed 11 0.749 -> 0.766 (all six gained), seed 12 0.751 ->
+    /// 0.712 (low-contrast flipped, 0.70 -> 0.46; the other five within +-0.06). The bench's
+    /// single-seed v1 had said 64.32 -> 63.56 % at f1cfeab. Earlier (evseg-bench-v1, with
+    /// `density_cell_px` 48, no feedback), IoU mask % for 5 / 8 / 12 / 16 / 24 px: 36.91 /
+    /// 38.01 / 38.93 / 39.57 / 40.89, enter-leave 41.86 / - / 42.72 / - / 42.08.
     pub sigma_px: f64,
     /// Smallest distance between the 2-means centres, normalized units/s, for a foreground to
     /// exist (default 0.02: about 10 px/s at f = 500 px, below the per-event accuracy of
@@ -124,7 +129,7 @@ impl Default for PlanarParams {
             derotate: true,
             fit: FitParams::default(),
             cell_px: 4,
-            sigma_px: 12.0,
+            sigma_px: 16.0,
             min_center_gap: 0.02,
             two_means_iter: 100,
             classify_invalid: true,

@@ -233,7 +233,7 @@ fn the_previous_foreground_is_left_out_of_the_plain_fit() {
     assert!(second.previous_applied);
     let clean = model_error(&second.residuals.model);
     assert!(clean < 1e-5, "model error {clean} (f32 flow), pulled {pulled}");
-    // Every object event is foreground; the smoothing (sigma 12 px) spreads a little past it.
+    // Every object event is foreground; the smoothing (sigma_px) spreads a little past it.
     let mut spread = 0;
     for (i, &o) in truth.iter().enumerate() {
         let background = second.residuals.background[i];
