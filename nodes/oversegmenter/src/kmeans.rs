@@ -145,6 +145,123 @@ fn update_centers<const D: usize>(pts: &[[f64; D]], assign: &[u32], centers: &mu
     empty
 }
 
+/// Relative margin on Hamerly's bounds in [`lloyd`]: they are sums of rounded distances, off by
+/// about 1e-15 relative per iteration; a point is skipped only when its bound holds by more.
+const BOUND_MARGIN: f64 = 1e-9;
+
+/// Nearest centre, its distance and the distance to the second nearest (Euclidean; the first
+/// of equally near centres wins, as in [`nearest`]).
+fn nearest_two<const D: usize>(p: &[f64; D], centers: &[[f64; D]]) -> (usize, f64, f64) {
+    let (mut best, mut d1, mut d2) = (0, f64::INFINITY, f64::INFINITY);
+    for (j, c) in centers.iter().enumerate() {
+        let d = dist2(p, c);
+        if d < d1 {
+            d2 = d1;
+            (best, d1) = (j, d);
+        } else if d < d2 {
+            d2 = d;
+        }
+    }
+    (best, d1.sqrt(), d2.sqrt())
+}
+
+/// Lloyd's iterations on `sample` from `centers` (updated in place), at most `max_iter`;
+/// returns the iterations run and whether the last changed no assignment. Hamerly's bounds
+/// (2010) skip the distance computations that cannot change a point's assignment: an upper
+/// bound on the distance to its centre and a lower bound on the distance to any other, moved by
+/// how far the centres moved. The assignments, and so the centres, are those of plain Lloyd
+/// (test `hamerly_bounds_reproduce_plain_lloyd`).
+fn lloyd<const D: usize>(sample: &[[f64; D]], centers: &mut [[f64; D]], max_iter: usize) -> (usize, bool) {
+    let n = sample.len();
+    let mut assign = vec![u32::MAX; n];
+    let mut upper = vec![f64::INFINITY; n];
+    let mut lower = vec![0.0; n];
+    let mut moved = vec![0.0; centers.len()];
+    let mut half_gap = vec![0.0; centers.len()];
+    let (mut iterations, mut converged) = (0, false);
+    while iterations < max_iter {
+        iterations += 1;
+        // Half the distance from each centre to its nearest other centre.
+        for (j, c) in centers.iter().enumerate() {
+            let mut m = f64::INFINITY;
+            for (i, o) in centers.iter().enumerate() {
+                if i != j {
+                    m = m.min(dist2(c, o));
+                }
+            }
+            half_gap[j] = 0.5 * m.sqrt();
+        }
+        let mut changed = false;
+        for (i, p) in sample.iter().enumerate() {
+            if assign[i] != u32::MAX {
+                // Strictly inside the bound (with a margin far above the bounds' rounding), the
+                // assigned centre is strictly the nearest: plain Lloyd would keep it too.
+                let a = assign[i] as usize;
+                let bound = half_gap[a].max(lower[i]) * (1.0 - BOUND_MARGIN);
+                if upper[i] < bound {
+                    continue;
+                }
+                upper[i] = dist2(p, &centers[a]).sqrt();
+                if upper[i] < bound {
+                    continue;
+                }
+            }
+            let (j, d1, d2) = nearest_two(p, centers);
+            if assign[i] != j as u32 {
+                assign[i] = j as u32;
+                changed = true;
+            }
+            (upper[i], lower[i]) = (d1, d2);
+        }
+        let before = centers.to_vec();
+        let empty = update_centers(sample, &assign, centers);
+        if !empty.is_empty() {
+            // An empty cluster restarts at the sample point farthest from its centre (that point
+            // is then taken out of consideration for the next empty cluster); the distances are
+            // the exact ones of this iteration's assignment, to the centres it was made with.
+            let mut dist: Vec<f64> = sample
+                .iter()
+                .zip(&assign)
+                .map(|(p, &a)| dist2(p, &before[a as usize]))
+                .collect();
+            for j in &empty {
+                let far = dist
+                    .iter()
+                    .enumerate()
+                    .fold((0, -1.0), |b, (i, &d)| if d > b.1 { (i, d) } else { b });
+                if far.1 <= 0.0 {
+                    break;
+                }
+                centers[*j] = sample[far.0];
+                dist[far.0] = 0.0;
+                changed = true;
+            }
+        }
+        if !changed {
+            converged = true;
+            break;
+        }
+        // Move the bounds by how far the centres moved.
+        for (m, (c, b)) in moved.iter_mut().zip(centers.iter().zip(&before)) {
+            *m = dist2(c, b).sqrt();
+        }
+        let (mut first, mut second, mut argmax) = (0.0f64, 0.0f64, usize::MAX);
+        for (j, &m) in moved.iter().enumerate() {
+            if m > first {
+                (second, first, argmax) = (first, m, j);
+            } else if m > second {
+                second = m;
+            }
+        }
+        for i in 0..n {
+            let a = assign[i] as usize;
+            upper[i] += moved[a];
+            lower[i] -= if a == argmax { second } else { first };
+        }
+    }
+    (iterations, converged)
+}
+
 /// Clusters `points` into at most `params.k` groups. Points must be finite. An empty input gives
 /// no centres and no assignment; `k = 0` is treated as 1.
 pub fn kmeans<const D: usize>(points: &[[f64; D]], params: &KMeansParams) -> KMeans<D> {
@@ -162,40 +279,7 @@ pub fn kmeans<const D: usize>(points: &[[f64; D]], params: &KMeansParams) -> KMe
     let k = params.k.clamp(1, sample.len());
     let mut centers = seed_centers(&sample, k, &mut rng);
 
-    let mut assign = vec![u32::MAX; sample.len()];
-    let mut dist = vec![0.0; sample.len()];
-    let (mut iterations, mut converged) = (0, false);
-    while iterations < params.max_iter {
-        iterations += 1;
-        let mut changed = false;
-        for ((p, a), d) in sample.iter().zip(assign.iter_mut()).zip(dist.iter_mut()) {
-            let (j, dj) = nearest(p, &centers);
-            if *a != j as u32 {
-                *a = j as u32;
-                changed = true;
-            }
-            *d = dj;
-        }
-        let empty = update_centers(&sample, &assign, &mut centers);
-        // An empty cluster restarts at the sample point farthest from its centre (that point is
-        // then taken out of consideration for the next empty cluster).
-        for j in &empty {
-            let far = dist
-                .iter()
-                .enumerate()
-                .fold((0, -1.0), |b, (i, &d)| if d > b.1 { (i, d) } else { b });
-            if far.1 <= 0.0 {
-                break;
-            }
-            centers[*j] = sample[far.0];
-            dist[far.0] = 0.0;
-            changed = true;
-        }
-        if !changed {
-            converged = true;
-            break;
-        }
-    }
+    let (iterations, converged) = lloyd(&sample, &mut centers, params.max_iter);
 
     let assignment: Vec<u32> = points.iter().map(|p| nearest(p, &centers).0 as u32).collect();
     update_centers(points, &assignment, &mut centers);
@@ -210,6 +294,87 @@ pub fn kmeans<const D: usize>(points: &[[f64; D]], params: &KMeansParams) -> KMe
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Plain Lloyd, as written before Hamerly's bounds: the reference [`lloyd`] must reproduce.
+    fn lloyd_reference<const D: usize>(
+        sample: &[[f64; D]],
+        centers: &mut [[f64; D]],
+        max_iter: usize,
+    ) -> (usize, bool) {
+        let params = KMeansParams {
+            max_iter,
+            ..Default::default()
+        };
+        let mut assign = vec![u32::MAX; sample.len()];
+        let mut dist = vec![0.0; sample.len()];
+        let (mut iterations, mut converged) = (0, false);
+        while iterations < params.max_iter {
+            iterations += 1;
+            let mut changed = false;
+            for ((p, a), d) in sample.iter().zip(assign.iter_mut()).zip(dist.iter_mut()) {
+                let (j, dj) = nearest(p, centers);
+                if *a != j as u32 {
+                    *a = j as u32;
+                    changed = true;
+                }
+                *d = dj;
+            }
+            let empty = update_centers(sample, &assign, centers);
+            // An empty cluster restarts at the sample point farthest from its centre (that point is
+            // then taken out of consideration for the next empty cluster).
+            for j in &empty {
+                let far = dist
+                    .iter()
+                    .enumerate()
+                    .fold((0, -1.0), |b, (i, &d)| if d > b.1 { (i, d) } else { b });
+                if far.1 <= 0.0 {
+                    break;
+                }
+                centers[*j] = sample[far.0];
+                dist[far.0] = 0.0;
+                changed = true;
+            }
+            if !changed {
+                converged = true;
+                break;
+            }
+        }
+
+        (iterations, converged)
+    }
+
+    #[test]
+    fn hamerly_bounds_reproduce_plain_lloyd() {
+        for seed in 0..40u64 {
+            let mut rng = SplitMix64::new(1000 + seed);
+            // Overlapping blobs in 4-D (as the over-segmentation's [x, y, lambda n]), some
+            // duplicate points, k from 2 to 40.
+            let n = 200 + (seed as usize * 37) % 900;
+            let pts: Vec<[f64; 4]> = (0..n)
+                .map(|i| {
+                    let b = (i * 13 + seed as usize) % 7;
+                    let c = b as f64 * 0.8;
+                    if i % 50 == 0 {
+                        [c, c, 0.0, 0.0]
+                    } else {
+                        [
+                            c + rng.next_f64(),
+                            c * 0.5 + rng.next_f64(),
+                            rng.next_f64() - 0.5,
+                            rng.next_f64(),
+                        ]
+                    }
+                })
+                .collect();
+            let k = 2 + (seed as usize * 7) % 39;
+            let start = seed_centers(&pts, k, &mut rng);
+            let (mut fast, mut slow) = (start.clone(), start);
+            let a = lloyd(&pts, &mut fast, 50);
+            let b = lloyd_reference(&pts, &mut slow, 50);
+            assert_eq!(a, b, "seed {seed}: iterations / converged");
+            assert_eq!(fast, slow, "seed {seed}: centres");
+        }
+    }
 
     /// Four tight blobs far apart, 250 points each, in shuffled order.
     fn blobs() -> (Vec<[f64; 2]>, Vec<usize>) {
