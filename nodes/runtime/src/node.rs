@@ -434,7 +434,11 @@ impl Outputs {
     }
 
     /// Waits until every consumer reports it has finished (so nothing sent is lost on exit).
-    fn wait_consumers_done(&self) -> Result<(), RuntimeError> {
+    /// `repeat_own_done` runs with each resend: the node's own final progress, repeated, since
+    /// two nodes of a feedback loop each wait here for the other's, and one lost progress
+    /// message (Zenoh drops under congestion) otherwise held both for [`DRAIN_TIMEOUT`] (seen
+    /// once in `evseg bench`: planar and background merger, 600 s).
+    fn wait_consumers_done(&self, repeat_own_done: impl Fn()) -> Result<(), RuntimeError> {
         let list: Vec<(String, String)> = self
             .ports
             .iter()
@@ -452,6 +456,7 @@ impl Outputs {
             if ok {
                 break;
             }
+            repeat_own_done();
             self.publish_unfinished_again()?;
         }
         if !ok {
@@ -641,7 +646,9 @@ impl Running {
         let done: Vec<(String, u64)> = self.cfg.inputs.iter().map(|i| (i.port.clone(), DONE)).collect();
         self.publish_progress(done.clone())?;
         self.publish_stats(true);
-        self.outputs.wait_consumers_done()?;
+        self.outputs.wait_consumers_done(|| {
+            let _ = self.publish_progress(done.clone());
+        })?;
         self.publish_final_stats();
         self.linger_until_producers_left(done);
         let _ = self.session.close().wait();
