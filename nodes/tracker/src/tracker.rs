@@ -319,13 +319,7 @@ impl Tracker {
         }
         // A track's box is that of all its pieces in this slice, so that the pieces fall inside
         // its predicted box next time (and are absorbed there).
-        let mut union: Vec<Option<[f64; 4]>> = vec![None; self.tracks.len()];
-        for (k, m) in track_of_segment.iter().enumerate() {
-            if let Some(ti) = *m {
-                let b = bbox_f64(segments[k].bbox);
-                union[ti] = Some(union[ti].map_or(b, |u| box_union(u, b)));
-            }
-        }
+        let union = union_boxes(segments, &track_of_segment, self.tracks.len());
         for (tr, u) in self.tracks.iter_mut().zip(&union) {
             if let Some(u) = u {
                 let [cx, cy] = tr.kf.position();
@@ -399,9 +393,9 @@ impl Tracker {
     /// Merges tracks that are pieces of one object (see `TrackerParams::merge_velocity_px_s`
     /// and `TrackerParams::merge_inside`): repeatedly takes the pair of tracks matched in this
     /// slice whose segments' boxes lie one inside the other (a young piece), else the
-    /// closest-moving pair whose boxes touch; the younger one's segments become fragments of the older one
-    /// (`absorbed`) and the younger one is marked `ended` (the caller grows the older one's box
-    /// over all its pieces).
+    /// closest-moving pair whose boxes touch; the younger one's segments become fragments of
+    /// the older one (`absorbed`) and the younger one is marked `ended` (the caller grows the
+    /// older one's box over all its pieces).
     fn merge_pieces(
         &mut self,
         segments: &[Segment],
@@ -409,20 +403,9 @@ impl Tracker {
         absorbed: &mut [bool],
         ended: &mut [bool],
     ) {
-        let union_boxes = |track_of_segment: &[Option<usize>], tracks: usize| {
-            let mut boxes: Vec<Option<[f64; 4]>> = vec![None; tracks];
-            for (k, m) in track_of_segment.iter().enumerate() {
-                if let Some(ti) = *m {
-                    let b = bbox_f64(segments[k].bbox);
-                    boxes[ti] = Some(boxes[ti].map_or(b, |u| box_union(u, b)));
-                }
-            }
-            boxes
-        };
         let p = &self.params;
         loop {
-            // Union box of each track's segments in this slice.
-            let boxes = union_boxes(track_of_segment, self.tracks.len());
+            let boxes = union_boxes(segments, track_of_segment, self.tracks.len());
             let mut best: Option<(usize, usize, f64)> = None;
             for a in 0..self.tracks.len() {
                 for b in a + 1..self.tracks.len() {
@@ -473,6 +456,24 @@ impl Tracker {
             ended[end] = true;
         }
     }
+}
+
+/// Per track (index below `tracks`), the smallest box holding the boxes of its segments in this
+/// slice (`track_of_segment[k]`: the track of `segments[k]`), pixels; `None` for a track without
+/// a segment.
+fn union_boxes(
+    segments: &[Segment],
+    track_of_segment: &[Option<usize>],
+    tracks: usize,
+) -> Vec<Option<[f64; 4]>> {
+    let mut boxes: Vec<Option<[f64; 4]>> = vec![None; tracks];
+    for (s, m) in segments.iter().zip(track_of_segment) {
+        if let Some(ti) = *m {
+            let b = bbox_f64(s.bbox);
+            boxes[ti] = Some(boxes[ti].map_or(b, |u| box_union(u, b)));
+        }
+    }
+    boxes
 }
 
 /// The smallest box holding boxes `a` and `b`.
