@@ -227,37 +227,60 @@ mod tests {
     use super::*;
     use crate::motion::translational_flow;
 
+    /// Samples of the translational flow of `t_true` in regions at `(cx, cy, inv_z)` (normalized
+    /// image units, 1 / m), at the offsets `points` around each centre, with normal directions
+    /// turning by the golden angle from sample to sample; the normal flow of the samples for
+    /// which `wrong(k)` holds (k counts from 1 over all regions) is flipped and doubled.
+    fn region_samples(
+        t_true: [f64; 3],
+        regions: impl Iterator<Item = (f64, f64, f64)>,
+        points: &[(f64, f64)],
+        wrong: impl Fn(usize) -> bool,
+    ) -> Vec<Vec<FlowSample>> {
+        let mut k = 0usize;
+        regions
+            .map(|(cx, cy, inv_z)| {
+                points
+                    .iter()
+                    .map(|&(dx, dy)| {
+                        k += 1;
+                        let (x, y) = (cx + dx, cy + dy);
+                        let u = translational_flow(x, y, t_true, inv_z);
+                        let ang = k as f64 * 2.399963;
+                        let n0 = [ang.cos(), ang.sin()];
+                        let mut n = u[0] * n0[0] + u[1] * n0[1];
+                        if wrong(k) {
+                            n *= -2.0;
+                        }
+                        FlowSample {
+                            index: k,
+                            x,
+                            y,
+                            n0,
+                            n,
+                            n_derot: n,
+                            confidence: 1.0,
+                        }
+                    })
+                    .collect()
+            })
+            .collect()
+    }
+
     #[test]
     fn regions_at_different_depths_give_the_direction_from_a_poor_start() {
         let t_true = [0.3, -0.2, 0.9];
-        let mut samples = Vec::new();
-        let mut k = 0usize;
-        for region in 0..12 {
-            let inv_z = 0.2 + 0.15 * f64::from(region);
-            let (cx, cy) = (
-                f64::from(region % 4) * 0.3 - 0.45,
-                f64::from(region / 4) * 0.3 - 0.3,
-            );
-            let mut members = Vec::new();
-            for j in 0..60 {
-                k += 1;
-                let (x, y) = (cx + f64::from(j % 8) * 0.01, cy + f64::from(j / 8) * 0.01);
-                let u = translational_flow(x, y, t_true, inv_z);
-                let ang = k as f64 * 2.399963;
-                let n0 = [ang.cos(), ang.sin()];
-                let n = u[0] * n0[0] + u[1] * n0[1];
-                members.push(FlowSample {
-                    index: k,
-                    x,
-                    y,
-                    n0,
-                    n,
-                    n_derot: n,
-                    confidence: 1.0,
-                });
-            }
-            samples.push(members);
-        }
+        let centres = (0..12u32).map(|r| {
+            (
+                f64::from(r % 4) * 0.3 - 0.45,
+                f64::from(r / 4) * 0.3 - 0.3,
+                0.2 + 0.15 * f64::from(r),
+            )
+        });
+        let points: Vec<(f64, f64)> = (0..60u32)
+            .map(|j| (f64::from(j % 8) * 0.01, f64::from(j / 8) * 0.01))
+            .collect();
+        let samples = region_samples(t_true, centres, &points, |_| false);
         let regions: Vec<Vec<(&FlowSample, f64)>> = samples
             .iter()
             .map(|m| m.iter().map(|s| (s, 1.0)).collect())
@@ -322,38 +345,18 @@ mod tests {
     #[test]
     fn the_huber_refinement_on_moments_matches_the_per_sample_form() {
         let t_true = [-0.4, 0.1, 0.8];
-        let mut samples = Vec::new();
-        let mut k = 0usize;
-        for region in 0..9 {
-            let inv_z = 0.3 + 0.1 * f64::from(region);
-            let (cx, cy) = (
-                f64::from(region % 3) * 0.3 - 0.3,
-                f64::from(region / 3) * 0.3 - 0.3,
-            );
-            let mut members = Vec::new();
-            for j in 0..40 {
-                k += 1;
-                let (x, y) = (cx + f64::from(j % 7) * 0.013, cy + f64::from(j / 7) * 0.011);
-                let u = translational_flow(x, y, t_true, inv_z);
-                let ang = k as f64 * 2.399963;
-                let n0 = [ang.cos(), ang.sin()];
-                // Every seventh estimate is wrong (sign flipped and doubled), so Huber bites.
-                let mut n = u[0] * n0[0] + u[1] * n0[1];
-                if k.is_multiple_of(7) {
-                    n *= -2.0;
-                }
-                members.push(FlowSample {
-                    index: k,
-                    x,
-                    y,
-                    n0,
-                    n,
-                    n_derot: n,
-                    confidence: 1.0,
-                });
-            }
-            samples.push(members);
-        }
+        let centres = (0..9u32).map(|r| {
+            (
+                f64::from(r % 3) * 0.3 - 0.3,
+                f64::from(r / 3) * 0.3 - 0.3,
+                0.3 + 0.1 * f64::from(r),
+            )
+        });
+        let points: Vec<(f64, f64)> = (0..40u32)
+            .map(|j| (f64::from(j % 7) * 0.013, f64::from(j / 7) * 0.011))
+            .collect();
+        // Every seventh estimate is wrong (sign flipped and doubled), so Huber bites.
+        let samples = region_samples(t_true, centres, &points, |k| k.is_multiple_of(7));
         let regions: Vec<Vec<(&FlowSample, f64)>> = samples
             .iter()
             .enumerate()
