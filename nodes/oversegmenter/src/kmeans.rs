@@ -104,11 +104,7 @@ fn seed_centers<const D: usize>(pts: &[[f64; D]], k: usize, rng: &mut SplitMix64
         }
         if d2[pick] <= 0.0 {
             // Rounding landed on a point already a centre; take the farthest point instead.
-            pick = d2
-                .iter()
-                .enumerate()
-                .fold((0, -1.0), |b, (i, &d)| if d > b.1 { (i, d) } else { b })
-                .0;
+            pick = farthest(&d2).0;
         }
         let c = pts[pick];
         centers.push(c);
@@ -143,6 +139,36 @@ fn update_centers<const D: usize>(pts: &[[f64; D]], assign: &[u32], centers: &mu
         }
     }
     empty
+}
+
+/// Index and value of the largest of `d` (the first of equal ones; `(0, -1)` when empty).
+fn farthest(d: &[f64]) -> (usize, f64) {
+    d.iter()
+        .enumerate()
+        .fold((0, -1.0), |b, (i, &v)| if v > b.1 { (i, v) } else { b })
+}
+
+/// Restarts each cluster of `empty` at the sample point farthest from its centre (`dist`:
+/// squared distances of `sample` to their centres); a point taken is then left out of
+/// consideration for the next empty cluster. Stops when no point lies off its centre. Returns
+/// whether any centre moved.
+fn restart_empty<const D: usize>(
+    empty: &[usize],
+    dist: &mut [f64],
+    sample: &[[f64; D]],
+    centers: &mut [[f64; D]],
+) -> bool {
+    let mut moved = false;
+    for &j in empty {
+        let (far, d) = farthest(dist);
+        if d <= 0.0 {
+            break;
+        }
+        centers[j] = sample[far];
+        dist[far] = 0.0;
+        moved = true;
+    }
+    moved
 }
 
 /// Relative margin on Hamerly's bounds in [`lloyd`]: they are sums of rounded distances, off by
@@ -224,18 +250,7 @@ fn lloyd<const D: usize>(sample: &[[f64; D]], centers: &mut [[f64; D]], max_iter
                 .zip(&assign)
                 .map(|(p, &a)| dist2(p, &before[a as usize]))
                 .collect();
-            for j in &empty {
-                let far = dist
-                    .iter()
-                    .enumerate()
-                    .fold((0, -1.0), |b, (i, &d)| if d > b.1 { (i, d) } else { b });
-                if far.1 <= 0.0 {
-                    break;
-                }
-                centers[*j] = sample[far.0];
-                dist[far.0] = 0.0;
-                changed = true;
-            }
+            changed |= restart_empty(&empty, &mut dist, sample, centers);
         }
         if !changed {
             converged = true;
@@ -301,14 +316,10 @@ mod tests {
         centers: &mut [[f64; D]],
         max_iter: usize,
     ) -> (usize, bool) {
-        let params = KMeansParams {
-            max_iter,
-            ..Default::default()
-        };
         let mut assign = vec![u32::MAX; sample.len()];
         let mut dist = vec![0.0; sample.len()];
         let (mut iterations, mut converged) = (0, false);
-        while iterations < params.max_iter {
+        while iterations < max_iter {
             iterations += 1;
             let mut changed = false;
             for ((p, a), d) in sample.iter().zip(assign.iter_mut()).zip(dist.iter_mut()) {
@@ -320,20 +331,7 @@ mod tests {
                 *d = dj;
             }
             let empty = update_centers(sample, &assign, centers);
-            // An empty cluster restarts at the sample point farthest from its centre (that point is
-            // then taken out of consideration for the next empty cluster).
-            for j in &empty {
-                let far = dist
-                    .iter()
-                    .enumerate()
-                    .fold((0, -1.0), |b, (i, &d)| if d > b.1 { (i, d) } else { b });
-                if far.1 <= 0.0 {
-                    break;
-                }
-                centers[*j] = sample[far.0];
-                dist[far.0] = 0.0;
-                changed = true;
-            }
+            changed |= restart_empty(&empty, &mut dist, sample, centers);
             if !changed {
                 converged = true;
                 break;
