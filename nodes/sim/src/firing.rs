@@ -136,7 +136,6 @@ pub(crate) fn fire(
     thresholds: (f32, f32),
     batch: &mut Vec<RawEvent>,
 ) {
-    let (ta, tb) = span;
     crossings_to_events(
         ctx,
         reference,
@@ -146,14 +145,7 @@ pub(crate) fn fire(
         span,
         thresholds,
         batch,
-        |t| {
-            let frac = if tb > ta {
-                ((t - ta) / (tb - ta)) as f32
-            } else {
-                0.0
-            };
-            event_truth(ctx, i, geoms.0, geoms.1, ids.0, ids.1, frac)
-        },
+        |t| event_truth(ctx, i, geoms.0, geoms.1, ids.0, ids.1, fraction(t, span)),
     );
 }
 
@@ -174,7 +166,6 @@ fn fire_segment(
     thresholds: (f32, f32),
     batch: &mut Vec<RawEvent>,
 ) {
-    let (wa, wb) = (ends.0.t, ends.1.t);
     crossings_to_events(
         ctx,
         reference,
@@ -185,17 +176,19 @@ fn fire_segment(
         thresholds,
         batch,
         |t| {
-            let frac = if wb > wa {
-                ((t - wa) / (wb - wa)) as f32
-            } else {
-                0.0
-            };
             let (x, y) = (ctx.rays.x[i], ctx.rays.y[i]);
             let flow = |e: &PathEnd| e.geom.flow_at(ctx.cam, x, y, e.key, e.z, id);
+            let frac = fraction(t, (ends.0.t, ends.1.t));
             let (fx, fy) = interpolate_flow(flow(ends.0), flow(ends.1), frac);
             (id, fx, fy)
         },
     );
+}
+
+/// How far time `t` lies from `span.0` towards `span.1` (0 for an empty span).
+fn fraction(t: f64, span: (f64, f64)) -> f32 {
+    let (a, b) = span;
+    if b > a { ((t - a) / (b - a)) as f32 } else { 0.0 }
 }
 
 /// The ESIM threshold crossings of pixel `i` from log intensity `levels.0` to `levels.1` over
