@@ -92,6 +92,7 @@ fn apply(
             "min_segment_fraction" => hier.min_segment_fraction = f,
             "touch_px" => hier.touch_px = f as f32,
             "sigma_px" => planar.sigma_px = f,
+            "split_power" => planar.split_power = f,
             "min_center_gap" => planar.min_center_gap = f,
             "density_cell_px" => planar.density_cell_px = f as u16,
             "previous_weight" => planar.previous.weight = f,

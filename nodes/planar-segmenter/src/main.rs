@@ -123,6 +123,11 @@ fn main() -> ExitCode {
         d.min_center_gap,
         "2-means centres closer than this (normalized units/s) = no foreground",
     )
+    .param(
+        "split_power",
+        d.split_power,
+        "the 2-means split runs on smoothed residuals to this power (1 = linear, the paper; 0 = logarithms)",
+    )
     .param("two_means_iter", d.two_means_iter, "most 2-means iterations")
     .param(
         "classify_invalid",
@@ -174,6 +179,7 @@ fn main() -> ExitCode {
             sigma_px: cfg.param("sigma_px")?,
             residual_length_k: cfg.param("residual_length_k")?,
             min_center_gap: cfg.param("min_center_gap")?,
+            split_power: cfg.param("split_power")?,
             two_means_iter: cfg.param("two_means_iter")?,
             classify_invalid: cfg.param("classify_invalid")?,
             min_support: cfg.param("min_support")?,

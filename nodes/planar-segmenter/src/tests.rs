@@ -218,7 +218,14 @@ fn model_error(a: &[f64]) -> f64 {
 fn the_previous_foreground_is_left_out_of_the_plain_fit() {
     let (ev, fl, truth) = scene(6000, true, 0.0, flow_with_object);
     let labels: Vec<u32> = truth.iter().map(|&o| u32::from(o)).collect();
-    let mut seg = PlanarSegmenter::new(ls()).unwrap();
+    // The paper's linear split, whose midpoint bounds how far the smoothing's ramp past the
+    // object counts as foreground (a compressed split_power lowers the threshold, see
+    // `a_compressed_split_spreads_further_past_a_clean_object`).
+    let mut seg = PlanarSegmenter::new(PlanarParams {
+        split_power: 1.0,
+        ..ls()
+    })
+    .unwrap();
     // No previous slice yet: the labels cannot be placed and are not used.
     let first = seg
         .segment_with_previous(&camera(), &ev, &fl, Some(W.into()), Some(&labels))
@@ -432,4 +439,36 @@ fn long_flows_residuals_are_discounted_relative_to_the_median_length() {
     assert!((0..5).all(|i| off(i) == 1.0));
     let none = length_discount(&[], 6.0);
     assert_eq!(none(0), 1.0);
+}
+
+/// With an exact background model the only foreground past the object is the smoothing's ramp;
+/// the default compressed split takes more of it than the linear one, but stays bounded.
+#[test]
+fn a_compressed_split_spreads_further_past_a_clean_object() {
+    let (ev, fl, truth) = scene(6000, true, 0.0, flow_with_object);
+    let labels: Vec<u32> = truth.iter().map(|&o| u32::from(o)).collect();
+    let spread = |split_power: f64| {
+        let mut seg = PlanarSegmenter::new(PlanarParams { split_power, ..ls() }).unwrap();
+        seg.segment_with_previous(&camera(), &ev, &fl, Some(W.into()), Some(&labels))
+            .unwrap();
+        let r = seg
+            .segment_with_previous(&camera(), &ev, &fl, Some(W.into()), Some(&labels))
+            .unwrap();
+        assert!(r.previous_applied);
+        let mut spread = 0;
+        for (i, &o) in truth.iter().enumerate() {
+            assert!(
+                !(o && r.residuals.background[i]),
+                "object event {i} at {split_power}"
+            );
+            spread += usize::from(!o && !r.residuals.background[i]);
+        }
+        spread
+    };
+    let (linear, default) = (spread(1.0), spread(PlanarParams::default().split_power));
+    assert!(linear < default, "{linear} {default}");
+    assert!(
+        default * 10 < truth.len(),
+        "{default} background events called foreground"
+    );
 }

@@ -41,9 +41,62 @@ pub fn two_means(values: &[f64], max_iter: usize) -> Option<TwoMeans> {
     })
 }
 
+/// Smallest value [`two_means_on_power`] distinguishes (keeps the logarithm finite; far below
+/// any residual the planar segmenter can measure, normalized units/s).
+pub const POWER_FLOOR: f64 = 1e-6;
+
+/// [`two_means`] of `values^power` (non-negative values, e.g. residual magnitudes; `power` in
+/// [0, 1], 0 = the logarithm), with the centres and the threshold mapped back to the values'
+/// scale. Power 1 is [`two_means`]; a smaller power lowers the threshold towards the lower
+/// centre (two tight groups at `a < b`: threshold `((a^p + b^p) / 2)^(1/p)`, the geometric
+/// mean at 0). Values below [`POWER_FLOOR`] count as it.
+pub fn two_means_on_power(values: &[f64], power: f64, max_iter: usize) -> Option<TwoMeans> {
+    if power == 1.0 {
+        return two_means(values, max_iter);
+    }
+    let to = |v: f64| {
+        let v = v.max(POWER_FLOOR);
+        if power == 0.0 { v.ln() } else { v.powf(power) }
+    };
+    let back = |u: f64| {
+        if power == 0.0 {
+            u.exp()
+        } else {
+            u.max(0.0).powf(1.0 / power)
+        }
+    };
+    let scaled: Vec<f64> = values.iter().map(|&v| to(v)).collect();
+    two_means(&scaled, max_iter).map(|s| TwoMeans {
+        centers: [back(s.centers[0]), back(s.centers[1])],
+        threshold: back(s.threshold),
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_smaller_power_moves_the_threshold_towards_the_lower_group() {
+        let mut v = vec![0.01; 90];
+        v.extend([0.09; 10]);
+        let close = |a: f64, b: f64| (a - b).abs() < 1e-12;
+        for (power, threshold) in [(1.0, 0.05), (0.5, 0.04), (0.0, 0.03)] {
+            let t = two_means_on_power(&v, power, 100).unwrap();
+            assert!(
+                close(t.centers[0], 0.01) && close(t.centers[1], 0.09),
+                "{power}: {t:?}"
+            );
+            assert!(close(t.threshold, threshold), "{power}: {t:?}");
+        }
+        // Zeros are clamped to the floor, not a NaN from the logarithm.
+        let t = two_means_on_power(&[0.0, 0.0, 1.0], 0.0, 100).unwrap();
+        assert!(
+            close(t.centers[0], POWER_FLOOR) && close(t.centers[1], 1.0),
+            "{t:?}"
+        );
+        assert!(two_means_on_power(&[], 0.5, 10).is_none());
+    }
 
     #[test]
     fn splits_two_groups_at_the_gap() {
