@@ -131,6 +131,16 @@ fn description() -> NodeDescription {
         d.merge_inside_max_hits,
         "most matches of the younger track for the containment merge (a fresh piece, not a tracked object)",
     )
+    .param(
+        "split_gap_px",
+        d.split_gap_px,
+        "a group of a track's segments whose boxes lie more than this (pixels) from the matched segment's group opens a track of its own (0 = off)",
+    )
+    .param(
+        "split_min_events",
+        d.split_min_events,
+        "fewest events of a group split off a track",
+    )
 
     .build()
 }
@@ -154,6 +164,8 @@ fn main() -> ExitCode {
             min_hits_to_merge: cfg.param("min_hits_to_merge")?,
             merge_inside: cfg.param("merge_inside")?,
             merge_inside_max_hits: cfg.param("merge_inside_max_hits")?,
+            split_gap_px: cfg.param("split_gap_px")?,
+            split_min_events: cfg.param("split_min_events")?,
         };
         Ok(Node(Tracker::new(params)?))
     })
@@ -196,6 +208,8 @@ mod tests {
                 "min_hits_to_merge",
                 "merge_inside",
                 "merge_inside_max_hits",
+                "split_gap_px",
+                "split_min_events",
             ]
         );
         let default_of = |n: &str| d.params.iter().find(|p| p.name == n).map(|p| p.default.clone());

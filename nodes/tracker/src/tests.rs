@@ -695,3 +695,50 @@ fn two_objects_tracked_apart_stay_apart_when_one_passes_inside_the_others_box() 
     );
     Ok(())
 }
+
+#[test]
+fn objects_joined_while_overlapping_are_split_once_apart() -> Result<(), TrackerError> {
+    // A large object (40 x 40 px box) still; a second one (20 x 20) starts inside its box, so
+    // the two are one track from the first slice, then moves away at 400 px/s.
+    let run = |split_gap_px: f64| -> Result<Vec<(u32, u32)>, TrackerError> {
+        let mut tracker = Tracker::new(TrackerParams {
+            split_gap_px,
+            ..TrackerParams::default()
+        })?;
+        let mut ids = Vec::new();
+        for k in 0..15 {
+            let (n, mut seg) = frame(
+                &[
+                    Obj {
+                        label: 1,
+                        centroid: [300.0, 300.0],
+                        events: 300,
+                    },
+                    Obj {
+                        label: 2,
+                        centroid: [300.0 + 400.0 * k as f64 * DT, 300.0],
+                        events: 150,
+                    },
+                ],
+                50,
+            );
+            let b = &mut seg.segments[0].bbox;
+            *b = [b[0] - 10.0, b[1] - 10.0, b[2] + 10.0, b[3] + 10.0];
+            let out = tracker.update(span(k), n, &seg)?;
+            ids.push((id_of(&seg, &out, 1), id_of(&seg, &out, 2)));
+        }
+        Ok(ids)
+    };
+    // Off: the track's box grows over both objects and keeps absorbing the second one.
+    let off = run(0.0)?;
+    assert!(off.iter().all(|&(a, b)| a == 1 && b == 1), "{off:?}");
+    // On: one track while the boxes are within the gap, two once the second one is clear of
+    // it (its box 17 px away from slice 4 on); the first keeps its id.
+    let on = run(TrackerParams::default().split_gap_px)?;
+    assert_eq!(on[0], (1, 1), "{on:?}");
+    assert!(on.iter().all(|&(a, _)| a == 1), "{on:?}");
+    let apart = on.iter().position(|&(a, b)| a != b).unwrap_or(on.len());
+    assert!((3..=5).contains(&apart), "{on:?}");
+    assert!(on[apart..].iter().all(|&(_, b)| b == on[apart].1), "{on:?}");
+    Ok(())
+}

@@ -120,7 +120,10 @@ fn bbox_f64(b: [f32; 4]) -> [f64; 4] {
 /// 4. a tentative track (fewer than `min_hits` matches) that was not matched is dropped;
 /// 5. each unmatched segment with at least `min_events` events opens a track with a new id
 ///    (1, 2, 3, ...; ids are never reused);
-/// 6. every event of a segment takes the id of the segment's track; events of label 0 and of
+/// 6. tracks that are pieces of one object merge (`merge_inside`, `merge_velocity_px_s`), and a
+///    group of a track's segments far from the one that corrected it opens a track of its own
+///    (`split_gap_px`);
+/// 7. every event of a segment takes the id of the segment's track; events of label 0 and of
 ///    small unmatched segments (no track) are background, 0.
 ///
 /// Events of a tentative track carry its id too, since the evaluator scores per-event labels and
@@ -250,12 +253,15 @@ impl Tracker {
         // Track index per segment index, filled for matched and new tracks.
         let mut track_of_segment: Vec<Option<usize>> = vec![None; segments.len()];
         let mut matched_track = vec![false; self.tracks.len()];
+        // The segment that corrected each track's filter in this slice.
+        let mut primary: Vec<Option<usize>> = vec![None; self.tracks.len()];
         for (ti, m) in matches.iter().enumerate() {
             if let Some(ci) = *m {
                 let k = candidates[ci];
                 let s = &segments[k];
                 self.tracks[ti].take(s, t, &self.params);
                 matched_track[ti] = true;
+                primary[ti] = Some(k);
                 track_of_segment[k] = Some(ti);
             }
         }
@@ -279,6 +285,7 @@ impl Tracker {
                     if !matched_track[ti] {
                         self.tracks[ti].take(s, t, &self.params);
                         matched_track[ti] = true;
+                        primary[ti] = Some(k);
                     } else {
                         absorbed[k] = true;
                     }
@@ -294,21 +301,9 @@ impl Tracker {
             .filter(|&k| track_of_segment[k].is_none() && counts[k] >= self.params.min_events)
             .collect();
         for &k in &new_segments {
-            let s = &segments[k];
-            let id = self.next_id;
-            self.next_id += 1;
-            self.tracks.push(TrackState {
-                id,
-                kf: {
-                    let [sx, sy] = self.params.measurement_std(bbox_f64(s.bbox));
-                    CvKalman::new(s.centroid, sx.max(sy), self.params.initial_velocity_std_px_s)
-                },
-                box_offsets: box_offsets(s),
-                created_slice: self.slices,
-                hits: 1,
-                last_match_t: t,
-            });
+            self.open_track(&segments[k], t);
             matched_track.push(true);
+            primary.push(Some(k));
             track_of_segment[k] = Some(self.tracks.len() - 1);
         }
 
@@ -316,6 +311,19 @@ impl Tracker {
         let mut ended = vec![false; self.tracks.len()];
         if self.params.merge_velocity_px_s > 0.0 {
             self.merge_pieces(segments, &mut track_of_segment, &mut absorbed, &mut ended);
+        }
+        // ---- groups far from a track's matched segment: another object ----
+        if self.params.split_gap_px > 0.0 {
+            let opened = self.split_apart(
+                segments,
+                &counts,
+                &primary,
+                &mut track_of_segment,
+                &mut absorbed,
+                t,
+            );
+            matched_track.extend(std::iter::repeat_n(true, opened));
+            ended.extend(std::iter::repeat_n(false, opened));
         }
         // A track's box is that of all its pieces in this slice, so that the pieces fall inside
         // its predicted box next time (and are absorbed there).
@@ -390,6 +398,77 @@ impl Tracker {
 }
 
 impl Tracker {
+    /// Opens a track (a new id) on segment `s` of the slice centred at `t` seconds.
+    fn open_track(&mut self, s: &Segment, t: f64) {
+        let id = self.next_id;
+        self.next_id += 1;
+        let [sx, sy] = self.params.measurement_std(bbox_f64(s.bbox));
+        self.tracks.push(TrackState {
+            id,
+            kf: CvKalman::new(s.centroid, sx.max(sy), self.params.initial_velocity_std_px_s),
+            box_offsets: box_offsets(s),
+            created_slice: self.slices,
+            hits: 1,
+            last_match_t: t,
+        });
+    }
+
+    /// Splits off each track's segment groups that lie apart from its matched segment (see
+    /// `TrackerParams::split_gap_px`): a group with at least `split_min_events` events opens a
+    /// new track on its largest segment and its other segments become that track's fragments.
+    /// Returns the number of tracks opened (appended to `self.tracks`).
+    fn split_apart(
+        &mut self,
+        segments: &[Segment],
+        counts: &[u32],
+        primary: &[Option<usize>],
+        track_of_segment: &mut [Option<usize>],
+        absorbed: &mut [bool],
+        t: f64,
+    ) -> usize {
+        let p = &self.params;
+        let (gap, min_events) = (p.split_gap_px, p.split_min_events);
+        let mut opened = 0;
+        for (ti, first) in primary.iter().enumerate() {
+            let Some(first) = *first else { continue };
+            if track_of_segment[first] != Some(ti) {
+                continue; // merged into another track
+            }
+            let members: Vec<usize> = (0..segments.len())
+                .filter(|&k| track_of_segment[k] == Some(ti))
+                .collect();
+            if members.len() < 2 {
+                continue;
+            }
+            let groups = box_groups(segments, &members, gap);
+            let keep = groups[members.iter().position(|&k| k == first).unwrap_or(0)];
+            let n_groups = groups.iter().max().map_or(0, |g| g + 1);
+            for g in (0..n_groups).filter(|&g| g != keep) {
+                let group: Vec<usize> = members
+                    .iter()
+                    .zip(&groups)
+                    .filter(|&(_, &h)| h == g)
+                    .map(|(&k, _)| k)
+                    .collect();
+                let events: u32 = group.iter().map(|&k| counts[k]).sum();
+                if events < min_events {
+                    continue;
+                }
+                let Some(&main) = group.iter().max_by_key(|&&k| counts[k]) else {
+                    continue;
+                };
+                self.open_track(&segments[main], t);
+                let nt = self.tracks.len() - 1;
+                for &k in &group {
+                    track_of_segment[k] = Some(nt);
+                    absorbed[k] = k != main;
+                }
+                opened += 1;
+            }
+        }
+        opened
+    }
+
     /// Merges tracks that are pieces of one object (see `TrackerParams::merge_velocity_px_s`
     /// and `TrackerParams::merge_inside`): repeatedly takes the pair of tracks matched in this
     /// slice whose segments' boxes lie one inside the other (a young piece), else the
@@ -474,6 +553,31 @@ fn union_boxes(
         }
     }
     boxes
+}
+
+/// Groups of `members` (indices into `segments`) whose boxes lie at most `gap` pixels apart,
+/// transitively: the group number (0, 1, ...) of each member, in `members`' order.
+fn box_groups(segments: &[Segment], members: &[usize], gap: f64) -> Vec<usize> {
+    let boxes: Vec<[f64; 4]> = members.iter().map(|&k| bbox_f64(segments[k].bbox)).collect();
+    let mut group = vec![usize::MAX; members.len()];
+    let mut next = 0;
+    for start in 0..members.len() {
+        if group[start] != usize::MAX {
+            continue;
+        }
+        group[start] = next;
+        let mut stack = vec![start];
+        while let Some(a) = stack.pop() {
+            for b in 0..members.len() {
+                if group[b] == usize::MAX && box_gap(boxes[a], boxes[b]) <= gap {
+                    group[b] = next;
+                    stack.push(b);
+                }
+            }
+        }
+        next += 1;
+    }
+    group
 }
 
 /// The smallest box holding boxes `a` and `b`.
