@@ -1026,6 +1026,7 @@ fn object_speed(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::config::RenderConfig;
     use crate::presets::preset;
 
     /// Key frames of a 5 x 5 image whose texture coordinates are the affine map `(a, b, c, d)`
@@ -1037,6 +1038,161 @@ mod tests {
             kf.u[i] = j[0] * x + j[1] * y + shift.0;
             kf.v[i] = j[2] * x + j[3] * y + shift.1;
             kf.z[i] = z;
+        }
+    }
+
+    /// For every camera-frame point of `pts(t)` in the image at either end of the step
+    /// `[ta, tb]`: its largest image distance (px) from its position at `ta` over four later
+    /// instants of the step, its position at `ta` and its image displacement (px) over the
+    /// step, appended to `out`.
+    #[allow(clippy::needless_range_loop)]
+    fn excursion(
+        cam: &crate::camera::CameraConfig,
+        pts: &dyn Fn(f64) -> Vec<math::V3>,
+        ta: f64,
+        tb: f64,
+        out: &mut Vec<(f64, f64, f64, f64)>,
+    ) {
+        let (w, h) = (cam.width as f64, cam.height as f64);
+        let inside = |p: Option<(f64, f64)>| {
+            p.is_some_and(|(x, y)| x >= -0.5 && y >= -0.5 && x <= w - 0.5 && y <= h - 0.5)
+        };
+        let sub: Vec<Vec<math::V3>> = (0..=4).map(|s| pts(ta + (tb - ta) * s as f64 / 4.0)).collect();
+        for j in 0..sub[0].len() {
+            let p0 = cam.project(sub[0][j]);
+            let p1 = cam.project(sub[4][j]);
+            if !(inside(p0) || inside(p1)) {
+                continue;
+            }
+            let (Some(a), Some(b)) = (p0, p1) else { continue };
+            let mut m: f64 = 0.0;
+            for s in 1..=4 {
+                if let Some(q) = cam.project(sub[s][j]) {
+                    m = m.max((q.0 - a.0).hypot(q.1 - a.1));
+                }
+            }
+            out.push((m, a.0, a.1, (b.0 - a.0).hypot(b.1 - a.1)));
+        }
+    }
+
+    /// Measurement (ignored by default; prints, checks nothing): the largest image
+    /// displacement of any sampled scene point per render step against `max_px_per_step`
+    /// (background points from every second pixel of each interval's opening key frame, back
+    /// projected with its depths; moving boxes from a 17 x 17 grid on every face), and each
+    /// point's displacement over the step against the local speed bound (unstable pixels'
+    /// schedules) at its pixel at the step's start. `SIM_MEASURE_PRESETS` (comma separated),
+    /// `SIM_MEASURE_SECONDS`, `SIM_MEASURE_SAFETY` (`speed_safety`). Run with
+    /// `cargo test --release -p evseg-sim --lib measure_step -- --ignored --nocapture`.
+    #[test]
+    #[ignore]
+    fn measure_step_displacements() {
+        let names = std::env::var("SIM_MEASURE_PRESETS").unwrap_or("one-object".into());
+        let secs: f64 = std::env::var("SIM_MEASURE_SECONDS")
+            .ok()
+            .and_then(|s| s.parse().ok())
+            .unwrap_or(0.5);
+        let safety: f64 = std::env::var("SIM_MEASURE_SAFETY")
+            .ok()
+            .and_then(|s| s.parse().ok())
+            .unwrap_or(RenderConfig::default().speed_safety);
+        for name in names.split(',') {
+            let mut cfg = preset(name, 1).unwrap();
+            cfg.render.speed_safety = safety;
+            cfg.duration_s = cfg.duration_s.min(secs);
+            let mut e = Engine::new(&cfg);
+            let cam = cfg.camera.clone();
+            let (w, h) = (e.rays.width, e.rays.height);
+            let mut out = Vec::new();
+            let (mut worst_bg, mut worst_obj, mut worst_local) = (0.0f64, 0.0f64, 0.0f64);
+            let (mut sum_step_worst, mut n_steps, mut over) = (0.0f64, 0usize, 0usize);
+            let mut local_over = 0usize;
+            let mut steps = 0usize;
+            while e.t < cfg.duration_s - 1e-12 {
+                let last_dt = e.last_dt;
+                let (times, _) = e.plan(&cfg);
+                e.last_dt = last_dt;
+                let geoms: Vec<FrameGeom> =
+                    times.iter().map(|&t| FrameGeom::new(&e.scene, &cam, t)).collect();
+                let speeds = e.local_speeds(&cfg, &geoms);
+                // Background points of the opening key frame, in the world frame.
+                let c0 = e.scene.camera_state(times[0]);
+                let mut world = Vec::new();
+                for v in (0..h).step_by(2) {
+                    for u in (0..w).step_by(2) {
+                        let i = v * w + u;
+                        let z = e.kf0.z[i] as f64;
+                        if e.kf0.id[i] != 0 || !z.is_finite() {
+                            continue;
+                        }
+                        let p = [e.rays.x[i] as f64 * z, e.rays.y[i] as f64 * z, z];
+                        world.push(math::add(math::mul_mv(&c0.rotation, p), c0.position));
+                    }
+                }
+                let scene = &e.scene;
+                let bg = |t: f64| -> Vec<math::V3> {
+                    let c = scene.camera_state(t);
+                    let r = math::transpose(&c.rotation);
+                    world
+                        .iter()
+                        .map(|x| math::mul_mv(&r, math::sub(*x, c.position)))
+                        .collect()
+                };
+                let obj = |t: f64| -> Vec<math::V3> {
+                    let c = scene.camera_state(t);
+                    let mut pts = Vec::new();
+                    for b in scene.boxes.iter().filter(|b| b.id != 0) {
+                        let pose = scene::BoxPose::new(&c, &b.trajectory.state(t));
+                        for f in 0..6 {
+                            let (ax, sign) = (f / 2, if f % 2 == 0 { -1.0 } else { 1.0 });
+                            let (a1, a2) = ((ax + 1) % 3, (ax + 2) % 3);
+                            for i in 0..17 {
+                                for j in 0..17 {
+                                    let mut s = [0.0; 3];
+                                    s[ax] = sign * b.half[ax];
+                                    s[a1] = b.half[a1] * (i as f64 / 8.0 - 1.0);
+                                    s[a2] = b.half[a2] * (j as f64 / 8.0 - 1.0);
+                                    pts.push(math::add(pose.center, math::mul_mv(&pose.r_cb, s)));
+                                }
+                            }
+                        }
+                    }
+                    pts
+                };
+                for k in 0..times.len() - 1 {
+                    let (ta, tb) = (times[k], times[k + 1]);
+                    let (mut rb, mut ro) = (Vec::new(), Vec::new());
+                    excursion(&cam, &bg, ta, tb, &mut rb);
+                    excursion(&cam, &obj, ta, tb, &mut ro);
+                    let mut step_worst: f64 = 0.0;
+                    for (set, worst) in [(&rb, &mut worst_bg), (&ro, &mut worst_obj)] {
+                        for &(m, x, y, chord) in set.iter() {
+                            *worst = worst.max(m);
+                            step_worst = step_worst.max(m);
+                            over += usize::from(m > cfg.render.max_px_per_step);
+                            // Local bound at the start pixel (px/s, safety included).
+                            let (xi, yi) = (
+                                x.round().clamp(0.0, (w - 1) as f64),
+                                y.round().clamp(0.0, (h - 1) as f64),
+                            );
+                            let local = speeds.at(xi as usize, yi as usize) as f64;
+                            let r = chord / ((tb - ta) * local);
+                            worst_local = worst_local.max(r);
+                            local_over += usize::from(r > 1.0);
+                        }
+                    }
+                    sum_step_worst += step_worst;
+                    n_steps += 1;
+                }
+                steps += times.len() - 1;
+                e.advance(&cfg, &mut out);
+                out.clear();
+            }
+            println!(
+                "{name} safety {safety}: {steps} steps, events {}; largest excursion per step px: background {worst_bg:.6}, objects {worst_obj:.6}; mean of per-step largest {:.4}; points over {}: {over}; largest chord / local bound {worst_local:.6} ({local_over} over)",
+                e.stats.model_events,
+                sum_step_worst / n_steps as f64,
+                cfg.render.max_px_per_step,
+            );
         }
     }
 
