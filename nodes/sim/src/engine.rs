@@ -171,6 +171,8 @@ pub struct Engine {
     sort_scratch: Vec<RawEvent>,
     /// Quiet pixels that may cross at the closing key frame and stable pixels, in pixel order.
     work: Vec<u32>,
+    /// 1 for the pixels of `work`, per pixel (see `classify_pixels`).
+    listed: Vec<u8>,
     // Filter buffers.
     lo: Vec<f32>,
     hi: Vec<f32>,
@@ -212,6 +214,7 @@ impl Engine {
             batch: Vec::new(),
             sort_scratch: Vec::new(),
             work: Vec::new(),
+            listed: Vec::new(),
             lo: vec![0.0; n],
             hi: vec![0.0; n],
             scratch: Vec::new(),
@@ -781,50 +784,145 @@ impl Engine {
     fn classify(&mut self, cfg: &SceneConfig, radius: usize, shade_margin: f32) {
         let (w, h) = (self.rays.width, self.rays.height);
         let (kf0, kf1) = (&self.kf0, &self.kf1);
-        for i in 0..w * h {
-            self.lo[i] = fmin(kf0.l[i], kf1.l[i]);
-            self.hi[i] = fmax(kf0.l[i], kf1.l[i]);
+        // Zipped slices: no bounds checks or reloads of the vectors per pixel (vectorised).
+        let n = w * h;
+        let ends = self.lo[..n].iter_mut().zip(&mut self.hi[..n]);
+        for ((lo, hi), (&a, &b)) in ends.zip(kf0.l[..n].iter().zip(&kf1.l[..n])) {
+            *lo = fmin(a, b);
+            *hi = fmax(a, b);
         }
         filters::window_min_max_in_place(&mut self.lo, &mut self.hi, w, h, radius, &mut self.scratch);
         let margin = cfg.render.quiet_margin_log as f32;
-        let n = w * h;
         let (on, off, reference) = (
             &self.thresholds.on[..n],
             &self.thresholds.off[..n],
             &self.reference[..n],
         );
-        let (lo, hi, class) = (&self.lo[..n], &self.hi[..n], &mut self.class[..n]);
-        let (id0, id1, key0, key1) = (&kf0.id[..n], &kf1.id[..n], &kf0.key[..n], &kf1.key[..n]);
-        let (mixed0, mixed1, l1s) = (&kf0.mixed[..n], &kf1.mixed[..n], &kf1.l[..n]);
-        // Every index is written and the cursor advances only for listed pixels (no branch
-        // per pixel); non-short-circuit `&` and `|` keep the tests branch-free too.
+        let inputs = ClassInputs {
+            lo: &self.lo[..n],
+            hi: &self.hi[..n],
+            on,
+            off,
+            reference,
+            l1: &kf1.l[..n],
+            id0: &kf0.id[..n],
+            id1: &kf1.id[..n],
+            key0: &kf0.key[..n],
+            key1: &kf1.key[..n],
+            mixed0: &kf0.mixed[..n],
+            mixed1: &kf1.mixed[..n],
+        };
+        self.listed.resize(n, 0);
+        classify_pixels(
+            &inputs,
+            margin,
+            shade_margin,
+            &mut self.class[..n],
+            &mut self.listed[..n],
+        );
+        // The work list through a cursor that advances only for listed pixels (no branch per
+        // pixel).
         self.work.clear();
         self.work.resize(n, 0);
         let work = &mut self.work[..];
         let mut listed = 0usize;
-        for i in 0..n {
-            let m = margin + if (id0[i] | id1[i]) != 0 { shade_margin } else { 0.0 };
-            let r = reference[i];
-            let quiet = (hi[i] + m < r + on[i]) & (lo[i] - m > r - off[i]);
-            // The same surface at both key frames, without the other surface of a nearby edge
-            // inside the pixel: its texture coordinates move smoothly in between (edges move
-            // by under a pixel per render step and do not turn back within an interval).
-            let same = (key0[i] == key1[i]) & !mixed0[i] & !mixed1[i] & (key0[i] != u16::MAX);
-            class[i] = if quiet {
-                QUIET
-            } else if same {
-                STABLE
-            } else {
-                UNSTABLE
-            };
-            // Quiet pixels whose key-frame value is strictly inside the thresholds cannot
-            // cross; the others (and stable pixels) are visited by `advance`, in pixel order.
-            let l1 = l1s[i];
-            let settled = quiet & (l1 < r + on[i]) & (l1 > r - off[i]);
+        for (i, &f) in self.listed[..n].iter().enumerate() {
             work[listed] = i as u32;
-            listed += usize::from(!settled & (quiet | same));
+            listed += usize::from(f);
         }
         self.work.truncate(listed);
+    }
+}
+
+/// The per-pixel arrays [`classify_pixels`] reads (all of one length).
+struct ClassInputs<'a> {
+    /// Window minimum and maximum of both key frames' log intensities.
+    lo: &'a [f32],
+    hi: &'a [f32],
+    /// Thresholds and reference levels.
+    on: &'a [f32],
+    off: &'a [f32],
+    reference: &'a [f32],
+    /// Log intensities of the closing key frame.
+    l1: &'a [f32],
+    /// Object ids, surface keys and mixed flags of both key frames.
+    id0: &'a [u16],
+    id1: &'a [u16],
+    key0: &'a [u16],
+    key1: &'a [u16],
+    mixed0: &'a [bool],
+    mixed1: &'a [bool],
+}
+
+/// The class of every pixel (`QUIET`, `STABLE` or `UNSTABLE`) into `class`, and into `listed`
+/// 1 for the pixels `Engine::advance` visits (stable pixels and quiet pixels that may cross at
+/// the closing key frame), else 0. Without branches: with AVX2 (detected at run time) the
+/// loop runs in vector registers; the same comparisons, so the same classes.
+fn classify_pixels(c: &ClassInputs, margin: f32, shade_margin: f32, class: &mut [u8], listed: &mut [u8]) {
+    #[cfg(target_arch = "x86_64")]
+    if std::is_x86_feature_detected!("avx2") {
+        // SAFETY: AVX2 is available (checked just above).
+        return unsafe { classify_pixels_avx2(c, margin, shade_margin, class, listed) };
+    }
+    classify_pixels_with(c, margin, shade_margin, class, listed);
+}
+
+/// [`classify_pixels`] compiled with AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn classify_pixels_avx2(
+    c: &ClassInputs,
+    margin: f32,
+    shade_margin: f32,
+    class: &mut [u8],
+    listed: &mut [u8],
+) {
+    classify_pixels_with(c, margin, shade_margin, class, listed);
+}
+
+/// The body of [`classify_pixels`].
+#[inline(always)]
+fn classify_pixels_with(
+    c: &ClassInputs,
+    margin: f32,
+    shade_margin: f32,
+    class: &mut [u8],
+    listed: &mut [u8],
+) {
+    let n = class.len().min(listed.len());
+    let (lo, hi, on, off, reference, l1s) = (
+        &c.lo[..n],
+        &c.hi[..n],
+        &c.on[..n],
+        &c.off[..n],
+        &c.reference[..n],
+        &c.l1[..n],
+    );
+    let (id0, id1, key0, key1, mixed0, mixed1) = (
+        &c.id0[..n],
+        &c.id1[..n],
+        &c.key0[..n],
+        &c.key1[..n],
+        &c.mixed0[..n],
+        &c.mixed1[..n],
+    );
+    let (class, listed) = (&mut class[..n], &mut listed[..n]);
+    // Non-short-circuit `&` and `|` keep the tests branch-free.
+    for i in 0..n {
+        let m = margin + if (id0[i] | id1[i]) != 0 { shade_margin } else { 0.0 };
+        let r = reference[i];
+        let quiet = (hi[i] + m < r + on[i]) & (lo[i] - m > r - off[i]);
+        // The same surface at both key frames, without the other surface of a nearby edge
+        // inside the pixel: its texture coordinates move smoothly in between (edges move
+        // by under a pixel per render step and do not turn back within an interval).
+        let same = (key0[i] == key1[i]) & !mixed0[i] & !mixed1[i] & (key0[i] != u16::MAX);
+        // QUIET, else STABLE or UNSTABLE.
+        class[i] = u8::from(!quiet) * (STABLE + u8::from(!same));
+        // Quiet pixels whose key-frame value is strictly inside the thresholds cannot
+        // cross; the others (and stable pixels) are visited by `advance`, in pixel order.
+        let l1 = l1s[i];
+        let settled = quiet & (l1 < r + on[i]) & (l1 > r - off[i]);
+        listed[i] = u8::from(!settled & (quiet | same));
     }
 }
 
