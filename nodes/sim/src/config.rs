@@ -24,8 +24,9 @@ pub struct RenderConfig {
     /// preset and 3 s of four; background points from every second pixel of each key frame,
     /// a 17 x 17 grid on every face of the moving boxes): the largest displacement of any
     /// point in one step was 0.499998 px (fast-rotation; 0.4999 or less elsewhere), none over
-    /// 0.5 px, and none over its local bound. 1.01 leaves 1 % for that change (measured under
-    /// 1e-5); it was 1.1 until the eighth speed round.
+    /// 0.5 px, and none over its local bound. 1.01 leaves 1 % for that change (no sampled
+    /// point exceeded the bound at the step's ends times the step); it was 1.1 until the
+    /// eighth speed round.
     pub speed_safety: f64,
     /// Longest render step, s (5 ms; used when nothing moves fast).
     pub max_step_s: f64,
