@@ -31,6 +31,12 @@ fn run(name: &str, secs: f64, seed: u64) -> Result<Row, Box<dyn std::error::Erro
     {
         cfg.render.steps_per_keyframe = k;
     }
+    if let Some(s) = std::env::var("SIM_SPEED_SAFETY")
+        .ok()
+        .and_then(|s| s.parse().ok())
+    {
+        cfg.render.speed_safety = s;
+    }
     if std::env::var("SIM_NO_SUPERSAMPLING").is_ok() {
         cfg.render.edge_supersampling = false;
     }

@@ -83,6 +83,7 @@ pub struct KeyFrame {
 
 impl KeyFrame {
     /// Pixel `i` as one end of a path on its surface, at time `t` (this key frame's).
+    #[inline]
     fn path_end(&self, i: usize, t: f64) -> PathEnd<'_> {
         let key = self.key[i];
         PathEnd {
@@ -171,6 +172,8 @@ pub struct Engine {
     sort_scratch: Vec<RawEvent>,
     /// Quiet pixels that may cross at the closing key frame and stable pixels, in pixel order.
     work: Vec<u32>,
+    /// 1 for the pixels of `work`, per pixel (see `classify_pixels`).
+    listed: Vec<u8>,
     // Filter buffers.
     lo: Vec<f32>,
     hi: Vec<f32>,
@@ -212,6 +215,7 @@ impl Engine {
             batch: Vec::new(),
             sort_scratch: Vec::new(),
             work: Vec::new(),
+            listed: Vec::new(),
             lo: vec![0.0; n],
             hi: vec![0.0; n],
             scratch: Vec::new(),
@@ -781,50 +785,145 @@ impl Engine {
     fn classify(&mut self, cfg: &SceneConfig, radius: usize, shade_margin: f32) {
         let (w, h) = (self.rays.width, self.rays.height);
         let (kf0, kf1) = (&self.kf0, &self.kf1);
-        for i in 0..w * h {
-            self.lo[i] = fmin(kf0.l[i], kf1.l[i]);
-            self.hi[i] = fmax(kf0.l[i], kf1.l[i]);
+        // Zipped slices: no bounds checks or reloads of the vectors per pixel (vectorised).
+        let n = w * h;
+        let ends = self.lo[..n].iter_mut().zip(&mut self.hi[..n]);
+        for ((lo, hi), (&a, &b)) in ends.zip(kf0.l[..n].iter().zip(&kf1.l[..n])) {
+            *lo = fmin(a, b);
+            *hi = fmax(a, b);
         }
         filters::window_min_max_in_place(&mut self.lo, &mut self.hi, w, h, radius, &mut self.scratch);
         let margin = cfg.render.quiet_margin_log as f32;
-        let n = w * h;
         let (on, off, reference) = (
             &self.thresholds.on[..n],
             &self.thresholds.off[..n],
             &self.reference[..n],
         );
-        let (lo, hi, class) = (&self.lo[..n], &self.hi[..n], &mut self.class[..n]);
-        let (id0, id1, key0, key1) = (&kf0.id[..n], &kf1.id[..n], &kf0.key[..n], &kf1.key[..n]);
-        let (mixed0, mixed1, l1s) = (&kf0.mixed[..n], &kf1.mixed[..n], &kf1.l[..n]);
-        // Every index is written and the cursor advances only for listed pixels (no branch
-        // per pixel); non-short-circuit `&` and `|` keep the tests branch-free too.
+        let inputs = ClassInputs {
+            lo: &self.lo[..n],
+            hi: &self.hi[..n],
+            on,
+            off,
+            reference,
+            l1: &kf1.l[..n],
+            id0: &kf0.id[..n],
+            id1: &kf1.id[..n],
+            key0: &kf0.key[..n],
+            key1: &kf1.key[..n],
+            mixed0: &kf0.mixed[..n],
+            mixed1: &kf1.mixed[..n],
+        };
+        self.listed.resize(n, 0);
+        classify_pixels(
+            &inputs,
+            margin,
+            shade_margin,
+            &mut self.class[..n],
+            &mut self.listed[..n],
+        );
+        // The work list through a cursor that advances only for listed pixels (no branch per
+        // pixel).
         self.work.clear();
         self.work.resize(n, 0);
         let work = &mut self.work[..];
         let mut listed = 0usize;
-        for i in 0..n {
-            let m = margin + if (id0[i] | id1[i]) != 0 { shade_margin } else { 0.0 };
-            let r = reference[i];
-            let quiet = (hi[i] + m < r + on[i]) & (lo[i] - m > r - off[i]);
-            // The same surface at both key frames, without the other surface of a nearby edge
-            // inside the pixel: its texture coordinates move smoothly in between (edges move
-            // by under a pixel per render step and do not turn back within an interval).
-            let same = (key0[i] == key1[i]) & !mixed0[i] & !mixed1[i] & (key0[i] != u16::MAX);
-            class[i] = if quiet {
-                QUIET
-            } else if same {
-                STABLE
-            } else {
-                UNSTABLE
-            };
-            // Quiet pixels whose key-frame value is strictly inside the thresholds cannot
-            // cross; the others (and stable pixels) are visited by `advance`, in pixel order.
-            let l1 = l1s[i];
-            let settled = quiet & (l1 < r + on[i]) & (l1 > r - off[i]);
+        for (i, &f) in self.listed[..n].iter().enumerate() {
             work[listed] = i as u32;
-            listed += usize::from(!settled & (quiet | same));
+            listed += usize::from(f);
         }
         self.work.truncate(listed);
+    }
+}
+
+/// The per-pixel arrays [`classify_pixels`] reads (all of one length).
+struct ClassInputs<'a> {
+    /// Window minimum and maximum of both key frames' log intensities.
+    lo: &'a [f32],
+    hi: &'a [f32],
+    /// Thresholds and reference levels.
+    on: &'a [f32],
+    off: &'a [f32],
+    reference: &'a [f32],
+    /// Log intensities of the closing key frame.
+    l1: &'a [f32],
+    /// Object ids, surface keys and mixed flags of both key frames.
+    id0: &'a [u16],
+    id1: &'a [u16],
+    key0: &'a [u16],
+    key1: &'a [u16],
+    mixed0: &'a [bool],
+    mixed1: &'a [bool],
+}
+
+/// The class of every pixel (`QUIET`, `STABLE` or `UNSTABLE`) into `class`, and into `listed`
+/// 1 for the pixels `Engine::advance` visits (stable pixels and quiet pixels that may cross at
+/// the closing key frame), else 0. Without branches: with AVX2 (detected at run time) the
+/// loop runs in vector registers; the same comparisons, so the same classes.
+fn classify_pixels(c: &ClassInputs, margin: f32, shade_margin: f32, class: &mut [u8], listed: &mut [u8]) {
+    #[cfg(target_arch = "x86_64")]
+    if std::is_x86_feature_detected!("avx2") {
+        // SAFETY: AVX2 is available (checked just above).
+        return unsafe { classify_pixels_avx2(c, margin, shade_margin, class, listed) };
+    }
+    classify_pixels_with(c, margin, shade_margin, class, listed);
+}
+
+/// [`classify_pixels`] compiled with AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn classify_pixels_avx2(
+    c: &ClassInputs,
+    margin: f32,
+    shade_margin: f32,
+    class: &mut [u8],
+    listed: &mut [u8],
+) {
+    classify_pixels_with(c, margin, shade_margin, class, listed);
+}
+
+/// The body of [`classify_pixels`].
+#[inline(always)]
+fn classify_pixels_with(
+    c: &ClassInputs,
+    margin: f32,
+    shade_margin: f32,
+    class: &mut [u8],
+    listed: &mut [u8],
+) {
+    let n = class.len().min(listed.len());
+    let (lo, hi, on, off, reference, l1s) = (
+        &c.lo[..n],
+        &c.hi[..n],
+        &c.on[..n],
+        &c.off[..n],
+        &c.reference[..n],
+        &c.l1[..n],
+    );
+    let (id0, id1, key0, key1, mixed0, mixed1) = (
+        &c.id0[..n],
+        &c.id1[..n],
+        &c.key0[..n],
+        &c.key1[..n],
+        &c.mixed0[..n],
+        &c.mixed1[..n],
+    );
+    let (class, listed) = (&mut class[..n], &mut listed[..n]);
+    // Non-short-circuit `&` and `|` keep the tests branch-free.
+    for i in 0..n {
+        let m = margin + if (id0[i] | id1[i]) != 0 { shade_margin } else { 0.0 };
+        let r = reference[i];
+        let quiet = (hi[i] + m < r + on[i]) & (lo[i] - m > r - off[i]);
+        // The same surface at both key frames, without the other surface of a nearby edge
+        // inside the pixel: its texture coordinates move smoothly in between (edges move
+        // by under a pixel per render step and do not turn back within an interval).
+        let same = (key0[i] == key1[i]) & !mixed0[i] & !mixed1[i] & (key0[i] != u16::MAX);
+        // QUIET, else STABLE or UNSTABLE.
+        class[i] = u8::from(!quiet) * (STABLE + u8::from(!same));
+        // Quiet pixels whose key-frame value is strictly inside the thresholds cannot
+        // cross; the others (and stable pixels) are visited by `advance`, in pixel order.
+        let l1 = l1s[i];
+        let settled = quiet & (l1 < r + on[i]) & (l1 > r - off[i]);
+        listed[i] = u8::from(!settled & (quiet | same));
     }
 }
 
@@ -982,28 +1081,38 @@ fn stable_displacement(kf0: &KeyFrame, kf1: &KeyFrame, i: usize, w: usize, du: f
     if x == 0 || x + 1 >= w || y == 0 || i + w >= n {
         return any_direction;
     }
-    let through = |kf: &KeyFrame| {
-        let k = kf.key[i];
-        if kf.key[i + 1] != k || kf.key[i - 1] != k || kf.key[i + w] != k || kf.key[i - w] != k {
-            // A neighbour on another surface (the pixel lies along an edge).
-            return f32::INFINITY;
-        }
-        let (a, b) = (
-            0.5 * (kf.u[i + 1] - kf.u[i - 1]),
-            0.5 * (kf.u[i + w] - kf.u[i - w]),
-        );
-        let (c, d) = (
-            0.5 * (kf.v[i + 1] - kf.v[i - 1]),
-            0.5 * (kf.v[i + w] - kf.v[i - w]),
-        );
-        let det = a * d - b * c;
-        if det.is_nan() || det.abs() <= 1e-12 {
-            return f32::INFINITY;
-        }
-        let (px, py) = ((d * du - b * dv) / det, (a * dv - c * du) / det);
-        (px * px + py * py).sqrt()
-    };
-    (through(kf0).max(through(kf1)) * DISPLACEMENT_SAFETY).min(any_direction)
+    let (d0, d1) = (
+        jacobian_displacement(kf0, i, w, du, dv),
+        jacobian_displacement(kf1, i, w, du, dv),
+    );
+    (d0.max(d1) * DISPLACEMENT_SAFETY).min(any_direction)
+}
+
+/// The image displacement (px) of texture-coordinate change `(du, dv)` at pixel `i` of key
+/// frame `kf` through its pixel-to-texture Jacobian from central differences (infinite when a
+/// 4-neighbour sees another surface or the Jacobian is degenerate); see
+/// [`stable_displacement`]. Inlined: it runs twice per stable pixel.
+#[inline(always)]
+fn jacobian_displacement(kf: &KeyFrame, i: usize, w: usize, du: f32, dv: f32) -> f32 {
+    let k = kf.key[i];
+    if kf.key[i + 1] != k || kf.key[i - 1] != k || kf.key[i + w] != k || kf.key[i - w] != k {
+        // A neighbour on another surface (the pixel lies along an edge).
+        return f32::INFINITY;
+    }
+    let (a, b) = (
+        0.5 * (kf.u[i + 1] - kf.u[i - 1]),
+        0.5 * (kf.u[i + w] - kf.u[i - w]),
+    );
+    let (c, d) = (
+        0.5 * (kf.v[i + 1] - kf.v[i - 1]),
+        0.5 * (kf.v[i + w] - kf.v[i - w]),
+    );
+    let det = a * d - b * c;
+    if det.is_nan() || det.abs() <= 1e-12 {
+        return f32::INFINITY;
+    }
+    let (px, py) = ((d * du - b * dv) / det, (a * dv - c * du) / det);
+    (px * px + py * py).sqrt()
 }
 
 /// Bound of the normalized image speed (1/s) of a moving box with motion `m` relative to the
@@ -1026,6 +1135,7 @@ fn object_speed(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::config::RenderConfig;
     use crate::presets::preset;
 
     /// Key frames of a 5 x 5 image whose texture coordinates are the affine map `(a, b, c, d)`
@@ -1037,6 +1147,161 @@ mod tests {
             kf.u[i] = j[0] * x + j[1] * y + shift.0;
             kf.v[i] = j[2] * x + j[3] * y + shift.1;
             kf.z[i] = z;
+        }
+    }
+
+    /// For every camera-frame point of `pts(t)` in the image at either end of the step
+    /// `[ta, tb]`: its largest image distance (px) from its position at `ta` over four later
+    /// instants of the step, its position at `ta` and its image displacement (px) over the
+    /// step, appended to `out`.
+    #[allow(clippy::needless_range_loop)]
+    fn excursion(
+        cam: &crate::camera::CameraConfig,
+        pts: &dyn Fn(f64) -> Vec<math::V3>,
+        ta: f64,
+        tb: f64,
+        out: &mut Vec<(f64, f64, f64, f64)>,
+    ) {
+        let (w, h) = (cam.width as f64, cam.height as f64);
+        let inside = |p: Option<(f64, f64)>| {
+            p.is_some_and(|(x, y)| x >= -0.5 && y >= -0.5 && x <= w - 0.5 && y <= h - 0.5)
+        };
+        let sub: Vec<Vec<math::V3>> = (0..=4).map(|s| pts(ta + (tb - ta) * s as f64 / 4.0)).collect();
+        for j in 0..sub[0].len() {
+            let p0 = cam.project(sub[0][j]);
+            let p1 = cam.project(sub[4][j]);
+            if !(inside(p0) || inside(p1)) {
+                continue;
+            }
+            let (Some(a), Some(b)) = (p0, p1) else { continue };
+            let mut m: f64 = 0.0;
+            for s in 1..=4 {
+                if let Some(q) = cam.project(sub[s][j]) {
+                    m = m.max((q.0 - a.0).hypot(q.1 - a.1));
+                }
+            }
+            out.push((m, a.0, a.1, (b.0 - a.0).hypot(b.1 - a.1)));
+        }
+    }
+
+    /// Measurement (ignored by default; prints, checks nothing): the largest image
+    /// displacement of any sampled scene point per render step against `max_px_per_step`
+    /// (background points from every second pixel of each interval's opening key frame, back
+    /// projected with its depths; moving boxes from a 17 x 17 grid on every face), and each
+    /// point's displacement over the step against the local speed bound (unstable pixels'
+    /// schedules) at its pixel at the step's start. `SIM_MEASURE_PRESETS` (comma separated),
+    /// `SIM_MEASURE_SECONDS`, `SIM_MEASURE_SAFETY` (`speed_safety`). Run with
+    /// `cargo test --release -p evseg-sim --lib measure_step -- --ignored --nocapture`.
+    #[test]
+    #[ignore]
+    fn measure_step_displacements() {
+        let names = std::env::var("SIM_MEASURE_PRESETS").unwrap_or("one-object".into());
+        let secs: f64 = std::env::var("SIM_MEASURE_SECONDS")
+            .ok()
+            .and_then(|s| s.parse().ok())
+            .unwrap_or(0.5);
+        let safety: f64 = std::env::var("SIM_MEASURE_SAFETY")
+            .ok()
+            .and_then(|s| s.parse().ok())
+            .unwrap_or(RenderConfig::default().speed_safety);
+        for name in names.split(',') {
+            let mut cfg = preset(name, 1).unwrap();
+            cfg.render.speed_safety = safety;
+            cfg.duration_s = cfg.duration_s.min(secs);
+            let mut e = Engine::new(&cfg);
+            let cam = cfg.camera.clone();
+            let (w, h) = (e.rays.width, e.rays.height);
+            let mut out = Vec::new();
+            let (mut worst_bg, mut worst_obj, mut worst_local) = (0.0f64, 0.0f64, 0.0f64);
+            let (mut sum_step_worst, mut n_steps, mut over) = (0.0f64, 0usize, 0usize);
+            let mut local_over = 0usize;
+            let mut steps = 0usize;
+            while e.t < cfg.duration_s - 1e-12 {
+                let last_dt = e.last_dt;
+                let (times, _) = e.plan(&cfg);
+                e.last_dt = last_dt;
+                let geoms: Vec<FrameGeom> =
+                    times.iter().map(|&t| FrameGeom::new(&e.scene, &cam, t)).collect();
+                let speeds = e.local_speeds(&cfg, &geoms);
+                // Background points of the opening key frame, in the world frame.
+                let c0 = e.scene.camera_state(times[0]);
+                let mut world = Vec::new();
+                for v in (0..h).step_by(2) {
+                    for u in (0..w).step_by(2) {
+                        let i = v * w + u;
+                        let z = e.kf0.z[i] as f64;
+                        if e.kf0.id[i] != 0 || !z.is_finite() {
+                            continue;
+                        }
+                        let p = [e.rays.x[i] as f64 * z, e.rays.y[i] as f64 * z, z];
+                        world.push(math::add(math::mul_mv(&c0.rotation, p), c0.position));
+                    }
+                }
+                let scene = &e.scene;
+                let bg = |t: f64| -> Vec<math::V3> {
+                    let c = scene.camera_state(t);
+                    let r = math::transpose(&c.rotation);
+                    world
+                        .iter()
+                        .map(|x| math::mul_mv(&r, math::sub(*x, c.position)))
+                        .collect()
+                };
+                let obj = |t: f64| -> Vec<math::V3> {
+                    let c = scene.camera_state(t);
+                    let mut pts = Vec::new();
+                    for b in scene.boxes.iter().filter(|b| b.id != 0) {
+                        let pose = scene::BoxPose::new(&c, &b.trajectory.state(t));
+                        for f in 0..6 {
+                            let (ax, sign) = (f / 2, if f % 2 == 0 { -1.0 } else { 1.0 });
+                            let (a1, a2) = ((ax + 1) % 3, (ax + 2) % 3);
+                            for i in 0..17 {
+                                for j in 0..17 {
+                                    let mut s = [0.0; 3];
+                                    s[ax] = sign * b.half[ax];
+                                    s[a1] = b.half[a1] * (i as f64 / 8.0 - 1.0);
+                                    s[a2] = b.half[a2] * (j as f64 / 8.0 - 1.0);
+                                    pts.push(math::add(pose.center, math::mul_mv(&pose.r_cb, s)));
+                                }
+                            }
+                        }
+                    }
+                    pts
+                };
+                for k in 0..times.len() - 1 {
+                    let (ta, tb) = (times[k], times[k + 1]);
+                    let (mut rb, mut ro) = (Vec::new(), Vec::new());
+                    excursion(&cam, &bg, ta, tb, &mut rb);
+                    excursion(&cam, &obj, ta, tb, &mut ro);
+                    let mut step_worst: f64 = 0.0;
+                    for (set, worst) in [(&rb, &mut worst_bg), (&ro, &mut worst_obj)] {
+                        for &(m, x, y, chord) in set.iter() {
+                            *worst = worst.max(m);
+                            step_worst = step_worst.max(m);
+                            over += usize::from(m > cfg.render.max_px_per_step);
+                            // Local bound at the start pixel (px/s, safety included).
+                            let (xi, yi) = (
+                                x.round().clamp(0.0, (w - 1) as f64),
+                                y.round().clamp(0.0, (h - 1) as f64),
+                            );
+                            let local = speeds.at(xi as usize, yi as usize) as f64;
+                            let r = chord / ((tb - ta) * local);
+                            worst_local = worst_local.max(r);
+                            local_over += usize::from(r > 1.0);
+                        }
+                    }
+                    sum_step_worst += step_worst;
+                    n_steps += 1;
+                }
+                steps += times.len() - 1;
+                e.advance(&cfg, &mut out);
+                out.clear();
+            }
+            println!(
+                "{name} safety {safety}: {steps} steps, events {}; largest excursion per step px: background {worst_bg:.6}, objects {worst_obj:.6}; mean of per-step largest {:.4}; points over {}: {over}; largest chord / local bound {worst_local:.6} ({local_over} over)",
+                e.stats.model_events,
+                sum_step_worst / n_steps as f64,
+                cfg.render.max_px_per_step,
+            );
         }
     }
 

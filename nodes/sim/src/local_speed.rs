@@ -97,6 +97,9 @@ pub struct Schedules<'a> {
     times: &'a [f64],
     max_px: f64,
     by_speed: std::collections::HashMap<u32, u32>,
+    /// The speed (bits) and schedule of the previous call: neighbouring pixels mostly share
+    /// their block's bound, so most calls skip the hash lookup.
+    last: Option<(u32, u32)>,
     /// Render slots of every schedule (see [`render_slots`]).
     pub lists: Vec<Vec<u32>>,
 }
@@ -108,6 +111,7 @@ impl<'a> Schedules<'a> {
             times,
             max_px,
             by_speed: std::collections::HashMap::new(),
+            last: None,
             lists: Vec::new(),
         }
     }
@@ -115,11 +119,19 @@ impl<'a> Schedules<'a> {
     /// Index in [`Schedules::lists`] of the schedule of a pixel with speed bound `speed`
     /// (px/s).
     pub fn of(&mut self, speed: f32) -> u32 {
+        let bits = speed.to_bits();
+        if let Some((b, s)) = self.last
+            && b == bits
+        {
+            return s;
+        }
         let (times, max_px, lists) = (self.times, self.max_px, &mut self.lists);
-        *self.by_speed.entry(speed.to_bits()).or_insert_with(|| {
+        let s = *self.by_speed.entry(bits).or_insert_with(|| {
             lists.push(render_slots(times, speed, max_px));
             (lists.len() - 1) as u32
-        })
+        });
+        self.last = Some((bits, s));
+        s
     }
 
     /// The last slot: the closing key frame.
