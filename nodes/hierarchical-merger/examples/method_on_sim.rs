@@ -96,6 +96,14 @@ fn apply(
             "min_center_gap" => planar.min_center_gap = f,
             "density_cell_px" => planar.density_cell_px = f as u16,
             "previous_weight" => planar.previous.weight = f,
+            "robust_needs_previous" => planar.robust_needs_previous = f > 0.0,
+            "huber_fit" => {
+                planar.fit.robust = if f > 0.0 {
+                    evseg_planar_segmenter::Robust::Huber { k: f }
+                } else {
+                    evseg_planar_segmenter::Robust::LeastSquares
+                }
+            }
             "previous_dilate_px" => planar.previous.dilate_px = f as u16,
             "previous_cell_px" => planar.previous.cell_px = f as u16,
             "previous_min_free_share" => planar.previous.min_free_share = f,

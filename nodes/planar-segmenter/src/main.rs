@@ -96,13 +96,18 @@ fn main() -> ExitCode {
     )
     .param(
         "robust",
-        "least_squares",
+        "huber",
         "least_squares (the paper), huber or tukey (iteratively reweighted)",
     )
     .param(
         "robust_threshold",
         serde_json::Value::Null,
         "weight threshold in robust standard deviations (default huber 1.345, tukey 4.685)",
+    )
+    .param(
+        "robust_needs_previous",
+        d.robust_needs_previous,
+        "use the robust fit only where the previous slice's foreground was left out of the fit (least squares otherwise)",
     )
     .param(SLOPE_PARAM, SLOPE_DEFAULT, SLOPE_PARAM_DOC)
     .param("robust_iterations", d.fit.iterations, "reweighting rounds")
@@ -180,6 +185,7 @@ fn main() -> ExitCode {
             residual_length_k: cfg.param("residual_length_k")?,
             min_center_gap: cfg.param("min_center_gap")?,
             split_power: cfg.param("split_power")?,
+            robust_needs_previous: cfg.param("robust_needs_previous")?,
             two_means_iter: cfg.param("two_means_iter")?,
             classify_invalid: cfg.param("classify_invalid")?,
             min_support: cfg.param("min_support")?,

@@ -92,12 +92,14 @@ fn flow_with_object(x: f64, y: f64, obj: bool) -> [f64; 2] {
     [tr[0] + ro[0], tr[1] + ro[1]]
 }
 
+/// Huber weights in every slice.
 fn huber() -> PlanarParams {
     PlanarParams {
         fit: FitParams {
             robust: Robust::Huber { k: 1.345 },
             ..Default::default()
         },
+        robust_needs_previous: false,
         ..Default::default()
     }
 }
@@ -471,4 +473,44 @@ fn a_compressed_split_spreads_further_past_a_clean_object() {
         default * 10 < truth.len(),
         "{default} background events called foreground"
     );
+}
+
+/// The default robust fit waits for the previous foreground: the first slice gets the plain
+/// fit, the next one (with its mask) the robust one.
+#[test]
+fn the_robust_fit_is_used_only_with_the_previous_foreground() {
+    let (ev, fl, truth) = scene(6000, true, 0.0, flow_with_object);
+    let labels: Vec<u32> = truth.iter().map(|&o| u32::from(o)).collect();
+    let d = PlanarParams::default();
+    assert!(d.robust_needs_previous && d.fit.robust != Robust::LeastSquares);
+    let model = |params: PlanarParams, labels: Option<&[u32]>| {
+        let mut seg = PlanarSegmenter::new(params).unwrap();
+        let first = seg
+            .segment_with_previous(&camera(), &ev, &fl, Some(W.into()), labels)
+            .unwrap();
+        assert!(!first.previous_applied);
+        first.residuals.model
+    };
+    // No previous slice: exactly the plain fit, not the robust one.
+    assert_eq!(model(d, Some(&labels)), model(ls(), None));
+    assert_ne!(model(d, Some(&labels)), model(huber(), None));
+    // The second slice, with the first one's labels (half the object's equations left in):
+    // the robust fit.
+    let half: Vec<u32> = labels
+        .iter()
+        .enumerate()
+        .map(|(i, &l)| l * (i % 2) as u32)
+        .collect();
+    let masked = |params: PlanarParams| {
+        let mut seg = PlanarSegmenter::new(params).unwrap();
+        seg.segment_with_previous(&camera(), &ev, &fl, Some(W.into()), Some(&half))
+            .unwrap();
+        let second = seg
+            .segment_with_previous(&camera(), &ev, &fl, Some(W.into()), Some(&half))
+            .unwrap();
+        assert!(second.previous_applied);
+        second.residuals.model
+    };
+    assert_eq!(masked(d), masked(huber()));
+    assert_ne!(masked(d), masked(ls()));
 }
