@@ -97,6 +97,7 @@ fn apply(
             "density_cell_px" => planar.density_cell_px = f as u16,
             "previous_weight" => planar.previous.weight = f,
             "robust_needs_previous" => planar.robust_needs_previous = f > 0.0,
+            "tukey_fit" => planar.fit.robust = evseg_planar_segmenter::Robust::Tukey { c: f },
             "huber_fit" => {
                 planar.fit.robust = if f > 0.0 {
                     evseg_planar_segmenter::Robust::Huber { k: f }

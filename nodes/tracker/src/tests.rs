@@ -742,3 +742,59 @@ fn objects_joined_while_overlapping_are_split_once_apart() -> Result<(), Tracker
     assert!(on[apart..].iter().all(|&(_, b)| b == on[apart].1), "{on:?}");
     Ok(())
 }
+
+#[test]
+fn a_split_track_stays_with_its_larger_group() -> Result<(), TrackerError> {
+    // A still object with a 60 x 60 px box for three slices; then its segmentation comes in
+    // two groups 19 px apart: a small piece (120 events) nearest the predicted centroid, which
+    // the association matches, and the bulk (400 events) absorbed through the box.
+    let mut tracker = Tracker::new(TrackerParams::default())?;
+    let widen = |seg: &mut Segmentation, k: usize, by: f32| {
+        let b = &mut seg.segments[k].bbox;
+        *b = [b[0] - by, b[1] - by, b[2] + by, b[3] + by];
+    };
+    for k in 0..3 {
+        let (n, mut seg) = frame(
+            &[Obj {
+                label: 1,
+                centroid: [300.0, 300.0],
+                events: 500,
+            }],
+            50,
+        );
+        widen(&mut seg, 0, 20.0);
+        let out = tracker.update(span(k), n, &seg)?;
+        assert_eq!(id_of(&seg, &out, 1), 1);
+    }
+    let (n, mut seg) = frame(
+        &[
+            Obj {
+                label: 1,
+                centroid: [285.0, 300.0],
+                events: 120,
+            },
+            Obj {
+                label: 2,
+                centroid: [335.0, 300.0],
+                events: 400,
+            },
+        ],
+        50,
+    );
+    widen(&mut seg, 1, 10.0);
+    let out = tracker.update(span(3), n, &seg)?;
+    assert_eq!((id_of(&seg, &out, 2), id_of(&seg, &out, 1)), (1, 2));
+    // The track was corrected with the bulk, which it keeps following.
+    let (n, mut seg) = frame(
+        &[Obj {
+            label: 1,
+            centroid: [335.0, 300.0],
+            events: 400,
+        }],
+        50,
+    );
+    widen(&mut seg, 0, 10.0);
+    let out = tracker.update(span(4), n, &seg)?;
+    assert_eq!(id_of(&seg, &out, 1), 1);
+    Ok(())
+}

@@ -120,9 +120,9 @@ fn bbox_f64(b: [f32; 4]) -> [f64; 4] {
 /// 4. a tentative track (fewer than `min_hits` matches) that was not matched is dropped;
 /// 5. each unmatched segment with at least `min_events` events opens a track with a new id
 ///    (1, 2, 3, ...; ids are never reused);
-/// 6. tracks that are pieces of one object merge (`merge_inside`, `merge_velocity_px_s`), and a
-///    group of a track's segments far from the one that corrected it opens a track of its own
-///    (`split_gap_px`);
+/// 6. tracks that are pieces of one object merge (`merge_inside`, `merge_velocity_px_s`); a
+///    track whose segments form groups lying apart keeps the largest group, and each other
+///    large enough group opens a track of its own (`split_gap_px`);
 /// 7. every event of a segment takes the id of the segment's track; events of label 0 and of
 ///    small unmatched segments (no track) are background, 0.
 ///
@@ -249,6 +249,13 @@ impl Tracker {
             })
             .collect();
         let matches = associate(&costs, self.params.bbox_weight);
+        // The tracks as predicted, before this slice's corrections (a split may hand a track
+        // to another of its groups, which then corrects it instead).
+        let before: Vec<TrackState> = if self.params.split_gap_px > 0.0 {
+            self.tracks.clone()
+        } else {
+            Vec::new()
+        };
 
         // Track index per segment index, filled for matched and new tracks.
         let mut track_of_segment: Vec<Option<usize>> = vec![None; segments.len()];
@@ -318,6 +325,7 @@ impl Tracker {
                 segments,
                 &counts,
                 &primary,
+                &before,
                 &mut track_of_segment,
                 &mut absorbed,
                 t,
@@ -413,15 +421,20 @@ impl Tracker {
         });
     }
 
-    /// Splits off each track's segment groups that lie apart from its matched segment (see
-    /// `TrackerParams::split_gap_px`): a group with at least `split_min_events` events opens a
-    /// new track on its largest segment and its other segments become that track's fragments.
-    /// Returns the number of tracks opened (appended to `self.tracks`).
+    /// Splits a track whose segments form groups lying apart (see
+    /// `TrackerParams::split_gap_px`): the group with the most events keeps the track (if that
+    /// is not the group of the segment that corrected it, the track is restored from `before`,
+    /// its state as predicted, and corrected with that group's largest segment instead); every
+    /// other group with at least `split_min_events` events opens a new track on its largest
+    /// segment, its other segments becoming that track's fragments. Returns the number of
+    /// tracks opened (appended to `self.tracks`).
+    #[allow(clippy::too_many_arguments)]
     fn split_apart(
         &mut self,
         segments: &[Segment],
         counts: &[u32],
         primary: &[Option<usize>],
+        before: &[TrackState],
         track_of_segment: &mut [Option<usize>],
         absorbed: &mut [bool],
         t: f64,
@@ -441,8 +454,36 @@ impl Tracker {
                 continue;
             }
             let groups = box_groups(segments, &members, gap);
-            let keep = groups[members.iter().position(|&k| k == first).unwrap_or(0)];
             let n_groups = groups.iter().max().map_or(0, |g| g + 1);
+            let first_group = groups[members.iter().position(|&k| k == first).unwrap_or(0)];
+            let group_events = |g: usize| -> u32 {
+                members
+                    .iter()
+                    .zip(&groups)
+                    .filter(|&(_, &h)| h == g)
+                    .map(|(&k, _)| counts[k])
+                    .sum()
+            };
+            let mut keep = first_group;
+            for g in 0..n_groups {
+                if group_events(g) > group_events(keep) {
+                    keep = g;
+                }
+            }
+            if keep != first_group
+                && let Some(prior) = before.get(ti)
+                && let Some(main) = members
+                    .iter()
+                    .zip(&groups)
+                    .filter(|&(_, &h)| h == keep)
+                    .map(|(&k, _)| k)
+                    .max_by_key(|&k| counts[k])
+            {
+                self.tracks[ti] = prior.clone();
+                self.tracks[ti].take(&segments[main], t, &self.params);
+                absorbed[main] = false;
+                absorbed[first] = true;
+            }
             for g in (0..n_groups).filter(|&g| g != keep) {
                 let group: Vec<usize> = members
                     .iter()
