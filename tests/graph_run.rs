@@ -368,6 +368,26 @@ fn a_lost_feedback_frame_is_published_again_and_the_run_completes() {
     );
 }
 
+/// A feedback consumer whose final progress never arrives (the planar segmenter, which never
+/// needs the background merger's last slice) and which then exits must not fail the run: the
+/// producer counts a consumer that left during its drain as finished (seen once in `evseg
+/// bench`: "consumer `planar` of output `coarse` is gone").
+#[test]
+fn a_consumer_that_exits_without_its_final_progress_does_not_fail_the_run() {
+    let dir = tempfile::tempdir().unwrap();
+    // evseg_runtime::node::DROP_DONE_ENV
+    let env = [("EVSEG_TEST_DROP_DONE", "planar/previous")];
+    let (run, out) = run_default_graph(dir.path(), 0.2, &env, Duration::from_secs(120));
+    assert!(run.status.success(), "run failed:\n{}", run.stderr);
+    let log = std::fs::read_to_string(out.join("logs").join("background.log")).unwrap_or_default();
+    assert!(log.contains("counted as finished"), "{log}");
+    let report = read_json(&out.join("report").join("report.json"));
+    assert!(
+        report["sequence"]["windows"].as_u64().unwrap_or(0) >= 5,
+        "{report}"
+    );
+}
+
 /// The real DAVIS346 recording of `shared/data/real`, found as the formats tests find it
 /// (`$EVSEG_SHARED/data/real`, else `../shared/data/real` beside the workspace). `None` (test
 /// skipped with a message) when absent; under `CI=true` its absence fails the test.

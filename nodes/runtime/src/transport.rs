@@ -304,6 +304,17 @@ impl CreditBook {
         self.changed.notify_all();
     }
 
+    /// True when `node` was alive once and has been gone for longer than [`CONSUMER_GRACE`]
+    /// (its process ended, or it lost the network for that long).
+    pub fn has_left(&self, node: &str) -> bool {
+        let s = lock(&self.state);
+        s.seen.contains(node)
+            && !s.alive.contains(node)
+            && s.gone_since
+                .get(node)
+                .is_some_and(|t| t.elapsed() > CONSUMER_GRACE)
+    }
+
     /// Messages consumed by `node`'s `port` so far (0 when unknown, [`DONE`] when finished).
     pub fn consumed(&self, node: &str, port: &str) -> u64 {
         lock(&self.state)
