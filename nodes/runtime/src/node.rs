@@ -469,28 +469,21 @@ impl Outputs {
             .iter()
             .flat_map(|(_, p)| p.consumers.iter().map(|(c, cp, _)| (c.clone(), cp.clone())))
             .collect();
-        let mut watch = self.watch_list();
         let mut exited: Vec<String> = Vec::new();
         let start = Instant::now();
         let mut ok = false;
         while start.elapsed() < DRAIN_TIMEOUT {
-            let waited = self
+            // No watch list: a consumer that left is handled below, whether or not some of its
+            // final progress arrived (the book's own "gone" test skips consumers with any).
+            ok = self
                 .book
-                .wait_until(&self.node, &watch, Some(RESEND_AFTER), |consumed, _| {
+                .wait_until(&self.node, &[], Some(RESEND_AFTER), |consumed, _| {
                     list.iter().all(|k| consumed.get(k).copied() == Some(DONE))
-                });
-            // A consumer that left: with no progress at all (the book's error) or with the
-            // final progress of some of its inputs but not of this node's (the book sees it
-            // finished and keeps waiting).
-            let mut left: Vec<String> = match waited {
-                Ok(true) => {
-                    ok = true;
-                    break;
-                }
-                Ok(false) => Vec::new(),
-                Err(RuntimeError::ConsumerGone { consumer, .. }) => vec![consumer],
-                Err(e) => return Err(e),
-            };
+                })?;
+            if ok {
+                break;
+            }
+            let mut left: Vec<String> = Vec::new();
             for (c, cp) in &list {
                 if self.book.consumed(c, cp) != DONE && self.book.has_left(c) && !left.contains(c) {
                     left.push(c.clone());
@@ -504,7 +497,6 @@ impl Outputs {
                      (its exit status tells whether it ended well)"
                 );
                 list.retain(|(c, _)| *c != consumer);
-                watch.retain(|(c, _)| *c != consumer);
                 exited.push(consumer);
             }
             repeat_own_done();

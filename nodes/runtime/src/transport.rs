@@ -224,6 +224,18 @@ struct BookState {
     gone_since: HashMap<String, Instant>,
 }
 
+impl BookState {
+    /// True when `node` was alive once and has been gone for longer than [`CONSUMER_GRACE`].
+    fn has_left(&self, node: &str) -> bool {
+        self.seen.contains(node)
+            && !self.alive.contains(node)
+            && self
+                .gone_since
+                .get(node)
+                .is_some_and(|t| t.elapsed() > CONSUMER_GRACE)
+    }
+}
+
 /// How long a consumer may be absent (for example while the launcher restarts it) before a
 /// producer waiting for it gives up.
 pub const CONSUMER_GRACE: Duration = Duration::from_secs(10);
@@ -307,12 +319,7 @@ impl CreditBook {
     /// True when `node` was alive once and has been gone for longer than [`CONSUMER_GRACE`]
     /// (its process ended, or it lost the network for that long).
     pub fn has_left(&self, node: &str) -> bool {
-        let s = lock(&self.state);
-        s.seen.contains(node)
-            && !s.alive.contains(node)
-            && s.gone_since
-                .get(node)
-                .is_some_and(|t| t.elapsed() > CONSUMER_GRACE)
+        lock(&self.state).has_left(node)
     }
 
     /// Messages consumed by `node`'s `port` so far (0 when unknown, [`DONE`] when finished).
@@ -361,11 +368,7 @@ impl CreditBook {
                 return Err(RuntimeError::Stopped);
             }
             for (consumer, port) in watch {
-                let absent_too_long = s
-                    .gone_since
-                    .get(consumer)
-                    .is_some_and(|t| t.elapsed() > CONSUMER_GRACE);
-                if s.seen.contains(consumer) && !s.alive.contains(consumer) && absent_too_long {
+                if s.has_left(consumer) {
                     let finished = s.consumed.iter().any(|((n, _), c)| n == consumer && *c == DONE);
                     if !finished {
                         return Err(RuntimeError::ConsumerGone {
