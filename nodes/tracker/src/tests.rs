@@ -69,6 +69,34 @@ fn id_of(seg: &Segmentation, out: &evseg_schemas::Tracks, label: u32) -> u32 {
     ids[0]
 }
 
+/// Grows the box of `seg`'s segment `k` by `by` pixels on every side.
+fn widen(seg: &mut Segmentation, k: usize, by: f32) {
+    let b = &mut seg.segments[k].bbox;
+    *b = [b[0] - by, b[1] - by, b[2] + by, b[3] + by];
+}
+
+/// A slice with a large object (label 1, 300 events, a 40 x 40 px box) at `large` and a small
+/// one (label 2, a 20 x 20 px box) at `small`, besides 50 background events.
+fn large_and_small(large: [f64; 2], small: [f64; 2], small_events: u32) -> (usize, Segmentation) {
+    let (n, mut seg) = frame(
+        &[
+            Obj {
+                label: 1,
+                centroid: large,
+                events: 300,
+            },
+            Obj {
+                label: 2,
+                centroid: small,
+                events: small_events,
+            },
+        ],
+        50,
+    );
+    widen(&mut seg, 0, 10.0);
+    (n, seg)
+}
+
 fn position(start: [f64; 2], velocity: [f64; 2], k: usize) -> [f64; 2] {
     let t = k as f64 * DT;
     [start[0] + velocity[0] * t, start[1] + velocity[1] * t]
@@ -628,23 +656,8 @@ fn a_piece_inside_another_tracks_box_is_merged_whatever_its_velocity() -> Result
         let mut ids = Vec::new();
         for k in 0..6 {
             let swing = if k % 2 == 0 { -10.0 } else { 10.0 };
-            let (n, mut seg) = frame(
-                &[
-                    Obj {
-                        label: 1,
-                        centroid: [200.0 + 3.0 * k as f64, 100.0],
-                        events: 300,
-                    },
-                    Obj {
-                        label: 2,
-                        centroid: [200.0 + 3.0 * k as f64 + swing, 100.0],
-                        events: 100,
-                    },
-                ],
-                50,
-            );
-            let b = &mut seg.segments[0].bbox;
-            *b = [b[0] - 10.0, b[1] - 10.0, b[2] + 10.0, b[3] + 10.0];
+            let x = 200.0 + 3.0 * k as f64;
+            let (n, seg) = large_and_small([x, 100.0], [x + swing, 100.0], 100);
             let out = tracker.update(span(k), n, &seg)?;
             ids.push((id_of(&seg, &out, 1), id_of(&seg, &out, 2)));
         }
@@ -668,23 +681,7 @@ fn two_objects_tracked_apart_stay_apart_when_one_passes_inside_the_others_box() 
     let mut overlapped = 0;
     for k in 0..30 {
         let small = [100.0 + 300.0 * k as f64 * DT, 300.0];
-        let (n, mut seg) = frame(
-            &[
-                Obj {
-                    label: 1,
-                    centroid: [300.0, 300.0],
-                    events: 300,
-                },
-                Obj {
-                    label: 2,
-                    centroid: small,
-                    events: 100,
-                },
-            ],
-            50,
-        );
-        let b = &mut seg.segments[0].bbox;
-        *b = [b[0] - 10.0, b[1] - 10.0, b[2] + 10.0, b[3] + 10.0];
+        let (n, seg) = large_and_small([300.0, 300.0], small, 100);
         overlapped += usize::from((small[0] - 300.0).abs() <= 10.0);
         let out = tracker.update(span(k), n, &seg)?;
         assert_eq!((id_of(&seg, &out, 1), id_of(&seg, &out, 2)), (1, 2), "slice {k}");
@@ -707,23 +704,8 @@ fn objects_joined_while_overlapping_are_split_once_apart() -> Result<(), Tracker
         })?;
         let mut ids = Vec::new();
         for k in 0..15 {
-            let (n, mut seg) = frame(
-                &[
-                    Obj {
-                        label: 1,
-                        centroid: [300.0, 300.0],
-                        events: 300,
-                    },
-                    Obj {
-                        label: 2,
-                        centroid: [300.0 + 400.0 * k as f64 * DT, 300.0],
-                        events: 150,
-                    },
-                ],
-                50,
-            );
-            let b = &mut seg.segments[0].bbox;
-            *b = [b[0] - 10.0, b[1] - 10.0, b[2] + 10.0, b[3] + 10.0];
+            let second = [300.0 + 400.0 * k as f64 * DT, 300.0];
+            let (n, seg) = large_and_small([300.0, 300.0], second, 150);
             let out = tracker.update(span(k), n, &seg)?;
             ids.push((id_of(&seg, &out, 1), id_of(&seg, &out, 2)));
         }
@@ -749,10 +731,6 @@ fn a_split_track_stays_with_its_larger_group() -> Result<(), TrackerError> {
     // two groups 19 px apart: a small piece (120 events) nearest the predicted centroid, which
     // the association matches, and the bulk (400 events) absorbed through the box.
     let mut tracker = Tracker::new(TrackerParams::default())?;
-    let widen = |seg: &mut Segmentation, k: usize, by: f32| {
-        let b = &mut seg.segments[k].bbox;
-        *b = [b[0] - by, b[1] - by, b[2] + by, b[3] + by];
-    };
     for k in 0..3 {
         let (n, mut seg) = frame(
             &[Obj {

@@ -454,53 +454,37 @@ impl Tracker {
                 continue;
             }
             let groups = box_groups(segments, &members, gap);
-            let n_groups = groups.iter().max().map_or(0, |g| g + 1);
-            let first_group = groups[members.iter().position(|&k| k == first).unwrap_or(0)];
-            let group_events = |g: usize| -> u32 {
-                members
-                    .iter()
-                    .zip(&groups)
-                    .filter(|&(_, &h)| h == g)
-                    .map(|(&k, _)| counts[k])
-                    .sum()
-            };
+            let events: Vec<u32> = groups
+                .iter()
+                .map(|g| g.iter().map(|&k| counts[k]).sum())
+                .collect();
+            let largest = |g: &[usize]| g.iter().copied().max_by_key(|&k| counts[k]);
+            let first_group = groups.iter().position(|g| g.contains(&first)).unwrap_or(0);
             let mut keep = first_group;
-            for g in 0..n_groups {
-                if group_events(g) > group_events(keep) {
+            for (g, &e) in events.iter().enumerate() {
+                if e > events[keep] {
                     keep = g;
                 }
             }
             if keep != first_group
                 && let Some(prior) = before.get(ti)
-                && let Some(main) = members
-                    .iter()
-                    .zip(&groups)
-                    .filter(|&(_, &h)| h == keep)
-                    .map(|(&k, _)| k)
-                    .max_by_key(|&k| counts[k])
+                && let Some(main) = largest(&groups[keep])
             {
                 self.tracks[ti] = prior.clone();
                 self.tracks[ti].take(&segments[main], t, &self.params);
                 absorbed[main] = false;
                 absorbed[first] = true;
             }
-            for g in (0..n_groups).filter(|&g| g != keep) {
-                let group: Vec<usize> = members
-                    .iter()
-                    .zip(&groups)
-                    .filter(|&(_, &h)| h == g)
-                    .map(|(&k, _)| k)
-                    .collect();
-                let events: u32 = group.iter().map(|&k| counts[k]).sum();
-                if events < min_events {
+            for (g, group) in groups.iter().enumerate() {
+                if g == keep || events[g] < min_events {
                     continue;
                 }
-                let Some(&main) = group.iter().max_by_key(|&&k| counts[k]) else {
+                let Some(main) = largest(group) else {
                     continue;
                 };
                 self.open_track(&segments[main], t);
                 let nt = self.tracks.len() - 1;
-                for &k in &group {
+                for &k in group {
                     track_of_segment[k] = Some(nt);
                     absorbed[k] = k != main;
                 }
@@ -597,28 +581,31 @@ fn union_boxes(
 }
 
 /// Groups of `members` (indices into `segments`) whose boxes lie at most `gap` pixels apart,
-/// transitively: the group number (0, 1, ...) of each member, in `members`' order.
-fn box_groups(segments: &[Segment], members: &[usize], gap: f64) -> Vec<usize> {
+/// transitively: each group's segment indices, in `members`' order.
+fn box_groups(segments: &[Segment], members: &[usize], gap: f64) -> Vec<Vec<usize>> {
     let boxes: Vec<[f64; 4]> = members.iter().map(|&k| bbox_f64(segments[k].bbox)).collect();
-    let mut group = vec![usize::MAX; members.len()];
-    let mut next = 0;
+    let mut placed = vec![false; members.len()];
+    let mut groups = Vec::new();
     for start in 0..members.len() {
-        if group[start] != usize::MAX {
+        if placed[start] {
             continue;
         }
-        group[start] = next;
+        placed[start] = true;
+        let mut group = Vec::new();
         let mut stack = vec![start];
         while let Some(a) = stack.pop() {
+            group.push(a);
             for b in 0..members.len() {
-                if group[b] == usize::MAX && box_gap(boxes[a], boxes[b]) <= gap {
-                    group[b] = next;
+                if !placed[b] && box_gap(boxes[a], boxes[b]) <= gap {
+                    placed[b] = true;
                     stack.push(b);
                 }
             }
         }
-        next += 1;
+        group.sort_unstable();
+        groups.push(group.into_iter().map(|i| members[i]).collect());
     }
-    group
+    groups
 }
 
 /// The smallest box holding boxes `a` and `b`.
