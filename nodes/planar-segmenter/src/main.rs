@@ -50,6 +50,15 @@ impl Stage for Node {
     }
 }
 
+/// The `robust` parameter's name of `r` (the inverse of [`robust_from`] without its threshold).
+fn robust_name(r: Robust) -> &'static str {
+    match r {
+        Robust::LeastSquares => "least_squares",
+        Robust::Huber { .. } => "huber",
+        Robust::Tukey { .. } => "tukey",
+    }
+}
+
 fn robust_from(name: &str, threshold: Option<f64>) -> Result<Robust, BoxError> {
     Ok(match name {
         "least_squares" => Robust::LeastSquares,
@@ -96,7 +105,7 @@ fn main() -> ExitCode {
     )
     .param(
         "robust",
-        "huber",
+        robust_name(d.fit.robust),
         "least_squares (the paper), huber or tukey (iteratively reweighted)",
     )
     .param(

@@ -243,12 +243,7 @@ fn the_previous_foreground_is_left_out_of_the_plain_fit() {
     let clean = model_error(&second.residuals.model);
     assert!(clean < 1e-5, "model error {clean} (f32 flow), pulled {pulled}");
     // Every object event is foreground; the smoothing (sigma_px) spreads a little past it.
-    let mut spread = 0;
-    for (i, &o) in truth.iter().enumerate() {
-        let background = second.residuals.background[i];
-        assert!(!(o && background), "object event {i}");
-        spread += usize::from(!o && !background);
-    }
+    let spread = spread_past_object(&second, &truth);
     assert!(
         spread * 20 < truth.len(),
         "{spread} background events called foreground"
@@ -443,6 +438,31 @@ fn long_flows_residuals_are_discounted_relative_to_the_median_length() {
     assert_eq!(none(0), 1.0);
 }
 
+/// Background events `r` calls foreground, after checking that it calls every object event
+/// (`truth`) foreground.
+fn spread_past_object(r: &PlanarResult, truth: &[bool]) -> usize {
+    let mut spread = 0;
+    for (i, &o) in truth.iter().enumerate() {
+        let background = r.residuals.background[i];
+        assert!(!(o && background), "object event {i}");
+        spread += usize::from(!o && !background);
+    }
+    spread
+}
+
+/// The result of segmenting the slice `(ev, fl)` a second time with `labels` as the previous
+/// slice's (the first time they cannot be placed), which must then be applied.
+fn with_previous(params: PlanarParams, ev: &Events, fl: &NormalFlow, labels: &[u32]) -> PlanarResult {
+    let mut seg = PlanarSegmenter::new(params).unwrap();
+    seg.segment_with_previous(&camera(), ev, fl, Some(W.into()), Some(labels))
+        .unwrap();
+    let second = seg
+        .segment_with_previous(&camera(), ev, fl, Some(W.into()), Some(labels))
+        .unwrap();
+    assert!(second.previous_applied);
+    second
+}
+
 /// With an exact background model the only foreground past the object is the smoothing's ramp;
 /// the default compressed split takes more of it than the linear one, but stays bounded.
 #[test]
@@ -450,22 +470,8 @@ fn a_compressed_split_spreads_further_past_a_clean_object() {
     let (ev, fl, truth) = scene(6000, true, 0.0, flow_with_object);
     let labels: Vec<u32> = truth.iter().map(|&o| u32::from(o)).collect();
     let spread = |split_power: f64| {
-        let mut seg = PlanarSegmenter::new(PlanarParams { split_power, ..ls() }).unwrap();
-        seg.segment_with_previous(&camera(), &ev, &fl, Some(W.into()), Some(&labels))
-            .unwrap();
-        let r = seg
-            .segment_with_previous(&camera(), &ev, &fl, Some(W.into()), Some(&labels))
-            .unwrap();
-        assert!(r.previous_applied);
-        let mut spread = 0;
-        for (i, &o) in truth.iter().enumerate() {
-            assert!(
-                !(o && r.residuals.background[i]),
-                "object event {i} at {split_power}"
-            );
-            spread += usize::from(!o && !r.residuals.background[i]);
-        }
-        spread
+        let r = with_previous(PlanarParams { split_power, ..ls() }, &ev, &fl, &labels);
+        spread_past_object(&r, &truth)
     };
     let (linear, default) = (spread(1.0), spread(PlanarParams::default().split_power));
     assert!(linear < default, "{linear} {default}");
@@ -501,16 +507,7 @@ fn the_robust_fit_is_used_only_with_the_previous_foreground() {
         .enumerate()
         .map(|(i, &l)| l * (i % 2) as u32)
         .collect();
-    let masked = |params: PlanarParams| {
-        let mut seg = PlanarSegmenter::new(params).unwrap();
-        seg.segment_with_previous(&camera(), &ev, &fl, Some(W.into()), Some(&half))
-            .unwrap();
-        let second = seg
-            .segment_with_previous(&camera(), &ev, &fl, Some(W.into()), Some(&half))
-            .unwrap();
-        assert!(second.previous_applied);
-        second.residuals.model
-    };
+    let masked = |params: PlanarParams| with_previous(params, &ev, &fl, &half).residuals.model;
     assert_eq!(masked(d), masked(huber()));
     assert_ne!(masked(d), masked(ls()));
 }
