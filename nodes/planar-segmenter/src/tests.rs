@@ -402,6 +402,18 @@ fn malformed_input_is_an_error() {
             ..Default::default()
         },
         PlanarParams {
+            split_power: 1.5,
+            ..Default::default()
+        },
+        PlanarParams {
+            split_power: -0.5,
+            ..Default::default()
+        },
+        PlanarParams {
+            split_power: f64::NAN,
+            ..Default::default()
+        },
+        PlanarParams {
             fit: FitParams {
                 robust: Robust::Huber { k: 0.0 },
                 ..Default::default()

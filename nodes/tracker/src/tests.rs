@@ -517,6 +517,14 @@ fn invalid_parameters_are_refused() {
             merge_inside: f64::NAN,
             ..Default::default()
         },
+        TrackerParams {
+            split_gap_px: -1.0,
+            ..Default::default()
+        },
+        TrackerParams {
+            split_gap_px: f64::NAN,
+            ..Default::default()
+        },
     ];
     for p in bad {
         assert!(
