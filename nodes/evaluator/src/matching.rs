@@ -25,6 +25,11 @@ pub struct ObjectMatch {
     pub predicted_events: u64,
     /// Events in both.
     pub intersection: u64,
+    /// Events of the object labelled background (0): what the segmentation missed.
+    pub as_background: u64,
+    /// Events of the object under other non-zero labels than the matched one: the object
+    /// split into pieces, or joined to a label matched to another object (or to none).
+    pub in_other_labels: u64,
 }
 
 /// Matches labels to objects over `(predicted label, ground-truth id)` pairs, one per event.
@@ -33,9 +38,13 @@ pub fn match_objects(pairs: impl Iterator<Item = (u32, u16)>) -> Vec<ObjectMatch
     let mut joint: BTreeMap<(u16, u32), u64> = BTreeMap::new();
     let mut per_object: BTreeMap<u16, u64> = BTreeMap::new();
     let mut per_label: BTreeMap<u32, u64> = BTreeMap::new();
+    let mut background: BTreeMap<u16, u64> = BTreeMap::new();
     for (label, id) in pairs {
         if id != 0 {
             *per_object.entry(id).or_default() += 1;
+            if label == 0 {
+                *background.entry(id).or_default() += 1;
+            }
         }
         if label != 0 {
             *per_label.entry(label).or_default() += 1;
@@ -60,6 +69,8 @@ pub fn match_objects(pairs: impl Iterator<Item = (u32, u16)>) -> Vec<ObjectMatch
         .enumerate()
         .map(|(oi, &(object, truth_events))| {
             let matched = assignment[oi].filter(|&li| weights[oi][li] > 0.0);
+            let as_background = background.get(&object).copied().unwrap_or(0);
+            let labelled = truth_events - as_background;
             match matched {
                 Some(li) => {
                     let (v, n) = iou(oi, li);
@@ -70,6 +81,8 @@ pub fn match_objects(pairs: impl Iterator<Item = (u32, u16)>) -> Vec<ObjectMatch
                         truth_events,
                         predicted_events: labels[li].1,
                         intersection: n,
+                        as_background,
+                        in_other_labels: labelled - n,
                     }
                 }
                 None => ObjectMatch {
@@ -79,6 +92,8 @@ pub fn match_objects(pairs: impl Iterator<Item = (u32, u16)>) -> Vec<ObjectMatch
                     truth_events,
                     predicted_events: 0,
                     intersection: 0,
+                    as_background,
+                    in_other_labels: labelled,
                 },
             }
         })
@@ -101,6 +116,8 @@ mod tests {
         assert!((m[0].iou - 4.0 / 5.0).abs() < 1e-12);
         assert_eq!((m[1].object, m[1].label), (2, Some(9)));
         assert!((m[1].iou - 0.5).abs() < 1e-12);
+        assert_eq!((m[0].as_background, m[0].in_other_labels), (0, 0));
+        assert_eq!((m[1].as_background, m[1].in_other_labels), (1, 0));
         // Swapped label values give the same matching quality: label ids are arbitrary.
         let all_bg = match_objects([0u32; 8].iter().copied().zip(ids.iter().copied()));
         assert!(all_bg.iter().all(|o| o.label.is_none() && o.iou == 0.0));
@@ -115,5 +132,19 @@ mod tests {
         assert!((m[0].iou - 0.75).abs() < 1e-12);
         assert_eq!(m[1].label, None);
         assert_eq!(m[1].iou, 0.0);
+        // Object 2 was not missed: its event went to the label matched to object 1.
+        assert_eq!((m[1].as_background, m[1].in_other_labels), (0, 1));
+    }
+
+    #[test]
+    fn an_object_split_into_pieces_counts_the_pieces_outside_its_match() {
+        let ids = [1u16, 1, 1, 1, 1, 0];
+        let labels = [4u32, 4, 4, 6, 0, 0];
+        let m = match_objects(labels.iter().copied().zip(ids.iter().copied()));
+        assert_eq!(m[0].label, Some(4));
+        assert_eq!(
+            (m[0].intersection, m[0].in_other_labels, m[0].as_background),
+            (3, 1, 1)
+        );
     }
 }

@@ -39,6 +39,13 @@ pub struct ObjectIouSummary {
     /// Times the matched label (track id) changed from one matched window to the next (the
     /// issue's "id switches"; unmatched windows in between do not count as a switch).
     pub id_switches: u64,
+    /// Where the object's events went, over all its windows (shares of its events, summing to
+    /// 1 with [`ObjectIouSummary::share_in_match`]): labelled background.
+    pub share_as_background: f64,
+    /// Share of the object's events under the label matched to it in their window.
+    pub share_in_match: f64,
+    /// Share of the object's events under other labels (pieces, or joined to another object).
+    pub share_in_other_labels: f64,
 }
 
 /// Distribution of the direction error, degrees.
@@ -152,6 +159,8 @@ pub struct SequenceAccumulator {
     iou_events: MeanAcc,
     iou_mask: MeanAcc,
     per_object: BTreeMap<u32, (f64, u64, u64)>,
+    /// Per object: events, of those in the matched label, labelled background, in other labels.
+    per_object_events: BTreeMap<u32, [u64; 4]>,
     /// Per object: last matched label and the number of label changes.
     id_history: BTreeMap<u32, (Option<u32>, u64)>,
     ego_n: u64,
@@ -180,6 +189,11 @@ impl SequenceAccumulator {
                 e.0 += m.iou;
                 e.1 += 1;
                 e.2 += m.label.is_some() as u64;
+                let c = self.per_object_events.entry(m.object as u32).or_default();
+                c[0] += m.truth_events;
+                c[1] += m.intersection;
+                c[2] += m.as_background;
+                c[3] += m.in_other_labels;
                 if let Some(l) = m.label {
                     let h = self.id_history.entry(m.object as u32).or_default();
                     if h.0.is_some_and(|prev| prev != l) {
@@ -225,12 +239,19 @@ impl SequenceAccumulator {
         let iou_per_object: Vec<ObjectIouSummary> = self
             .per_object
             .iter()
-            .map(|(&object, &(sum, n, matched))| ObjectIouSummary {
-                object,
-                mean_iou: sum / n as f64,
-                windows: n,
-                matched_windows: matched,
-                id_switches: self.id_history.get(&object).map_or(0, |h| h.1),
+            .map(|(&object, &(sum, n, matched))| {
+                let c = self.per_object_events.get(&object).copied().unwrap_or_default();
+                let share = |k: usize| if c[0] == 0 { 0.0 } else { c[k] as f64 / c[0] as f64 };
+                ObjectIouSummary {
+                    object,
+                    mean_iou: sum / n as f64,
+                    windows: n,
+                    matched_windows: matched,
+                    id_switches: self.id_history.get(&object).map_or(0, |h| h.1),
+                    share_in_match: share(1),
+                    share_as_background: share(2),
+                    share_in_other_labels: share(3),
+                }
             })
             .collect();
         let iou_per_object_mean = (!iou_per_object.is_empty())
