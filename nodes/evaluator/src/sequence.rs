@@ -4,6 +4,7 @@ use std::collections::BTreeMap;
 
 use serde::Serialize;
 
+use crate::matching::ObjectMatch;
 use crate::outcome::{Outcome, Skip};
 use crate::slice_eval::SliceReport;
 
@@ -39,8 +40,8 @@ pub struct ObjectIouSummary {
     /// Times the matched label (track id) changed from one matched window to the next (the
     /// issue's "id switches"; unmatched windows in between do not count as a switch).
     pub id_switches: u64,
-    /// Where the object's events went, over all its windows (shares of its events, summing to
-    /// 1 with [`ObjectIouSummary::share_in_match`]): labelled background.
+    /// Where the object's events went, over all its windows (shares of its events; the three
+    /// shares sum to 1): labelled background.
     pub share_as_background: f64,
     /// Share of the object's events under the label matched to it in their window.
     pub share_in_match: f64,
@@ -151,6 +152,41 @@ fn rmse<const N: usize>(sq: [f64; N], n: u64) -> Option<[f64; N]> {
     (n > 0).then(|| sq.map(|s| (s / n as f64).sqrt()))
 }
 
+/// One ground-truth object's figures so far (see [`ObjectIouSummary`]).
+#[derive(Debug, Default)]
+struct ObjectAcc {
+    iou_sum: f64,
+    windows: u64,
+    matched_windows: u64,
+    /// The label matched in the last matched window.
+    last_label: Option<u32>,
+    id_switches: u64,
+    /// The object's events, and of those: under the matched label, background, other labels.
+    events: u64,
+    in_match: u64,
+    as_background: u64,
+    in_other_labels: u64,
+}
+
+impl ObjectAcc {
+    /// Adds the object's match in one window.
+    fn add(&mut self, m: &ObjectMatch) {
+        self.iou_sum += m.iou;
+        self.windows += 1;
+        self.matched_windows += u64::from(m.label.is_some());
+        if let Some(l) = m.label {
+            if self.last_label.is_some_and(|prev| prev != l) {
+                self.id_switches += 1;
+            }
+            self.last_label = Some(l);
+        }
+        self.events += m.truth_events;
+        self.in_match += m.intersection;
+        self.as_background += m.as_background;
+        self.in_other_labels += m.in_other_labels;
+    }
+}
+
 /// Adds slice reports one at a time.
 #[derive(Debug, Default)]
 pub struct SequenceAccumulator {
@@ -158,11 +194,7 @@ pub struct SequenceAccumulator {
     moving: u64,
     iou_events: MeanAcc,
     iou_mask: MeanAcc,
-    per_object: BTreeMap<u32, (f64, u64, u64)>,
-    /// Per object: events, of those in the matched label, labelled background, in other labels.
-    per_object_events: BTreeMap<u32, [u64; 4]>,
-    /// Per object: last matched label and the number of label changes.
-    id_history: BTreeMap<u32, (Option<u32>, u64)>,
+    per_object: BTreeMap<u32, ObjectAcc>,
     ego_n: u64,
     ego_skipped: BTreeMap<String, u64>,
     ego_sq: [f64; 3],
@@ -185,22 +217,7 @@ impl SequenceAccumulator {
         self.iou_mask.add(&r.iou_mask, |s| s.iou);
         if let Outcome::Scored(o) = &r.objects {
             for m in &o.matches {
-                let e = self.per_object.entry(m.object as u32).or_default();
-                e.0 += m.iou;
-                e.1 += 1;
-                e.2 += m.label.is_some() as u64;
-                let c = self.per_object_events.entry(m.object as u32).or_default();
-                c[0] += m.truth_events;
-                c[1] += m.intersection;
-                c[2] += m.as_background;
-                c[3] += m.in_other_labels;
-                if let Some(l) = m.label {
-                    let h = self.id_history.entry(m.object as u32).or_default();
-                    if h.0.is_some_and(|prev| prev != l) {
-                        h.1 += 1;
-                    }
-                    h.0 = Some(l);
-                }
+                self.per_object.entry(m.object as u32).or_default().add(m);
             }
         }
         match &r.egomotion {
@@ -239,18 +256,23 @@ impl SequenceAccumulator {
         let iou_per_object: Vec<ObjectIouSummary> = self
             .per_object
             .iter()
-            .map(|(&object, &(sum, n, matched))| {
-                let c = self.per_object_events.get(&object).copied().unwrap_or_default();
-                let share = |k: usize| if c[0] == 0 { 0.0 } else { c[k] as f64 / c[0] as f64 };
+            .map(|(&object, a)| {
+                let share = |n: u64| {
+                    if a.events == 0 {
+                        0.0
+                    } else {
+                        n as f64 / a.events as f64
+                    }
+                };
                 ObjectIouSummary {
                     object,
-                    mean_iou: sum / n as f64,
-                    windows: n,
-                    matched_windows: matched,
-                    id_switches: self.id_history.get(&object).map_or(0, |h| h.1),
-                    share_in_match: share(1),
-                    share_as_background: share(2),
-                    share_in_other_labels: share(3),
+                    mean_iou: a.iou_sum / a.windows as f64,
+                    windows: a.windows,
+                    matched_windows: a.matched_windows,
+                    id_switches: a.id_switches,
+                    share_in_match: share(a.in_match),
+                    share_as_background: share(a.as_background),
+                    share_in_other_labels: share(a.in_other_labels),
                 }
             })
             .collect();

@@ -203,6 +203,11 @@ fn perfect_labels_score_one_and_a_ten_degree_direction_error_gives_ten_degrees()
     assert_eq!(sum.iou_per_object[0].mean_iou, 1.0);
     assert_eq!(sum.iou_per_object[0].matched_windows, 10);
     assert_eq!(sum.iou_per_object[0].id_switches, 0);
+    let o = &sum.iou_per_object[0];
+    assert_eq!(
+        (o.share_in_match, o.share_as_background, o.share_in_other_labels),
+        (1.0, 0.0, 0.0)
+    );
 
     let e = &sum.egomotion;
     // The last window's end has no pose after it to interpolate from.
@@ -263,6 +268,11 @@ fn all_background_scores_zero_and_invalid_egomotion_is_not_available() {
     assert_eq!(sum.iou_mask.mean, Some(0.0));
     assert_eq!(sum.iou_per_object[0].mean_iou, 0.0);
     assert_eq!(sum.iou_per_object[0].matched_windows, 0);
+    let o = &sum.iou_per_object[0];
+    assert_eq!(
+        (o.share_in_match, o.share_as_background, o.share_in_other_labels),
+        (0.0, 1.0, 0.0)
+    );
     assert_eq!(sum.egomotion.windows, 0);
     assert_eq!(sum.egomotion.skipped.get("no_prediction"), Some(&8));
     assert_eq!(sum.egomotion.skipped.len(), 1);
