@@ -8,6 +8,19 @@
 //!   `<prefix>.tracks.npy`, float64 (T, 15): slice, id, centroid x y (px), velocity x y (px/s),
 //!   bbox x_min y_min x_max y_max (px), translation x y z (1/s at depth 1, camera frame), age (slices),
 //!   events;
+//! - `evseg.Segmentation` (a segmenter's output before tracking): `<prefix>.labels.npy` and
+//!   `<prefix>.egomotion.npy` as for `evseg.Tracks`; `<prefix>.segments.npy`, float64 (G, 12):
+//!   slice, label, translation x y z (1/s at depth 1, camera frame), centroid x y (px), bbox
+//!   x_min y_min x_max y_max (px), events;
+//! - `evseg.CoarseSegmentation`: `<prefix>.groups.npy`, float64 (N, 3): slice, group (0 = merged
+//!   background, g >= 1 = cluster g - 1, -1 = unassigned), residual (normalized coordinates per
+//!   second, NaN without flow); `<prefix>.egomotion.npy` as for `evseg.Tracks`;
+//! - `evseg.Clusters`: `<prefix>.clusters.npy`, int64 (N, 2): slice, cluster (-1 = unassigned);
+//! - `evseg.Residuals`: `<prefix>.residuals.npy`, float64 (N, 3): slice, residual (normalized
+//!   coordinates per second, NaN without flow), background (0/1);
+//! - `evseg.Truth` with per-event ground truth: `<prefix>.objects.npy`, int64 (N, 2): slice,
+//!   object id (0 = background); `<prefix>.flow.npy`, float64 (N, 3): slice, true flow x y (px/s),
+//!   when the source gives it;
 //! - `evseg.NormalFlow`: `<prefix>.flow.npy`, float64 (N, 4): slice, nx, ny (normalized image coordinates per second), confidence (0..1);
 //! - `evseg.Metrics`: `<prefix>.metrics.npy`, float64 (S, 1 + M): slice, then one column per
 //!   metric name (NaN where a slice lacks it).
@@ -20,7 +33,10 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use evseg_evimo2::npy;
-use evseg_schemas::{CodecError, Message, Metrics, NormalFlow, Slice, Tracks, codec};
+use evseg_schemas::{
+    Clusters, CoarseSegmentation, CodecError, Egomotion, Message, Metrics, NormalFlow, Residuals,
+    Segmentation, Slice, Tracks, Truth, codec,
+};
 use serde::Serialize;
 
 use crate::error::RecordError;
@@ -64,7 +80,7 @@ pub struct ExportedFile {
 /// Messages that were not exported, per topic.
 #[derive(Debug, Clone, Default, PartialEq, Serialize)]
 pub struct NotExported {
-    /// Messages of a known schema that has no export (e.g. `evseg.Truth`).
+    /// Messages of a known schema that has no export (e.g. `evseg.EventPacket`: the slices hold the same events).
     pub other_schema: u64,
     /// Messages of a schema name or version this build does not know.
     pub unknown_schema: u64,
@@ -158,6 +174,15 @@ impl Collector {
         }
     }
 
+    /// One row of `<topic>.egomotion.npy`: `(seq, t_start, t_end)` and `g`.
+    fn egomotion(&mut self, topic: &str, schema: &str, (seq, t0, t1): (u64, f64, f64), g: &Egomotion) {
+        let ego = self.table(topic, "egomotion", schema, EGOMOTION, false);
+        ego.f64_rows.extend([seq as f64, t0, t1]);
+        ego.f64_rows.extend(g.direction);
+        ego.f64_rows.extend(g.omega);
+        ego.f64_rows.push(if g.valid { 1.0 } else { 0.0 });
+    }
+
     fn take(&mut self, m: MessageRef<'_>) {
         let topic = m.channel.topic.clone();
         let schema = match codec::decode_header(m.data) {
@@ -192,12 +217,7 @@ impl Collector {
                 for &l in &tr.label {
                     labels.i64_rows.extend([seq as i64, i64::from(l)]);
                 }
-                let ego = self.table(&topic, "egomotion", Tracks::SCHEMA, EGOMOTION, false);
-                let g = &tr.egomotion;
-                ego.f64_rows.extend([seq as f64, t0, t1]);
-                ego.f64_rows.extend(g.direction);
-                ego.f64_rows.extend(g.omega);
-                ego.f64_rows.push(if g.valid { 1.0 } else { 0.0 });
+                self.egomotion(&topic, Tracks::SCHEMA, (seq, t0, t1), &tr.egomotion);
                 let tracks = self.table(&topic, "tracks", Tracks::SCHEMA, TRACKS, false);
                 for k in &tr.tracks {
                     tracks.f64_rows.extend([seq as f64, f64::from(k.id)]);
@@ -206,6 +226,77 @@ impl Collector {
                     tracks.f64_rows.extend(k.bbox.map(f64::from));
                     tracks.f64_rows.extend(k.translation);
                     tracks.f64_rows.extend([f64::from(k.age), f64::from(k.events)]);
+                }
+            }
+            Segmentation::SCHEMA => {
+                let Some((seq, t0, t1, sg)) = self.decode::<Segmentation>(&m) else {
+                    return;
+                };
+                let labels = self.table(&topic, "labels", Segmentation::SCHEMA, LABELS, true);
+                for &l in &sg.label {
+                    labels.i64_rows.extend([seq as i64, i64::from(l)]);
+                }
+                self.egomotion(&topic, Segmentation::SCHEMA, (seq, t0, t1), &sg.egomotion);
+                let segments = self.table(&topic, "segments", Segmentation::SCHEMA, SEGMENTS, false);
+                for g in &sg.segments {
+                    segments.f64_rows.extend([seq as f64, f64::from(g.label)]);
+                    segments.f64_rows.extend(g.translation);
+                    segments.f64_rows.extend(g.centroid);
+                    segments.f64_rows.extend(g.bbox.map(f64::from));
+                    segments.f64_rows.push(f64::from(g.events));
+                }
+            }
+            CoarseSegmentation::SCHEMA => {
+                let Some((seq, t0, t1, c)) = self.decode::<CoarseSegmentation>(&m) else {
+                    return;
+                };
+                let t = self.table(&topic, "groups", CoarseSegmentation::SCHEMA, GROUPS, false);
+                for (i, &g) in c.group.iter().enumerate() {
+                    let group = if g == CoarseSegmentation::UNASSIGNED {
+                        -1.0
+                    } else {
+                        f64::from(g)
+                    };
+                    let r = c.residual.get(i).map_or(f64::NAN, |&r| f64::from(r));
+                    t.f64_rows.extend([seq as f64, group, r]);
+                }
+                self.egomotion(&topic, CoarseSegmentation::SCHEMA, (seq, t0, t1), &c.egomotion);
+            }
+            Clusters::SCHEMA => {
+                let Some((seq, _, _, c)) = self.decode::<Clusters>(&m) else {
+                    return;
+                };
+                let t = self.table(&topic, "clusters", Clusters::SCHEMA, CLUSTERS, true);
+                for &id in &c.id {
+                    t.i64_rows
+                        .extend([seq as i64, if id == u16::MAX { -1 } else { i64::from(id) }]);
+                }
+            }
+            Residuals::SCHEMA => {
+                let Some((seq, _, _, r)) = self.decode::<Residuals>(&m) else {
+                    return;
+                };
+                let t = self.table(&topic, "residuals", Residuals::SCHEMA, RESIDUALS, false);
+                for (i, &bg) in r.background.iter().enumerate() {
+                    let v = r.residual.get(i).map_or(f64::NAN, |&v| f64::from(v));
+                    t.f64_rows.extend([seq as f64, v, if bg { 1.0 } else { 0.0 }]);
+                }
+            }
+            Truth::SCHEMA => {
+                let Some((seq, _, _, tr)) = self.decode::<Truth>(&m) else {
+                    return;
+                };
+                if !tr.event_object.is_empty() {
+                    let t = self.table(&topic, "objects", Truth::SCHEMA, OBJECTS, true);
+                    for &o in &tr.event_object {
+                        t.i64_rows.extend([seq as i64, i64::from(o)]);
+                    }
+                }
+                if !tr.flow_x.is_empty() && tr.flow_x.len() == tr.flow_y.len() {
+                    let t = self.table(&topic, "flow", Truth::SCHEMA, TRUE_FLOW, false);
+                    for (&fx, &fy) in tr.flow_x.iter().zip(&tr.flow_y) {
+                        t.f64_rows.extend([seq as f64, f64::from(fx), f64::from(fy)]);
+                    }
                 }
             }
             NormalFlow::SCHEMA => {
@@ -290,6 +381,36 @@ const TRACKS: &[(&str, &str)] = &[
     ("age", "slices"),
     ("events", "count"),
 ];
+const SEGMENTS: &[(&str, &str)] = &[
+    ("slice", "index"),
+    ("label", "segment id, 0 = background"),
+    ("translation_x", "1/s at depth 1, camera frame"),
+    ("translation_y", "1/s at depth 1, camera frame"),
+    ("translation_z", "1/s at depth 1, camera frame"),
+    ("centroid_x", "px"),
+    ("centroid_y", "px"),
+    ("bbox_x_min", "px"),
+    ("bbox_y_min", "px"),
+    ("bbox_x_max", "px"),
+    ("bbox_y_max", "px"),
+    ("events", "count"),
+];
+const GROUPS: &[(&str, &str)] = &[
+    ("slice", "index"),
+    (
+        "group",
+        "0 = merged background, g >= 1 = cluster g - 1, -1 = unassigned",
+    ),
+    ("residual", "normalized coordinates/s, NaN without flow"),
+];
+const CLUSTERS: &[(&str, &str)] = &[("slice", "index"), ("cluster", "cluster id, -1 = unassigned")];
+const RESIDUALS: &[(&str, &str)] = &[
+    ("slice", "index"),
+    ("residual", "normalized coordinates/s, NaN without flow"),
+    ("background", "0/1"),
+];
+const OBJECTS: &[(&str, &str)] = &[("slice", "index"), ("object", "object id, 0 = background")];
+const TRUE_FLOW: &[(&str, &str)] = &[("slice", "index"), ("flow_x", "px/s"), ("flow_y", "px/s")];
 const FLOW: &[(&str, &str)] = &[
     ("slice", "index"),
     ("nx", "normalized coordinates/s"),

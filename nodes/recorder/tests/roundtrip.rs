@@ -354,3 +354,133 @@ fn a_truncated_recording_still_exports_what_was_recovered() {
     assert!(labels.shape[0] > 0 && labels.shape[0] < SLICES as usize * EVENTS_PER_SLICE);
     assert_eq!(labels.shape[0] % EVENTS_PER_SLICE, 0, "whole messages only");
 }
+
+/// Each stage's per-event output is exported, so a user can compare a stage's output between
+/// two runs (or against the ground truth) without decoding the wire format.
+#[test]
+fn export_writes_every_stage_s_per_event_output_and_the_truth() {
+    use evseg_schemas::{Clusters, CoarseSegmentation, Residuals, Segment, Segmentation, Truth};
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("stages.mcap");
+    let channels = [
+        channel("overseg/clusters", Clusters::SCHEMA),
+        channel("planar/residuals", Residuals::SCHEMA),
+        channel("background/coarse", CoarseSegmentation::SCHEMA),
+        channel("hierarchical/segments", Segmentation::SCHEMA),
+        channel("slicer/truth", Truth::SCHEMA),
+    ];
+    let mut rec = McapRecorder::create(&path, &channels, &WriterSettings::default()).unwrap();
+    let put = |rec: &mut McapRecorder, port: usize, frame: Vec<u8>| {
+        let (env, _) = codec::decode_header(&frame).unwrap();
+        rec.write_frame(port, &env, &frame).unwrap();
+    };
+    let ego = Egomotion {
+        direction: [0.6, 0.0, 0.8],
+        omega: [0.0, 0.1, 0.0],
+        valid: true,
+    };
+    for seq in 0..2u64 {
+        let (t0, t1) = (seq as f64 * 0.03, (seq + 1) as f64 * 0.03);
+        let clusters = Clusters {
+            id: vec![0, u16::MAX, 2],
+            count: 3,
+        };
+        put(&mut rec, 0, codec::encode(seq, t0, t1, &clusters).unwrap());
+        let residuals = Residuals {
+            residual: vec![0.5, f32::NAN, -0.25],
+            background: vec![true, true, false],
+            model: vec![],
+        };
+        put(&mut rec, 1, codec::encode(seq, t0, t1, &residuals).unwrap());
+        let coarse = CoarseSegmentation {
+            group: vec![0, CoarseSegmentation::UNASSIGNED, 3],
+            residual: vec![0.125, f32::NAN, 2.0],
+            map_overlap: vec![1.0, f32::NAN, f32::NAN, 0.0],
+            egomotion: ego,
+        };
+        put(&mut rec, 2, codec::encode(seq, t0, t1, &coarse).unwrap());
+        let segmentation = Segmentation {
+            label: vec![0, 0, 1],
+            segments: vec![Segment {
+                label: 1,
+                translation: [0.1, -0.2, 0.3],
+                centroid: [100.0, 50.0],
+                bbox: [90.0, 40.0, 110.0, 60.0],
+                events: 1,
+            }],
+            egomotion: ego,
+        };
+        put(&mut rec, 3, codec::encode(seq, t0, t1, &segmentation).unwrap());
+        let truth = Truth {
+            event_object: vec![0, 0, 2],
+            flow_x: vec![1.0, 2.0, 3.0],
+            flow_y: vec![-1.0, -2.0, -3.0],
+            ..Truth::default()
+        };
+        put(&mut rec, 4, codec::encode(seq, t0, t1, &truth).unwrap());
+    }
+    rec.finish().unwrap();
+    let out = dir.path().join("export");
+    let summary = export::export(&path, &out).unwrap();
+    let names: Vec<&str> = summary.files.iter().map(|f| f.file.as_str()).collect();
+    assert_eq!(
+        names,
+        [
+            "background.coarse.egomotion.npy",
+            "background.coarse.groups.npy",
+            "hierarchical.segments.egomotion.npy",
+            "hierarchical.segments.labels.npy",
+            "hierarchical.segments.segments.npy",
+            "overseg.clusters.clusters.npy",
+            "planar.residuals.residuals.npy",
+            "slicer.truth.flow.npy",
+            "slicer.truth.objects.npy",
+        ]
+    );
+    assert!(summary.not_exported.is_empty(), "{:?}", summary.not_exported);
+    let load_i64 = |name: &str| {
+        let bytes = std::fs::read(out.join(name)).unwrap();
+        let a = npy::parse_bytes(&bytes, name).unwrap();
+        assert_eq!(a.header.descr, "<i8");
+        let v: Vec<i64> = a
+            .data
+            .chunks_exact(8)
+            .map(|c| i64::from_le_bytes(c.try_into().unwrap()))
+            .collect();
+        (a.header.shape, v)
+    };
+    assert_eq!(
+        load_i64("overseg.clusters.clusters.npy"),
+        (vec![6, 2], vec![0, 0, 0, -1, 0, 2, 1, 0, 1, -1, 1, 2])
+    );
+    assert_eq!(
+        load_i64("slicer.truth.objects.npy"),
+        (vec![6, 2], vec![0, 0, 0, 0, 0, 2, 1, 0, 1, 0, 1, 2])
+    );
+    assert_eq!(
+        load_i64("hierarchical.segments.labels.npy").1[6..],
+        [1, 0, 1, 0, 1, 1]
+    );
+    let (shape, r) = load_f64(&out.join("planar.residuals.residuals.npy"));
+    assert_eq!(shape, [6, 3]);
+    assert_eq!((r[0], r[1], r[2]), (0.0, 0.5, 1.0));
+    assert!(r[4].is_nan());
+    assert_eq!((r[7], r[8]), (-0.25, 0.0));
+    let (shape, g) = load_f64(&out.join("background.coarse.groups.npy"));
+    assert_eq!(shape, [6, 3]);
+    assert_eq!((g[1], g[2], g[4], g[7], g[8]), (0.0, 0.125, -1.0, 3.0, 2.0));
+    let (shape, s) = load_f64(&out.join("hierarchical.segments.segments.npy"));
+    assert_eq!(shape, [2, 12]);
+    assert_eq!(
+        &s[12..],
+        &[
+            1.0, 1.0, 0.1, -0.2, 0.3, 100.0, 50.0, 90.0, 40.0, 110.0, 60.0, 1.0
+        ]
+    );
+    let (shape, e) = load_f64(&out.join("background.coarse.egomotion.npy"));
+    assert_eq!(shape, [2, 10]);
+    assert_eq!(&e[10..], &[1.0, 0.03, 0.06, 0.6, 0.0, 0.8, 0.0, 0.1, 0.0, 1.0]);
+    let (shape, f) = load_f64(&out.join("slicer.truth.flow.npy"));
+    assert_eq!(shape, [6, 3]);
+    assert_eq!(&f[6..9], &[0.0, 3.0, -3.0]);
+}
