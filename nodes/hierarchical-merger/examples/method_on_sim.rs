@@ -16,6 +16,12 @@
 //! true length).
 //! DEBUG_FIT: per slice, how many of the object's and of the background's events lie inside the
 //! planar segmenter's previous-foreground mask (whether the mask keeps the object out of the fit).
+//! OVERSEG_K / OVERSEG_LAMBDA: the over-segmentation's cluster count and flow weight.
+//! FP_DIST: per scene, the final labels' false positives by their distance to the nearest true
+//! object event and false negatives by their distance to the nearest predicted foreground event
+//! (chessboard distance in cells of FP_CELL pixels, default 4), and quartiles of event time,
+//! planar and coarse residuals (absolute and relative to the normal-flow length) for true
+//! positives, false positives in an object's cell and the other false positives.
 //! ORACLE_FIT: the plane fitted to the true background's events only (instead of leaving out
 //! the previous slice's foreground).
 //! Diagnostics that replace the final labels: ORACLE_CLUSTERS (each cluster labelled by its
@@ -113,6 +119,73 @@ fn apply(
         }
     }
     Ok(())
+}
+
+/// Counts false positives by their distance (4 px cells, chessboard) to the nearest true object
+/// event, and false negatives by their distance to the nearest predicted foreground event.
+fn fp_hist(
+    e: &evseg_schemas::Events,
+    w: u16,
+    h: u16,
+    label: &[u32],
+    truth: &[u16],
+    out: &mut [usize; 10],
+) -> Vec<u32> {
+    let cs: usize = std::env::var("FP_CELL")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(4);
+    let (cols, rows) = (usize::from(w).div_ceil(cs), usize::from(h).div_ceil(cs));
+    let dist = |mark: &dyn Fn(usize) -> bool| {
+        let mut d = vec![u32::MAX; cols * rows];
+        let mut q = std::collections::VecDeque::new();
+        for i in 0..e.len() {
+            if mark(i) {
+                let c = usize::from(e.y[i]) / cs * cols + usize::from(e.x[i]) / cs;
+                if d[c] != 0 {
+                    d[c] = 0;
+                    q.push_back(c);
+                }
+            }
+        }
+        while let Some(c) = q.pop_front() {
+            let (cx, cy) = ((c % cols) as i64, (c / cols) as i64);
+            for dy in -1..=1 {
+                for dx in -1..=1 {
+                    let (nx, ny) = (cx + dx, cy + dy);
+                    if nx >= 0 && ny >= 0 && (nx as usize) < cols && (ny as usize) < rows {
+                        let n = ny as usize * cols + nx as usize;
+                        if d[n] == u32::MAX {
+                            d[n] = d[c] + 1;
+                            q.push_back(n);
+                        }
+                    }
+                }
+            }
+        }
+        d
+    };
+    let bucket = |d: u32| match d {
+        0 => 0,
+        1 => 1,
+        2..=3 => 2,
+        4..=6 => 3,
+        _ => 4,
+    };
+    let dt = dist(&|i| truth[i] != 0);
+    let dp = dist(&|i| label[i] != 0);
+    for i in 0..e.len() {
+        let c = usize::from(e.y[i]) / cs * cols + usize::from(e.x[i]) / cs;
+        if label[i] != 0 && truth[i] == 0 {
+            out[bucket(dt[c])] += 1;
+        }
+        if label[i] == 0 && truth[i] != 0 {
+            out[5 + bucket(dp[c])] += 1;
+        }
+    }
+    (0..e.len())
+        .map(|i| dt[usize::from(e.y[i]) / cs * cols + usize::from(e.x[i]) / cs])
+        .collect()
 }
 
 fn c_of(c: &evseg_schemas::Clusters, i: usize) -> Option<usize> {
@@ -377,7 +450,11 @@ fn main() -> anyhow::Result<()> {
                 bv as f64 / bn.max(1) as f64
             );
         }
-        let mut overseg = Oversegmenter::new(OversegParams::default())?;
+        let mut overseg = Oversegmenter::new(OversegParams {
+            k: env_or("OVERSEG_K", OversegParams::default().k)?,
+            lambda: env_or("OVERSEG_LAMBDA", OversegParams::default().lambda)?,
+            ..OversegParams::default()
+        })?;
         let clusters: Vec<_> = slices
             .iter()
             .zip(&flows)
@@ -398,6 +475,8 @@ fn main() -> anyhow::Result<()> {
             // merger's coarse groups (group != 0 = foreground).
             let mut prev_planar: Option<Vec<u32>> = None;
             let (mut ious, mut dirs, mut planar_ious) = (Vec::new(), Vec::new(), Vec::new());
+            let mut fp_dist = [0usize; 10];
+            let mut feat: [Vec<[f64; 5]>; 3] = Default::default();
             let mut coarse_ious = Vec::new();
             let (mut inter_all, mut union_all) = (0usize, 0usize);
             let (mut predicted_all, mut truth_all) = (0usize, 0usize);
@@ -644,6 +723,35 @@ fn main() -> anyhow::Result<()> {
                         planar_inter_all += usize::from(pp && g);
                         pu += usize::from(pp || g);
                     }
+                    if std::env::var("FP_DIST").is_ok() {
+                        let cells = fp_hist(
+                            &s.events,
+                            s.camera.width,
+                            s.camera.height,
+                            label,
+                            &truth.event_object,
+                            &mut fp_dist,
+                        );
+                        let t0 = span.0;
+                        let dur = (span.1 - span.0).max(1e-9);
+                        for i in 0..label.len() {
+                            if label[i] == 0 {
+                                continue;
+                            }
+                            let kind = if truth.event_object[i] != 0 {
+                                0
+                            } else if cells[i] == 0 {
+                                1
+                            } else {
+                                2
+                            };
+                            let tt = (s.events.t[i] - t0) / dur;
+                            let pr = r.residuals.residual[i].abs() as f64;
+                            let cr = m.coarse.residual[i].abs() as f64;
+                            let nl = (f.nx[i] as f64).hypot(f.ny[i] as f64);
+                            feat[kind].push([tt, pr, cr, pr / nl.max(1e-9), cr / nl.max(1e-9)]);
+                        }
+                    }
                     ious.push(i as f64 / u.max(1) as f64);
                     if std::env::var("SLICE_IOU").is_ok() {
                         let g = truth.event_object.iter().filter(|&&o| o != 0).count();
@@ -686,6 +794,35 @@ fn main() -> anyhow::Result<()> {
             }
             dirs.sort_by(f64::total_cmp);
             let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
+            if std::env::var("FP_DIST").is_ok() {
+                for (kind, v) in ["TP", "FP0", "FPfar"].iter().zip(feat.iter_mut()) {
+                    let mut q = Vec::new();
+                    for j in 0..5 {
+                        let mut c: Vec<f64> = v.iter().map(|a| a[j]).filter(|x| x.is_finite()).collect();
+                        c.sort_by(f64::total_cmp);
+                        let at = |f: f64| {
+                            c.get(((c.len() as f64 * f) as usize).min(c.len().saturating_sub(1)))
+                                .copied()
+                                .unwrap_or(f64::NAN)
+                        };
+                        q.push(format!("{:.3}/{:.3}/{:.3}", at(0.25), at(0.5), at(0.75)));
+                    }
+                    println!(
+                        "  {kind:5} n {:7} time {} planar|r| {} coarse|r| {} planar rel {} coarse rel {}",
+                        v.len(),
+                        q[0],
+                        q[1],
+                        q[2],
+                        q[3],
+                        q[4]
+                    );
+                }
+                println!(
+                    "{name:14} FP by distance to object (4 px cells 0,1,2-3,4-6,>6): {:?}  FN by distance to predicted: {:?}",
+                    &fp_dist[..5],
+                    &fp_dist[5..]
+                );
+            }
             println!(
                 "{name:14} seed {seed} flow {} [{set}] slices {:3} IoU mean {:.3} pooled {:.3} prec {:.2} rec {:.2} (planar {:.3} prec {:.2} rec {:.2}, coarse {:.3}) dir median {:.1} deg (n {})",
                 if ideal {
