@@ -74,7 +74,7 @@ pub(crate) fn fire_path(
     let dfp = b.footprint - a.footprint;
     let r = *reference;
     let mf = m as f32;
-    tex.sample_path(
+    let (lo, hi) = tex.sample_path(
         [a.u, a.v, a.footprint, a.shade],
         [du, dv, dfp, b.shade - a.shade],
         m,
@@ -83,9 +83,7 @@ pub(crate) fn fire_path(
     path.push(b.l);
     let samples = (m - 1) as u64;
     let l_start = a.l;
-    let (lo, hi) = path
-        .iter()
-        .fold((l_start, l_start), |(lo, hi), &l| (fmin(lo, l), fmax(hi, l)));
+    let (lo, hi) = (fmin(fmin(lo, l_start), b.l), fmax(fmax(hi, l_start), b.l));
     if hi < r + c_on && lo > r - c_off {
         // Strictly inside both thresholds: no crossing, reference unchanged.
         return (samples, 0);
