@@ -62,6 +62,11 @@ pub struct UnstableList {
     pub s_prev: Vec<u32>,
     /// List indices of the pixels rendered at the current slot.
     pub active: Vec<u32>,
+    /// `active` grouped by the surface key of the pixels' previous renders (scratch of
+    /// [`UnstableList::render`]).
+    by_key: Vec<u32>,
+    /// Counts and offsets of the key groups of `by_key`.
+    key_counts: Vec<u32>,
     /// Image-sized map from pixel index to list index ([`NONE`] outside the list); all
     /// [`NONE`] between calls.
     index_of: Vec<u32>,
@@ -195,9 +200,12 @@ impl UnstableList {
     /// The body of [`UnstableList::render`].
     #[inline(always)]
     fn render_with(&mut self, scene: &Scene, geom: &FrameGeom, w: usize, supersample: bool) -> u64 {
-        // Centres located and shaded `LANES` at a time (see `FrameGeom::locate_lanes` and
-        // `FrameGeom::shade_lanes`).
-        let mut groups = self.active.chunks_exact(LANES);
+        self.group_by_key(scene.key_texture.len());
+        // Centres cast `LANES` at a time (see `FrameGeom::cast_lanes`), grouped by the surface
+        // of their previous render: it rarely changes between renders, so most groups hit one
+        // plane or box face and are shaded in vector form. Each pixel's value is its own, so
+        // the order does not matter.
+        let mut groups = self.by_key.chunks_exact(LANES);
         for g in &mut groups {
             // Plain loops: `array::from_fn` and `array::map` closures were left out of line.
             let mut js = [0usize; LANES];
@@ -208,13 +216,11 @@ impl UnstableList {
                 let p = self.pixel[j] as usize;
                 (js[l], px[l], py[l], x[l], y[l]) = (j, (p % w) as i32, (p / w) as i32, self.x[j], self.y[j]);
             }
-            let found = geom.locate_lanes(&x, &y, &px, &py);
-            let hits = geom.shade_lanes(scene, &x, &y, &found);
-            for (l, hit) in hits.iter().enumerate() {
-                let j = js[l];
-                self.l[j] = hit.l;
-                self.key[j] = hit.key;
-                self.id[j] = hit.id;
+            let hits = geom.cast_lanes(scene, &x, &y, &px, &py);
+            for (l, &j) in js.iter().enumerate() {
+                self.l[j] = hits.l[l];
+                self.key[j] = hits.key[l];
+                self.id[j] = hits.id[l];
             }
         }
         for &a in groups.remainder() {
@@ -260,6 +266,27 @@ impl UnstableList {
             }
         }
         count
+    }
+
+    /// `active` into `by_key`, grouped by the surface keys of the pixels' previous renders
+    /// (`keys` surface keys; "nothing" last), in their order within a group (counting sort).
+    fn group_by_key(&mut self, keys: usize) {
+        let slot = |k: u16| (k as usize).min(keys);
+        self.key_counts.clear();
+        self.key_counts.resize(keys + 2, 0);
+        for &a in &self.active {
+            self.key_counts[slot(self.key[a as usize]) + 1] += 1;
+        }
+        for k in 1..self.key_counts.len() {
+            self.key_counts[k] += self.key_counts[k - 1];
+        }
+        self.by_key.clear();
+        self.by_key.resize(self.active.len(), 0);
+        for &a in &self.active {
+            let c = &mut self.key_counts[slot(self.key[a as usize])];
+            self.by_key[*c as usize] = a;
+            *c += 1;
+        }
     }
 
     /// Writes the reference levels and last-event times back to the image arrays.
