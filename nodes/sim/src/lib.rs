@@ -36,6 +36,7 @@ pub mod radix;
 pub mod render;
 pub mod rng;
 pub mod scene;
+mod stable;
 pub mod texture;
 pub mod trajectory;
 pub mod truth;

@@ -156,6 +156,7 @@ impl Texture {
     /// which the 0.999 covers), the finest level alone is sampled, which is what `sample`
     /// does there.
     #[target_feature(enable = "avx2")]
+    #[inline]
     pub(super) fn sample_path_avx2(
         &self,
         start: [f32; 4],
