@@ -56,6 +56,24 @@ impl ListedPixels<'_> {
     /// their references stay. The tests run without branches per pixel; the list keeps its
     /// order.
     pub(crate) fn drop_bounded_runs(&self, reference: &[f32], work: &mut Vec<u32>) {
+        #[cfg(target_arch = "x86_64")]
+        if std::is_x86_feature_detected!("avx2") {
+            // SAFETY: AVX2 is available (checked just above).
+            return unsafe { self.drop_bounded_runs_avx2(reference, work) };
+        }
+        self.drop_bounded_runs_with(reference, work)
+    }
+
+    /// [`ListedPixels::drop_bounded_runs`] compiled with AVX2 (the same decisions).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn drop_bounded_runs_avx2(&self, reference: &[f32], work: &mut Vec<u32>) {
+        self.drop_bounded_runs_with(reference, work)
+    }
+
+    /// The body of [`ListedPixels::drop_bounded_runs`].
+    #[inline(always)]
+    fn drop_bounded_runs_with(&self, reference: &[f32], work: &mut Vec<u32>) {
         let (kf0, kf1, scene) = (self.kf0, self.kf1, self.scene);
         let (on, off, class) = (&self.thresholds.on, &self.thresholds.off, self.class);
         let (mut kept, mut wi) = (0usize, 0usize);
@@ -188,6 +206,7 @@ impl ListedPixels<'_> {
 /// more than `RUN_RANGE_TEXELS` texels). The union's texels include every member path's, so a
 /// member whose thresholds hold the run's bound would hold its own: the same decisions as
 /// bounding every path alone, with one setup and one texel scan per run.
+#[inline(always)]
 fn run_range(
     kf0: &KeyFrame,
     kf1: &KeyFrame,
@@ -210,17 +229,7 @@ fn run_range(
     if end - start < 2 {
         return (end, None);
     }
-    let (mut u_lo, mut u_hi, mut v_lo, mut v_hi) =
-        (f32::INFINITY, f32::NEG_INFINITY, f32::INFINITY, f32::NEG_INFINITY);
-    let (mut fp_lo, mut fp_hi) = (f32::INFINITY, f32::NEG_INFINITY);
-    for i in first..first + (end - start) {
-        u_lo = fmin(u_lo, fmin(kf0.u[i], kf1.u[i]));
-        u_hi = fmax(u_hi, fmax(kf0.u[i], kf1.u[i]));
-        v_lo = fmin(v_lo, fmin(kf0.v[i], kf1.v[i]));
-        v_hi = fmax(v_hi, fmax(kf0.v[i], kf1.v[i]));
-        fp_lo = fmin(fp_lo, fmin(kf0.footprint[i], kf1.footprint[i]));
-        fp_hi = fmax(fp_hi, fmax(kf0.footprint[i], kf1.footprint[i]));
-    }
+    let [u_lo, u_hi, v_lo, v_hi, fp_lo, fp_hi] = run_extent(kf0, kf1, first, end - start);
     let key = key as usize;
     let tex = &scene.textures[scene.key_texture[key]];
     let texels = tex.path_range(u_lo, v_lo, u_hi, v_hi, fp_lo, fp_hi, RUN_RANGE_TEXELS);
@@ -228,6 +237,49 @@ fn run_range(
         end,
         shaded_bounds(texels, kf0.geom.shade_by_key[key], kf1.geom.shade_by_key[key]),
     )
+}
+
+/// The extremes `[u_lo, u_hi, v_lo, v_hi, fp_lo, fp_hi]` of the texture coordinates and
+/// footprints of pixels `first..first + len` (`len <= RUN_PIXELS`) at both key frames. Over a
+/// window of `RUN_PIXELS` pixels with the ones past `len` masked (a fixed trip count the
+/// compiler vectorises) when the window fits in the image, else one by one.
+#[inline(always)]
+fn run_extent(kf0: &KeyFrame, kf1: &KeyFrame, first: usize, len: usize) -> [f32; 6] {
+    let (inf, ninf) = (f32::INFINITY, f32::NEG_INFINITY);
+    let mut e = [inf, ninf, inf, ninf, inf, ninf];
+    let n = kf0.u.len();
+    if first + RUN_PIXELS > n {
+        for i in first..first + len {
+            e[0] = fmin(e[0], fmin(kf0.u[i], kf1.u[i]));
+            e[1] = fmax(e[1], fmax(kf0.u[i], kf1.u[i]));
+            e[2] = fmin(e[2], fmin(kf0.v[i], kf1.v[i]));
+            e[3] = fmax(e[3], fmax(kf0.v[i], kf1.v[i]));
+            e[4] = fmin(e[4], fmin(kf0.footprint[i], kf1.footprint[i]));
+            e[5] = fmax(e[5], fmax(kf0.footprint[i], kf1.footprint[i]));
+        }
+        return e;
+    }
+    let w = first..first + RUN_PIXELS;
+    let lanes = |a: &[f32]| -> [f32; RUN_PIXELS] { a[w.clone()].try_into().expect("run window") };
+    let (u0, u1, v0, v1) = (lanes(&kf0.u), lanes(&kf1.u), lanes(&kf0.v), lanes(&kf1.v));
+    let (f0, f1) = (lanes(&kf0.footprint), lanes(&kf1.footprint));
+    let mut lo = [[inf; RUN_PIXELS]; 3];
+    let mut hi = [[ninf; RUN_PIXELS]; 3];
+    for l in 0..RUN_PIXELS {
+        let on = l < len;
+        for (k, (a, b)) in [(u0[l], u1[l]), (v0[l], v1[l]), (f0[l], f1[l])]
+            .into_iter()
+            .enumerate()
+        {
+            lo[k][l] = if on { fmin(a, b) } else { inf };
+            hi[k][l] = if on { fmax(a, b) } else { ninf };
+        }
+    }
+    for k in 0..3 {
+        e[2 * k] = lo[k].iter().fold(inf, |a, &b| fmin(a, b));
+        e[2 * k + 1] = hi[k].iter().fold(ninf, |a, &b| fmax(a, b));
+    }
+    e
 }
 
 /// Bounds of the log intensities along a stable path from the texel bound `texels` of its
