@@ -520,7 +520,6 @@ impl Engine {
             max_px: cfg.render.max_px_per_step as f32,
             width: self.rays.width,
         };
-        listed.drop_bounded_runs(&self.reference, &mut self.work);
 
         // The interval's events (buffer reused across intervals).
         let mut batch = std::mem::take(&mut self.batch);

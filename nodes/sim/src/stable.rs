@@ -51,60 +51,13 @@ pub(crate) struct ListedCounts {
 }
 
 impl ListedPixels<'_> {
-    /// Drops from the work list the stable pixels whose run's texel bound (see `run_range`)
-    /// keeps their whole path strictly inside their thresholds: none of them can fire and
-    /// their references stay. The tests run without branches per pixel; the list keeps its
-    /// order.
-    pub(crate) fn drop_bounded_runs(&self, reference: &[f32], work: &mut Vec<u32>) {
-        #[cfg(target_arch = "x86_64")]
-        if std::is_x86_feature_detected!("avx2") {
-            // SAFETY: AVX2 is available (checked just above).
-            return unsafe { self.drop_bounded_runs_avx2(reference, work) };
-        }
-        self.drop_bounded_runs_with(reference, work)
-    }
-
-    /// [`ListedPixels::drop_bounded_runs`] compiled with AVX2 (the same decisions).
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
-    fn drop_bounded_runs_avx2(&self, reference: &[f32], work: &mut Vec<u32>) {
-        self.drop_bounded_runs_with(reference, work)
-    }
-
-    /// The body of [`ListedPixels::drop_bounded_runs`].
-    #[inline(always)]
-    fn drop_bounded_runs_with(&self, reference: &[f32], work: &mut Vec<u32>) {
-        let (kf0, kf1, scene) = (self.kf0, self.kf1, self.scene);
-        let (on, off, class) = (&self.thresholds.on, &self.thresholds.off, self.class);
-        let (mut kept, mut wi) = (0usize, 0usize);
-        while wi < work.len() {
-            let p = work[wi];
-            if class[p as usize] != STABLE {
-                work[kept] = p;
-                kept += 1;
-                wi += 1;
-                continue;
-            }
-            let (end, bound) = run_range(kf0, kf1, scene, work, wi, class);
-            // No bound: every member stays.
-            let (lo, hi) = bound.unwrap_or((f32::NEG_INFINITY, f32::INFINITY));
-            for k in wi..end {
-                let p = work[k];
-                let i = p as usize;
-                let r = reference[i];
-                let inside = (hi < r + on[i]) & (lo > r - off[i]);
-                work[kept] = p;
-                kept += usize::from(!inside);
-            }
-            wi = end;
-        }
-        work.truncate(kept);
-    }
-
     /// Threshold crossings of the pixels of `work` (pixel order) into `batch`: quiet pixels
     /// from key frame to key frame (a crossing is a violation; its events are kept), stable
     /// pixels along their interpolated texture paths, sampled every `max_px` of their own
-    /// image motion (`stable_displacement`). `reference` and `last_event` are every pixel's
+    /// image motion (`stable_displacement`), unless the texel bound of their run (see
+    /// `run_range`) keeps them strictly inside their thresholds: none of those can fire and
+    /// their references stay. Run bounds and paths in one pass, so that each pixel's data is
+    /// read from memory once. `reference` and `last_event` are every pixel's
     /// state, `path` scratch. With AVX2 (detected at run time) the loop is compiled for it,
     /// so that the texture samples inline: the same arithmetic, the same events.
     pub(crate) fn fire(
@@ -150,9 +103,10 @@ impl ListedPixels<'_> {
         let (kf0, kf1) = (self.kf0, self.kf1);
         let (t0, t1) = self.span;
         let mut counts = ListedCounts::default();
-        for &p in work {
-            let i = p as usize;
-            let (c_on, c_off) = (self.thresholds.on[i], self.thresholds.off[i]);
+        let (on, off) = (&self.thresholds.on, &self.thresholds.off);
+        let mut wi = 0;
+        while wi < work.len() {
+            let i = work[wi] as usize;
             match self.class[i] {
                 QUIET => {
                     let before = batch.len();
@@ -166,36 +120,69 @@ impl ListedPixels<'_> {
                         (t0, t1),
                         (&kf0.geom, &kf1.geom),
                         (kf0.id[i], kf1.id[i]),
-                        (c_on, c_off),
+                        (on[i], off[i]),
                         batch,
                     );
                     counts.violations += u64::from(batch.len() > before);
+                    wi += 1;
                 }
                 STABLE => {
-                    let key = kf0.key[i] as usize;
-                    let tex = &self.scene.textures[self.scene.key_texture[key]];
-                    let (du, dv) = (kf1.u[i] - kf0.u[i], kf1.v[i] - kf0.v[i]);
-                    let disp = stable_displacement(kf0, kf1, i, self.width, du, dv);
-                    let m = ((disp / self.max_px).ceil() as usize).clamp(1, 4096);
-                    let (n, f) = fire_path(
-                        ctx,
-                        tex,
-                        (&kf0.path_end(i, t0), &kf1.path_end(i, t1)),
-                        m,
-                        i,
-                        kf0.id[i],
-                        (&mut reference[i], &mut last_event[i]),
-                        (c_on, c_off),
-                        batch,
-                        path,
-                    );
-                    counts.samples += n;
-                    counts.fired += f;
+                    // The run's texel bound first (`run_range`); members it keeps strictly
+                    // inside their thresholds cannot fire and keep their references. A
+                    // member's test reads only its own reference, so processing the run's
+                    // earlier members first decides the same.
+                    let (end, bound) = run_range(kf0, kf1, self.scene, work, wi, self.class);
+                    let (lo, hi) = bound.unwrap_or((f32::NEG_INFINITY, f32::INFINITY));
+                    for &p in &work[wi..end] {
+                        let i = p as usize;
+                        let r = reference[i];
+                        if (hi < r + on[i]) & (lo > r - off[i]) {
+                            continue;
+                        }
+                        let (n, f) =
+                            self.fire_stable(ctx, i, (&mut reference[i], &mut last_event[i]), batch, path);
+                        counts.samples += n;
+                        counts.fired += f;
+                    }
+                    wi = end;
                 }
-                _ => {}
+                _ => wi += 1,
             }
         }
         counts
+    }
+
+    /// Threshold crossings of stable pixel `i` (state `reference`, `last_event`) along its
+    /// texture path between the key frames (see [`ListedPixels::fire`]): the numbers of
+    /// interpolated samples and events.
+    #[inline(always)]
+    fn fire_stable(
+        &self,
+        ctx: &FireCtx,
+        i: usize,
+        state: (&mut f32, &mut f64),
+        batch: &mut Vec<RawEvent>,
+        path: &mut Vec<f32>,
+    ) -> (u64, u64) {
+        let (kf0, kf1) = (self.kf0, self.kf1);
+        let (t0, t1) = self.span;
+        let key = kf0.key[i] as usize;
+        let tex = &self.scene.textures[self.scene.key_texture[key]];
+        let (du, dv) = (kf1.u[i] - kf0.u[i], kf1.v[i] - kf0.v[i]);
+        let disp = stable_displacement(kf0, kf1, i, self.width, du, dv);
+        let m = ((disp / self.max_px).ceil() as usize).clamp(1, 4096);
+        fire_path(
+            ctx,
+            tex,
+            (&kf0.path_end(i, t0), &kf1.path_end(i, t1)),
+            m,
+            i,
+            kf0.id[i],
+            state,
+            (self.thresholds.on[i], self.thresholds.off[i]),
+            batch,
+            path,
+        )
     }
 }
 
