@@ -100,6 +100,19 @@ impl Texture {
                 _mm256_permutevar8x32_epi32(starts, l),
             )
         };
+        // Footprints of at most one texel: `fast_log2` <= 0, the finest level alone (as
+        // below, without the level tables).
+        let texels = _mm256_mul_ps(fp, _mm256_set1_ps(self.inv_texel));
+        if _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_GT_OQ>(texels, _mm256_set1_ps(1.0))) == 0 {
+            let m0 = &self.mips[0];
+            return self.bilinear_lanes(
+                u,
+                v,
+                _mm256_set1_ps(m0.scale),
+                _mm256_set1_epi32(m0.size as i32),
+                _mm256_set1_epi32(m0.start as i32),
+            );
+        }
         let lod = level_of_detail(self.inv_texel, self.max_level, fp);
         // lod >= 0 (or -0): truncation is `floor_fast`; lod <= 0 gives level 0 with f <= 0,
         // which is `sample`'s level-0 branch.
