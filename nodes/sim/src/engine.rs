@@ -173,6 +173,8 @@ pub struct Engine {
     hi: Vec<f32>,
     scratch: Vec<f32>,
     blocks: Vec<DepthBlock>,
+    /// The blocks' `x`, `y`, `hx` and `hy`, field by field (for the speed bounds in lanes).
+    block_geometry: [Vec<f64>; 4],
     zmin_bg: f64,
     last_dt: f64,
     /// Time of `kf0`, s.
@@ -214,6 +216,7 @@ impl Engine {
             hi: vec![0.0; n],
             scratch: Vec::new(),
             blocks: Vec::new(),
+            block_geometry: Default::default(),
             zmin_bg: 1.0,
             last_dt: cfg.render.max_step_s,
             t: 0.0,
@@ -234,15 +237,22 @@ impl Engine {
         let r_max = mx.hypot(my);
         let bg = scene::RelativeMotion::new(&cam, None);
         let safety = cfg.render.depth_safety;
-        let mut s: f64 = 0.0;
-        for b in &self.blocks {
-            let z = if b.zmin.is_finite() {
-                b.zmin.min(self.zmin_bg * 4.0)
-            } else {
-                self.zmin_bg
-            } * safety;
-            s = s.max(bg.static_speed_bound_near(b.x, b.y, b.hx, b.hy, z));
-        }
+        let z: Vec<f64> = self
+            .blocks
+            .iter()
+            .map(|b| {
+                let z = if b.zmin.is_finite() {
+                    b.zmin.min(self.zmin_bg * 4.0)
+                } else {
+                    self.zmin_bg
+                };
+                z * safety
+            })
+            .collect();
+        let mut bounds = vec![0.0; z.len()];
+        let g = &self.block_geometry;
+        bg.static_speed_bounds_near(&g[0], &g[1], &g[2], &g[3], &z, &mut bounds);
+        let mut s = bounds.iter().fold(0.0f64, |s, &b| s.max(b));
         for b in self.scene.boxes.iter().filter(|b| b.id != 0) {
             let bs = b.trajectory.state(t);
             let pose = scene::BoxPose::new(&cam, &bs);
@@ -306,10 +316,12 @@ impl Engine {
             .map(|i| around(&zb, i, f64::min, f64::INFINITY) * safety)
             .collect();
         let mut own = vec![0.0f64; bw * bh];
+        let mut bounds = vec![0.0f64; bw * bh];
+        let bl = &self.block_geometry;
         for g in geoms {
-            let bg = &g.motions[0];
-            for (i, b) in self.blocks.iter().enumerate() {
-                own[i] = own[i].max(bg.static_speed_bound_near(b.x, b.y, b.hx, b.hy, z3[i]));
+            g.motions[0].static_speed_bounds_near(&bl[0], &bl[1], &bl[2], &bl[3], &z3, &mut bounds);
+            for (o, &b) in own.iter_mut().zip(&bounds) {
+                *o = o.max(b);
             }
         }
         let background = (0..bw * bh)
@@ -426,6 +438,15 @@ impl Engine {
                     });
                 }
             }
+        }
+        if self.block_geometry[0].len() != self.blocks.len() {
+            let b = &self.blocks;
+            self.block_geometry = [
+                b.iter().map(|b| b.x).collect(),
+                b.iter().map(|b| b.y).collect(),
+                b.iter().map(|b| b.hx).collect(),
+                b.iter().map(|b| b.hy).collect(),
+            ];
         }
         let mut block_z = vec![f32::INFINITY; bw * bh];
         cast_keyframe(&mut self.kf1, &self.scene, &self.rays, &mut block_z);
