@@ -209,7 +209,28 @@ impl<const N: usize> LaneSearch<N> {
     fn located(&self, g: &FrameGeom) -> [Located; N] {
         let mut out = [Located::NOTHING; N];
         for (l, o) in out.iter_mut().enumerate() {
-            *o = if self.best_box[l] != u32::MAX {
+            *o = self.located_lane(g, l);
+        }
+        out
+    }
+
+    /// The surface key of lane `l` (as in [`LaneSearch::located`]).
+    #[inline(always)]
+    fn key(&self, g: &FrameGeom, l: usize) -> u16 {
+        if self.best_box[l] != u32::MAX {
+            g.boxes[self.best_box[l] as usize].key_base + self.box_face[l] as u16
+        } else if self.best_plane[l] == u32::MAX {
+            u16::MAX
+        } else {
+            g.planes[self.best_plane[l] as usize].key
+        }
+    }
+
+    /// Lane `l` as a [`Located`] surface of `g`.
+    #[inline(always)]
+    fn located_lane(&self, g: &FrameGeom, l: usize) -> Located {
+        {
+            if self.best_box[l] != u32::MAX {
                 let b = &g.boxes[self.best_box[l] as usize];
                 let face = self.box_face[l] as usize;
                 Located {
@@ -232,9 +253,8 @@ impl<const N: usize> LaneSearch<N> {
                     id: 0,
                     z: self.s[l],
                 }
-            };
+            }
         }
-        out
     }
 }
 
@@ -1074,19 +1094,19 @@ impl FrameGeom {
         for l in 0..LANES {
             (x8[l], y8[l]) = (rx[l % 4], ry[l % 4]);
         }
-        let found8 = self.locate_lanes(&x8, &y8, &[px; LANES], &[py; LANES]);
-        let found = [found8[0], found8[1], found8[2], found8[3]];
-        if found.iter().all(|f| f.key == centre.1) {
+        let found = self.search_lanes(&x8, &y8, &[px; LANES], &[py; LANES]);
+        let keys = [0, 1, 2, 3].map(|l| found.key(self, l));
+        if keys.iter().all(|&k| k == centre.1) {
             return (centre.0, false);
         }
         // Sub-rays on the centre's surface take its value (as above); the others are textured.
         let centre_lin = centre.0.exp();
         let mut acc = 0.0f32;
-        for ((sx, sy), f) in rays.iter().zip(&found) {
-            acc += if f.key == centre.1 {
+        for (l, (sx, sy)) in rays.iter().enumerate() {
+            acc += if keys[l] == centre.1 {
                 centre_lin
             } else {
-                self.shade(scene, *sx, *sy, f).l.exp()
+                self.shade(scene, *sx, *sy, &found.located_lane(self, l)).l.exp()
             };
         }
         ((0.25 * acc).ln(), true)
