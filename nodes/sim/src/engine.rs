@@ -29,7 +29,7 @@ use crate::camera::Rays;
 use crate::config::SceneConfig;
 use crate::esim::{self, NoiseSource, Thresholds};
 use crate::filters;
-use crate::firing::{FireCtx, PathEnd, fire};
+use crate::firing::{FireCtx, PathEnd, Seen, fire};
 use crate::local_speed::{self, LocalSpeed};
 use crate::math::{fmax, fmin};
 use crate::radix;
@@ -83,6 +83,16 @@ pub struct KeyFrame {
 }
 
 impl KeyFrame {
+    /// What pixel `i`'s centre ray met.
+    #[inline]
+    pub(crate) fn seen(&self, i: usize) -> Seen {
+        Seen {
+            id: self.id[i],
+            key: self.key[i],
+            z: self.z[i],
+        }
+    }
+
     /// Pixel `i` as one end of a path on its surface, at time `t` (this key frame's).
     #[inline]
     pub(crate) fn path_end(&self, i: usize, t: f64) -> PathEnd<'_> {
@@ -584,9 +594,7 @@ impl Engine {
                 last_event: &self.last_event,
                 c_on: &self.thresholds.on,
                 c_off: &self.thresholds.off,
-                l0: &self.kf0.l,
-                id0: &self.kf0.id,
-                key0: &self.kf0.key,
+                kf0: &self.kf0,
             },
         );
         let w = self.rays.width;
@@ -642,10 +650,10 @@ impl Engine {
             for a in 0..count {
                 let j = if q < key_slot { u.active[a] as usize } else { a };
                 let i = u.pixel[j] as usize;
-                let (l1, id1) = if q < key_slot {
-                    (u.l[j], u.id[j])
+                let (l1, seen1) = if q < key_slot {
+                    (u.l[j], u.seen(j))
                 } else {
-                    (self.kf1.l[i], self.kf1.id[i])
+                    (self.kf1.l[i], self.kf1.seen(i))
                 };
                 let sp = u.s_prev[j] as usize;
                 if esim::may_cross(u.reference[j], l1, u.c_on[j], u.c_off[j]) {
@@ -659,14 +667,14 @@ impl Engine {
                         l1,
                         (local_speed::slot_time(&times, sp), tq),
                         (geom_at(sp), geom_at(q)),
-                        (u.id_prev[j], id1),
+                        (u.seen_prev[j], seen1),
                         (u.c_on[j], u.c_off[j]),
                         &mut batch,
                     );
                     fired += (batch.len() - before) as u64;
                 }
                 u.l_prev[j] = l1;
-                u.id_prev[j] = id1;
+                u.seen_prev[j] = seen1;
                 u.s_prev[j] = q as u32;
                 if q < key_slot {
                     u.next[j] += 1;

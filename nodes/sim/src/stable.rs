@@ -119,7 +119,7 @@ impl ListedPixels<'_> {
                         kf1.l[i],
                         (t0, t1),
                         (&kf0.geom, &kf1.geom),
-                        (kf0.id[i], kf1.id[i]),
+                        (kf0.seen(i), kf1.seen(i)),
                         (on[i], off[i]),
                         batch,
                     );

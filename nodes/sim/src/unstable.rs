@@ -9,6 +9,8 @@
 //! render slots its local speed bound needs (see `local_speed::render_slots`).
 
 use crate::camera::Rays;
+use crate::engine::KeyFrame;
+use crate::firing::Seen;
 use crate::render::FrameGeom;
 use crate::scene::Scene;
 
@@ -45,14 +47,16 @@ pub struct UnstableList {
     pub c_off: Vec<f32>,
     /// Log intensity at the previous render step.
     pub l_prev: Vec<f32>,
-    /// Object id at the pixel centre at the previous render step.
-    pub id_prev: Vec<u16>,
+    /// What the pixel centre saw at the previous render step.
+    pub(crate) seen_prev: Vec<Seen>,
     /// Log intensity of the current render step.
     pub l: Vec<f32>,
     /// Surface key of the current render step.
     pub key: Vec<u16>,
     /// Object id of the current render step.
     pub id: Vec<u16>,
+    /// Depth of the current render step's centre surface, m.
+    pub z: Vec<f32>,
     /// Render schedule: index into `local_speed::Schedules::lists`.
     pub schedule: Vec<u32>,
     /// Position of the pixel's next render in its schedule.
@@ -84,12 +88,8 @@ pub struct PixelState<'a> {
     pub c_on: &'a [f32],
     /// OFF thresholds, log units.
     pub c_off: &'a [f32],
-    /// Log intensities of the interval's first key frame.
-    pub l0: &'a [f32],
-    /// Object ids of the interval's first key frame.
-    pub id0: &'a [u16],
-    /// Surface keys of the interval's first key frame.
-    pub key0: &'a [u16],
+    /// The interval's first key frame.
+    pub kf0: &'a KeyFrame,
 }
 
 impl UnstableList {
@@ -132,7 +132,7 @@ impl UnstableList {
         g(&mut self.reference, src.reference);
         g(&mut self.c_on, src.c_on);
         g(&mut self.c_off, src.c_off);
-        g(&mut self.l_prev, src.l0);
+        g(&mut self.l_prev, &src.kf0.l);
         self.d_du.clear();
         self.d_du.extend(pix.iter().map(|&p| r.d_du[p as usize]));
         self.d_dv.clear();
@@ -140,13 +140,14 @@ impl UnstableList {
         self.last_event.clear();
         self.last_event
             .extend(pix.iter().map(|&p| src.last_event[p as usize]));
-        self.id_prev.clear();
-        self.id_prev.extend(pix.iter().map(|&p| src.id0[p as usize]));
+        self.seen_prev.clear();
+        self.seen_prev
+            .extend(pix.iter().map(|&p| src.kf0.seen(p as usize)));
         let m = pix.len();
         self.l.clear();
         self.l.resize(m, 0.0);
         self.key.clear();
-        self.key.extend(pix.iter().map(|&p| src.key0[p as usize]));
+        self.key.extend(pix.iter().map(|&p| src.kf0.key[p as usize]));
         self.schedule.clear();
         self.schedule.resize(m, 0);
         self.next.clear();
@@ -155,6 +156,8 @@ impl UnstableList {
         self.s_prev.resize(m, 0);
         self.id.clear();
         self.id.resize(m, 0);
+        self.z.clear();
+        self.z.resize(m, 0.0);
         if self.index_of.len() != n {
             self.index_of = vec![NONE; n];
         }
@@ -221,6 +224,7 @@ impl UnstableList {
                 self.l[j] = hits.l[l];
                 self.key[j] = hits.key[l];
                 self.id[j] = hits.id[l];
+                self.z[j] = hits.z[l];
             }
         }
         for &a in groups.remainder() {
@@ -230,6 +234,7 @@ impl UnstableList {
             self.l[j] = hit.l;
             self.key[j] = hit.key;
             self.id[j] = hit.id;
+            self.z[j] = hit.z;
         }
         if !supersample {
             return 0;
@@ -286,6 +291,16 @@ impl UnstableList {
             let c = &mut self.key_counts[slot(self.key[a as usize])];
             self.by_key[*c as usize] = a;
             *c += 1;
+        }
+    }
+
+    /// What pixel `j`'s centre saw at its latest render.
+    #[inline]
+    pub(crate) fn seen(&self, j: usize) -> Seen {
+        Seen {
+            id: self.id[j],
+            key: self.key[j],
+            z: self.z[j],
         }
     }
 
