@@ -616,6 +616,26 @@ impl FrameGeom {
         self.search_lanes(x, y, px, py).located(self)
     }
 
+    /// The object ids of [`FrameGeom::locate_lanes`] (0 for the background and for nothing),
+    /// without assembling the located surfaces.
+    #[inline(always)]
+    pub fn object_ids_lanes(
+        &self,
+        x: &[f32; LANES],
+        y: &[f32; LANES],
+        px: &[i32; LANES],
+        py: &[i32; LANES],
+    ) -> [u16; LANES] {
+        let found = self.search_lanes(x, y, px, py);
+        let mut ids = [0u16; LANES];
+        for (l, id) in ids.iter_mut().enumerate() {
+            if found.best_box[l] != u32::MAX {
+                *id = self.boxes[found.best_box[l] as usize].id;
+            }
+        }
+        ids
+    }
+
     /// The search of [`FrameGeom::locate_lanes`], lane by lane in arrays. With `LANES` rays
     /// and AVX2 (detected at run time) in vector registers (see `lane_search`): the same
     /// results.

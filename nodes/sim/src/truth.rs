@@ -9,7 +9,7 @@ use crate::scene::{BoxPose, Scene};
 use crate::trajectory::RigidState;
 
 /// Pixels located together by [`mask`] (a multiple of the SIMD width).
-const MASK_LANES: usize = 8;
+const MASK_LANES: usize = crate::texture::LANES;
 
 /// Camera motion sample of a camera state at `t`: pose camera -> world, velocities in the
 /// camera frame.
@@ -55,10 +55,8 @@ pub fn mask(_scene: &Scene, rays: &Rays, geom: &FrameGeom) -> Mask {
                     let x: &[f32; MASK_LANES] = rays.x[i..i + MASK_LANES].try_into().expect("lane slice");
                     let y: &[f32; MASK_LANES] = rays.y[i..i + MASK_LANES].try_into().expect("lane slice");
                     let px = std::array::from_fn(|l| (u + l) as i32);
-                    let found = geom.locate_lanes(x, y, &px, &[v as i32; MASK_LANES]);
-                    for (l, f) in found.iter().enumerate() {
-                        ids[i + l] = f.id;
-                    }
+                    let found = geom.object_ids_lanes(x, y, &px, &[v as i32; MASK_LANES]);
+                    ids[i..i + MASK_LANES].copy_from_slice(&found);
                     u += MASK_LANES;
                 } else {
                     ids[i] = geom.locate(rays.x[i], rays.y[i], u as i32, v as i32, None).id;
