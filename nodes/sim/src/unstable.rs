@@ -71,9 +71,6 @@ pub struct UnstableList {
     by_key: Vec<u32>,
     /// Counts and offsets of the key groups of `by_key`.
     key_counts: Vec<u32>,
-    /// Image-sized map from pixel index to list index ([`NONE`] outside the list); all
-    /// [`NONE`] between calls.
-    index_of: Vec<u32>,
 }
 
 /// The per-pixel image arrays an [`UnstableList`] is gathered from.
@@ -158,26 +155,40 @@ impl UnstableList {
         self.id.resize(m, 0);
         self.z.clear();
         self.z.resize(m, 0.0);
-        if self.index_of.len() != n {
-            self.index_of = vec![NONE; n];
-        }
-        for (j, &p) in pix.iter().enumerate() {
-            self.index_of[p as usize] = j as u32;
-        }
+        // Neighbours by walking the list (in pixel order): the left and right ones are the
+        // adjacent entries, the lower and upper ones found by two cursors that only move on.
         self.neighbours.clear();
-        for &p in pix {
+        let (mut down, mut up) = (0usize, 0usize);
+        let find = |cursor: &mut usize, target: u32| {
+            while *cursor < m && pix[*cursor] < target {
+                *cursor += 1;
+            }
+            if *cursor < m && pix[*cursor] == target {
+                *cursor as u32
+            } else {
+                NONE
+            }
+        };
+        for (j, &p) in pix.iter().enumerate() {
             let i = p as usize;
             let (x, y) = (i % w, i / w);
-            let at = |ok: bool, k: usize| if ok { self.index_of[k] } else { NONE };
-            self.neighbours.push([
-                at(x + 1 < w, i + 1),
-                at(x > 0, i.wrapping_sub(1)),
-                at(i + w < n, i + w),
-                at(y > 0, i.wrapping_sub(w)),
-            ]);
-        }
-        for &p in pix {
-            self.index_of[p as usize] = NONE;
+            let right = if x + 1 < w && j + 1 < m && pix[j + 1] == p + 1 {
+                (j + 1) as u32
+            } else {
+                NONE
+            };
+            let left = if x > 0 && j > 0 && pix[j - 1] == p - 1 {
+                (j - 1) as u32
+            } else {
+                NONE
+            };
+            let below = if i + w < n {
+                find(&mut down, p + w as u32)
+            } else {
+                NONE
+            };
+            let above = if y > 0 { find(&mut up, p - w as u32) } else { NONE };
+            self.neighbours.push([right, left, below, above]);
         }
     }
 
