@@ -197,8 +197,8 @@ struct LaneSearch<const N: usize> {
     best_box: [u32; N],
     /// Face of that box.
     box_face: [u32; N],
-    /// Ray direction in that box's coordinates.
-    box_db: [[f32; 3]; N],
+    /// Ray direction in that box's coordinates, component by component.
+    box_db: [[f32; N]; 3],
     /// Depth of the nearest surface (infinite: none).
     s: [f32; N],
 }
@@ -237,7 +237,7 @@ impl<const N: usize> LaneSearch<N> {
                     surface: Surface::Box {
                         index: self.best_box[l] as usize,
                         face,
-                        db: self.box_db[l],
+                        db: [self.box_db[0][l], self.box_db[1][l], self.box_db[2][l]],
                     },
                     key: b.key_base + face as u16,
                     id: b.id,
@@ -661,14 +661,16 @@ impl FrameGeom {
                 best_plane: [0; N],
                 best_box: [0; N],
                 box_face: [0; N],
-                box_db: [[0.0; 3]; N],
+                box_db: [[0.0; N]; 3],
                 s: [0.0; N],
             };
             for l in 0..N {
                 out.best_plane[l] = r.best_plane[l];
                 out.best_box[l] = r.best_box[l];
                 out.box_face[l] = r.box_face[l];
-                out.box_db[l] = r.box_db[l];
+                for k in 0..3 {
+                    out.box_db[k][l] = r.box_db[k][l];
+                }
                 out.s[l] = r.s[l];
             }
             return out;
@@ -693,7 +695,7 @@ impl FrameGeom {
         }
         let mut best_box = [u32::MAX; N];
         let mut box_face = [0u32; N];
-        let mut box_db = [[0.0f32; 3]; N];
+        let mut box_db = [[0.0f32; N]; 3];
         for (j, b) in self.boxes.iter().enumerate() {
             let mut inside = [false; N];
             for l in 0..N {
@@ -731,7 +733,9 @@ impl FrameGeom {
                     best_box[l] = j as u32;
                     let a = axis[l] as usize;
                     box_face[l] = 2 * axis[l] + u32::from(db[a][l] < 0.0);
-                    box_db[l] = [db[0][l], db[1][l], db[2][l]];
+                    for k in 0..3 {
+                        box_db[k][l] = db[k][l];
+                    }
                 }
             }
         }
@@ -829,7 +833,7 @@ impl FrameGeom {
         let s = &found.s;
         let (mut u, mut v, mut cos) = ([0.0f32; LANES], [0.0f32; LANES], [0.0f32; LANES]);
         for l in 0..LANES {
-            let db = found.box_db[l];
+            let db = [found.box_db[0][l], found.box_db[1][l], found.box_db[2][l]];
             let dn = (x[l] * x[l] + y[l] * y[l] + 1.0).sqrt();
             u[l] = (b.o_b[j] + s[l] * db[j]) + off[0];
             v[l] = (b.o_b[k] + s[l] * db[k]) + off[1];

@@ -135,22 +135,18 @@ impl FrameGeom {
             best_plane: [0; LANES],
             best_box: [0; LANES],
             box_face: [0; LANES],
-            box_db: [[0.0; 3]; LANES],
+            box_db: [[0.0; LANES]; 3],
             s: [0.0; LANES],
         };
-        let mut dbs = [[0.0f32; LANES]; 3];
         // SAFETY: unaligned stores of 8 values into arrays of 8.
         unsafe {
             _mm256_storeu_si256(out.best_plane.as_mut_ptr().cast(), best_plane);
             _mm256_storeu_si256(out.best_box.as_mut_ptr().cast(), best_box);
             _mm256_storeu_si256(out.box_face.as_mut_ptr().cast(), box_face);
             _mm256_storeu_ps(out.s.as_mut_ptr(), s);
-            for (d, v) in dbs.iter_mut().zip(box_db) {
+            for (d, v) in out.box_db.iter_mut().zip(box_db) {
                 _mm256_storeu_ps(d.as_mut_ptr(), v);
             }
-        }
-        for (l, d) in out.box_db.iter_mut().enumerate() {
-            *d = [dbs[0][l], dbs[1][l], dbs[2][l]];
         }
         out
     }
