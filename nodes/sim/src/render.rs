@@ -1107,6 +1107,46 @@ impl FrameGeom {
         py: i32,
         centre: (f32, u16),
     ) -> (f32, bool) {
+        #[cfg(target_arch = "x86_64")]
+        if std::is_x86_feature_detected!("avx2") {
+            // SAFETY: AVX2 is available (checked just above).
+            return unsafe { self.edge_mix_avx2(scene, x, y, du, dv, px, py, centre) };
+        }
+        self.edge_mix_with(scene, x, y, du, dv, px, py, centre)
+    }
+
+    /// [`FrameGeom::edge_mix`] compiled with AVX2 (the lane search inlined).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    #[allow(clippy::too_many_arguments)]
+    fn edge_mix_avx2(
+        &self,
+        scene: &Scene,
+        x: f32,
+        y: f32,
+        du: [f32; 2],
+        dv: [f32; 2],
+        px: i32,
+        py: i32,
+        centre: (f32, u16),
+    ) -> (f32, bool) {
+        self.edge_mix_with(scene, x, y, du, dv, px, py, centre)
+    }
+
+    /// The body of [`FrameGeom::edge_mix`].
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn edge_mix_with(
+        &self,
+        scene: &Scene,
+        x: f32,
+        y: f32,
+        du: [f32; 2],
+        dv: [f32; 2],
+        px: i32,
+        py: i32,
+        centre: (f32, u16),
+    ) -> (f32, bool) {
         let (mut rx, mut ry) = ([0.0f32; 4], [0.0f32; 4]);
         for (k, (ou, ov)) in SUBSAMPLES.into_iter().enumerate() {
             (rx[k], ry[k]) = (x + ou * du[0] + ov * dv[0], y + ou * du[1] + ov * dv[1]);

@@ -40,6 +40,24 @@ pub fn object_poses(t: f64, scene: &Scene, cam: &RigidState, out: &mut Vec<Objec
 /// Only pixels inside a moving object's bounding box are located, a group of
 /// `MASK_LANES` along the row at a time (see `FrameGeom::locate_lanes`).
 pub fn mask(_scene: &Scene, rays: &Rays, geom: &FrameGeom) -> Mask {
+    #[cfg(target_arch = "x86_64")]
+    if std::is_x86_feature_detected!("avx2") {
+        // SAFETY: AVX2 is available (checked just above).
+        return unsafe { mask_avx2(rays, geom) };
+    }
+    mask_with(rays, geom)
+}
+
+/// [`mask`] compiled with AVX2 (the lane search inlined).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn mask_avx2(rays: &Rays, geom: &FrameGeom) -> Mask {
+    mask_with(rays, geom)
+}
+
+/// The body of [`mask`].
+#[inline(always)]
+fn mask_with(rays: &Rays, geom: &FrameGeom) -> Mask {
     let (w, h) = (rays.width, rays.height);
     let mut ids = vec![0u16; w * h];
     for (_, b) in geom.object_bboxes() {
