@@ -492,7 +492,7 @@ impl Texture {
     /// none). Both hold `[u (m), v (m), footprint (m), offset (log units)]`; each sample is
     /// `sample(u, v, footprint) + offset` at the interpolated values. With AVX2 (detected at
     /// run time) 8 at a time (see `lanes`): the same values.
-    #[inline]
+    #[inline(always)]
     pub fn sample_path(&self, start: [f32; 4], delta: [f32; 4], m: usize, out: &mut Vec<f32>) -> (f32, f32) {
         let n = m.saturating_sub(1);
         out.clear();

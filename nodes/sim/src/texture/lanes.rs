@@ -185,70 +185,68 @@ impl Texture {
     /// every sample's level of detail at 0 (`fast_log2` of at most one texel: the footprint
     /// is interpolated between its ends, so it stays below the larger end up to rounding,
     /// which the 0.999 covers), the finest level alone is sampled, which is what `sample`
-    /// does there.
-    #[target_feature(enable = "avx2")]
-    #[inline]
-    pub(super) fn sample_path_avx2(
+    /// does there. Inlined into its callers (see the module's safety note).
+    #[inline(always)]
+    pub(super) unsafe fn sample_path_avx2(
         &self,
         start: [f32; 4],
         delta: [f32; 4],
         m: usize,
         out: &mut [f32],
     ) -> (f32, f32) {
-        let n = out.len();
-        let mf = _mm256_set1_ps(m as f32);
-        let last = _mm256_set1_ps(n as f32);
-        let ones = _mm256_set_ps(8.0, 7.0, 6.0, 5.0, 4.0, 3.0, 2.0, 1.0);
-        let (fp0, fp1) = (start[2], start[2] + delta[2]);
-        let finest = fp0.max(fp1) * self.inv_texel <= 0.999;
-        let m0 = &self.mips[0];
-        let (scale0, size0, start0) = (
-            _mm256_set1_ps(m0.scale),
-            _mm256_set1_epi32(m0.size as i32),
-            _mm256_set1_epi32(m0.start as i32),
-        );
-        let (mut lo, mut hi) = (_mm256_set1_ps(f32::INFINITY), _mm256_set1_ps(f32::NEG_INFINITY));
-        let mut j0 = 0;
-        while j0 < n {
-            // Sample j0 + l + 1 (at most n: the padding repeats the last sample), at f = that / m.
-            let at = _mm256_min_ps(_mm256_add_ps(ones, _mm256_set1_ps(j0 as f32)), last);
-            let f = _mm256_div_ps(at, mf);
-            let along = |k: usize| {
-                _mm256_add_ps(
-                    _mm256_set1_ps(start[k]),
-                    _mm256_mul_ps(f, _mm256_set1_ps(delta[k])),
-                )
-            };
-            let (u, v) = (along(0), along(1));
-            let s = if finest {
-                // SAFETY: compiled with AVX2 (this function).
-                unsafe { self.bilinear_lanes(u, v, scale0, size0, start0) }
-            } else {
-                // SAFETY: compiled with AVX2 (this function).
-                unsafe { self.sample_vec(u, v, along(2)) }
-            };
-            let s = _mm256_add_ps(
-                _mm256_add_ps(s, _mm256_set1_ps(start[3])),
-                _mm256_mul_ps(f, _mm256_set1_ps(delta[3])),
-            );
-            lo = _mm256_min_ps(lo, s);
-            hi = _mm256_max_ps(hi, s);
-            let mut r = [0.0f32; LANES];
-            // SAFETY: an unaligned store of 8 values into an array of 8.
-            unsafe { _mm256_storeu_ps(r.as_mut_ptr(), s) };
-            let k = (n - j0).min(LANES);
-            out[j0..j0 + k].copy_from_slice(&r[..k]);
-            j0 += LANES;
-        }
-        let (mut a, mut b) = ([0.0f32; LANES], [0.0f32; LANES]);
-        // SAFETY: unaligned stores of 8 values into arrays of 8.
+        // SAFETY: callers run where AVX2 is available (see the module's safety note).
         unsafe {
+            let n = out.len();
+            let mf = _mm256_set1_ps(m as f32);
+            let last = _mm256_set1_ps(n as f32);
+            let ones = _mm256_set_ps(8.0, 7.0, 6.0, 5.0, 4.0, 3.0, 2.0, 1.0);
+            let (fp0, fp1) = (start[2], start[2] + delta[2]);
+            let finest = fp0.max(fp1) * self.inv_texel <= 0.999;
+            let m0 = &self.mips[0];
+            let (scale0, size0, start0) = (
+                _mm256_set1_ps(m0.scale),
+                _mm256_set1_epi32(m0.size as i32),
+                _mm256_set1_epi32(m0.start as i32),
+            );
+            let (mut lo, mut hi) = (_mm256_set1_ps(f32::INFINITY), _mm256_set1_ps(f32::NEG_INFINITY));
+            let mut j0 = 0;
+            while j0 < n {
+                // Sample j0 + l + 1 (at most n: the padding repeats the last sample), at f = that / m.
+                let at = _mm256_min_ps(_mm256_add_ps(ones, _mm256_set1_ps(j0 as f32)), last);
+                let f = _mm256_div_ps(at, mf);
+                let along = |k: usize| {
+                    _mm256_add_ps(
+                        _mm256_set1_ps(start[k]),
+                        _mm256_mul_ps(f, _mm256_set1_ps(delta[k])),
+                    )
+                };
+                let (u, v) = (along(0), along(1));
+                let s = if finest {
+                    self.bilinear_lanes(u, v, scale0, size0, start0)
+                } else {
+                    self.sample_vec(u, v, along(2))
+                };
+                let s = _mm256_add_ps(
+                    _mm256_add_ps(s, _mm256_set1_ps(start[3])),
+                    _mm256_mul_ps(f, _mm256_set1_ps(delta[3])),
+                );
+                lo = _mm256_min_ps(lo, s);
+                hi = _mm256_max_ps(hi, s);
+                let mut r = [0.0f32; LANES];
+                // An unaligned store of 8 values into an array of 8.
+                _mm256_storeu_ps(r.as_mut_ptr(), s);
+                let k = (n - j0).min(LANES);
+                out[j0..j0 + k].copy_from_slice(&r[..k]);
+                j0 += LANES;
+            }
+            let (mut a, mut b) = ([0.0f32; LANES], [0.0f32; LANES]);
+            // Unaligned stores of 8 values into arrays of 8.
             _mm256_storeu_ps(a.as_mut_ptr(), lo);
             _mm256_storeu_ps(b.as_mut_ptr(), hi);
+            (
+                a.iter().fold(f32::INFINITY, |x, &y| x.min(y)),
+                b.iter().fold(f32::NEG_INFINITY, |x, &y| x.max(y)),
+            )
         }
-        (
-            a.iter().fold(f32::INFINITY, |x, &y| x.min(y)),
-            b.iter().fold(f32::NEG_INFINITY, |x, &y| x.max(y)),
-        )
     }
 }
