@@ -447,12 +447,10 @@ impl Texture {
         let (iv, b) = floor_split(v * m.scale - 0.5);
         let x0 = (iu as u32) & mask;
         let y0 = (iv as u32) & mask;
-        let x1 = (x0 + 1) & mask;
-        let y1 = (y0 + 1) & mask;
-        let d = self.level(m);
-        let (r0, r1) = ((y0 * size) as usize, (y1 * size) as usize);
-        let top = d[r0 + x0 as usize] + a * (d[r0 + x1 as usize] - d[r0 + x0 as usize]);
-        let bot = d[r1 + x0 as usize] + a * (d[r1 + x1 as usize] - d[r1 + x0 as usize]);
+        // The four taps (wrapping) in one quad (see `quads`), the memory the lane samples use.
+        let [d00, d01, d10, d11] = self.quads[m.start + (y0 * size + x0) as usize];
+        let top = d00 + a * (d01 - d00);
+        let bot = d10 + a * (d11 - d10);
         top + b * (bot - top)
     }
 
