@@ -29,12 +29,13 @@ use crate::camera::Rays;
 use crate::config::SceneConfig;
 use crate::esim::{self, NoiseSource, Thresholds};
 use crate::filters;
-use crate::firing::{FireCtx, PathEnd, fire, fire_path};
+use crate::firing::{FireCtx, PathEnd, Seen, fire};
 use crate::local_speed::{self, LocalSpeed};
 use crate::math::{fmax, fmin};
 use crate::radix;
 use crate::render::FrameGeom;
 use crate::scene::{self, Scene};
+use crate::stable::ListedPixels;
 use crate::unstable::{PixelState, UnstableList};
 use crate::{SimStats, math};
 
@@ -82,9 +83,19 @@ pub struct KeyFrame {
 }
 
 impl KeyFrame {
+    /// What pixel `i`'s centre ray met.
+    #[inline]
+    pub(crate) fn seen(&self, i: usize) -> Seen {
+        Seen {
+            id: self.id[i],
+            key: self.key[i],
+            z: self.z[i],
+        }
+    }
+
     /// Pixel `i` as one end of a path on its surface, at time `t` (this key frame's).
     #[inline]
-    fn path_end(&self, i: usize, t: f64) -> PathEnd<'_> {
+    pub(crate) fn path_end(&self, i: usize, t: f64) -> PathEnd<'_> {
         let key = self.key[i];
         PathEnd {
             t,
@@ -99,7 +110,8 @@ impl KeyFrame {
         }
     }
 
-    fn new(geom: FrameGeom, n: usize) -> Self {
+    /// A key frame of `n` pixels at `geom`, not cast yet.
+    pub(crate) fn new(geom: FrameGeom, n: usize) -> Self {
         Self {
             geom,
             l: vec![0.0; n],
@@ -133,23 +145,15 @@ struct DepthBlock {
     zmin_prev: f64,
 }
 
-/// Rounding allowance, log units, of bounds of interpolated texture samples (f32 rounding of
-/// the blends; not a modelling parameter).
-const SAMPLE_EPS_LOG: f32 = 1e-4;
-/// Most neighbouring stable pixels whose paths are bounded together (see `run_range`).
-const RUN_PIXELS: usize = 8;
-/// Largest texel span per axis of the union of a run's paths (see `run_range`).
-const RUN_RANGE_TEXELS: u32 = 12;
-/// Factor on a stable pixel's displacement from its texture Jacobian: covers the change of
-/// the Jacobian along the path (perspective) and its finite-difference estimate.
-const DISPLACEMENT_SAFETY: f32 = 1.1;
-
 /// Rays located and shaded together in a key frame (see `FrameGeom::locate_lanes` and
 /// `FrameGeom::shade_lanes`).
 const KEY_LANES: usize = crate::texture::LANES;
 
-const QUIET: u8 = 0;
-const STABLE: u8 = 1;
+/// Pixel classes of an interval (see the module documentation).
+pub(crate) const QUIET: u8 = 0;
+/// See [`QUIET`].
+pub(crate) const STABLE: u8 = 1;
+/// See [`QUIET`].
 const UNSTABLE: u8 = 2;
 
 /// The per-pixel state and the key frames.
@@ -179,6 +183,8 @@ pub struct Engine {
     hi: Vec<f32>,
     scratch: Vec<f32>,
     blocks: Vec<DepthBlock>,
+    /// The blocks' `x`, `y`, `hx` and `hy`, field by field (for the speed bounds in lanes).
+    block_geometry: [Vec<f64>; 4],
     zmin_bg: f64,
     last_dt: f64,
     /// Time of `kf0`, s.
@@ -220,6 +226,7 @@ impl Engine {
             hi: vec![0.0; n],
             scratch: Vec::new(),
             blocks: Vec::new(),
+            block_geometry: Default::default(),
             zmin_bg: 1.0,
             last_dt: cfg.render.max_step_s,
             t: 0.0,
@@ -240,15 +247,22 @@ impl Engine {
         let r_max = mx.hypot(my);
         let bg = scene::RelativeMotion::new(&cam, None);
         let safety = cfg.render.depth_safety;
-        let mut s: f64 = 0.0;
-        for b in &self.blocks {
-            let z = if b.zmin.is_finite() {
-                b.zmin.min(self.zmin_bg * 4.0)
-            } else {
-                self.zmin_bg
-            } * safety;
-            s = s.max(bg.static_speed_bound_near(b.x, b.y, b.hx, b.hy, z));
-        }
+        let z: Vec<f64> = self
+            .blocks
+            .iter()
+            .map(|b| {
+                let z = if b.zmin.is_finite() {
+                    b.zmin.min(self.zmin_bg * 4.0)
+                } else {
+                    self.zmin_bg
+                };
+                z * safety
+            })
+            .collect();
+        let mut bounds = vec![0.0; z.len()];
+        let g = &self.block_geometry;
+        bg.static_speed_bounds_near(&g[0], &g[1], &g[2], &g[3], &z, &mut bounds);
+        let mut s = bounds.iter().fold(0.0f64, |s, &b| s.max(b));
         for b in self.scene.boxes.iter().filter(|b| b.id != 0) {
             let bs = b.trajectory.state(t);
             let pose = scene::BoxPose::new(&cam, &bs);
@@ -312,10 +326,12 @@ impl Engine {
             .map(|i| around(&zb, i, f64::min, f64::INFINITY) * safety)
             .collect();
         let mut own = vec![0.0f64; bw * bh];
+        let mut bounds = vec![0.0f64; bw * bh];
+        let bl = &self.block_geometry;
         for g in geoms {
-            let bg = &g.motions[0];
-            for (i, b) in self.blocks.iter().enumerate() {
-                own[i] = own[i].max(bg.static_speed_bound_near(b.x, b.y, b.hx, b.hy, z3[i]));
+            g.motions[0].static_speed_bounds_near(&bl[0], &bl[1], &bl[2], &bl[3], &z3, &mut bounds);
+            for (o, &b) in own.iter_mut().zip(&bounds) {
+                *o = o.max(b);
             }
         }
         let background = (0..bw * bh)
@@ -433,6 +449,15 @@ impl Engine {
                 }
             }
         }
+        if self.block_geometry[0].len() != self.blocks.len() {
+            let b = &self.blocks;
+            self.block_geometry = [
+                b.iter().map(|b| b.x).collect(),
+                b.iter().map(|b| b.y).collect(),
+                b.iter().map(|b| b.hx).collect(),
+                b.iter().map(|b| b.hy).collect(),
+            ];
+        }
         let mut block_z = vec![f32::INFINITY; bw * bh];
         cast_keyframe(&mut self.kf1, &self.scene, &self.rays, &mut block_z);
         let kf = &mut self.kf1;
@@ -516,7 +541,16 @@ impl Engine {
         let radius = (travel.ceil() as usize + 1).min(256);
         let shade = self.shade_change(t0, t1);
         self.classify(cfg, radius, shade);
-        self.drop_bounded_runs();
+        let listed = ListedPixels {
+            kf0: &self.kf0,
+            kf1: &self.kf1,
+            scene: &self.scene,
+            class: &self.class,
+            thresholds: &self.thresholds,
+            span: (t0, t1),
+            max_px: cfg.render.max_px_per_step as f32,
+            width: self.rays.width,
+        };
 
         // The interval's events (buffer reused across intervals).
         let mut batch = std::mem::take(&mut self.batch);
@@ -536,64 +570,17 @@ impl Engine {
         geoms.push(self.kf1.geom.clone());
 
         // Quiet and stable pixels.
-        let max_px = cfg.render.max_px_per_step as f32;
-        let mut violations = 0u64;
-        let mut samples = 0u64;
-        let mut fired = 0u64;
         let mut path: Vec<f32> = Vec::new();
-        let w_img = self.rays.width;
-        let work = std::mem::take(&mut self.work);
-        for &p in &work {
-            let i = p as usize;
-            let (kf0, kf1) = (&self.kf0, &self.kf1);
-            let (c_on, c_off) = (self.thresholds.on[i], self.thresholds.off[i]);
-            match self.class[i] {
-                QUIET => {
-                    let before = batch.len();
-                    fire(
-                        &ctx,
-                        &mut self.reference[i],
-                        &mut self.last_event[i],
-                        i,
-                        kf0.l[i],
-                        kf1.l[i],
-                        (t0, t1),
-                        (&kf0.geom, &kf1.geom),
-                        (kf0.id[i], kf1.id[i]),
-                        (c_on, c_off),
-                        &mut batch,
-                    );
-                    if batch.len() > before {
-                        violations += 1;
-                    }
-                }
-                STABLE => {
-                    let key = kf0.key[i] as usize;
-                    let tex = &self.scene.textures[self.scene.key_texture[key]];
-                    let (du, dv) = (kf1.u[i] - kf0.u[i], kf1.v[i] - kf0.v[i]);
-                    let disp = stable_displacement(kf0, kf1, i, w_img, du, dv);
-                    let m = ((disp / max_px).ceil() as usize).clamp(1, 4096);
-                    let (n, f) = fire_path(
-                        &ctx,
-                        tex,
-                        (&kf0.path_end(i, t0), &kf1.path_end(i, t1)),
-                        m,
-                        i,
-                        kf0.id[i],
-                        (&mut self.reference[i], &mut self.last_event[i]),
-                        (c_on, c_off),
-                        &mut batch,
-                        &mut path,
-                    );
-                    samples += n;
-                    fired += f;
-                }
-                _ => {}
-            }
-        }
-        self.work = work;
+        let counts = listed.fire(
+            &ctx,
+            &self.work,
+            (&mut self.reference, &mut self.last_event),
+            &mut batch,
+            &mut path,
+        );
+        let (violations, mut fired) = (counts.violations, counts.fired);
         self.stats.skip_violations += violations;
-        self.stats.interpolated_samples += samples;
+        self.stats.interpolated_samples += counts.samples;
 
         // Unstable pixels: ray cast at the steps their local speed bound needs.
         let speeds = self.local_speeds(cfg, &geoms);
@@ -607,9 +594,7 @@ impl Engine {
                 last_event: &self.last_event,
                 c_on: &self.thresholds.on,
                 c_off: &self.thresholds.off,
-                l0: &self.kf0.l,
-                id0: &self.kf0.id,
-                key0: &self.kf0.key,
+                kf0: &self.kf0,
             },
         );
         let w = self.rays.width;
@@ -665,10 +650,10 @@ impl Engine {
             for a in 0..count {
                 let j = if q < key_slot { u.active[a] as usize } else { a };
                 let i = u.pixel[j] as usize;
-                let (l1, id1) = if q < key_slot {
-                    (u.l[j], u.id[j])
+                let (l1, seen1) = if q < key_slot {
+                    (u.l[j], u.seen(j))
                 } else {
-                    (self.kf1.l[i], self.kf1.id[i])
+                    (self.kf1.l[i], self.kf1.seen(i))
                 };
                 let sp = u.s_prev[j] as usize;
                 if esim::may_cross(u.reference[j], l1, u.c_on[j], u.c_off[j]) {
@@ -682,14 +667,14 @@ impl Engine {
                         l1,
                         (local_speed::slot_time(&times, sp), tq),
                         (geom_at(sp), geom_at(q)),
-                        (u.id_prev[j], id1),
+                        (u.seen_prev[j], seen1),
                         (u.c_on[j], u.c_off[j]),
                         &mut batch,
                     );
                     fired += (batch.len() - before) as u64;
                 }
                 u.l_prev[j] = l1;
-                u.id_prev[j] = id1;
+                u.seen_prev[j] = seen1;
                 u.s_prev[j] = q as u32;
                 if q < key_slot {
                     u.next[j] += 1;
@@ -741,44 +726,6 @@ impl Engine {
         self.batch = batch;
         std::mem::swap(&mut self.kf0, &mut self.kf1);
         self.t = t1;
-    }
-
-    /// Drops from the work list the stable pixels whose run's texel bound (see `run_range`)
-    /// keeps their whole path strictly inside their thresholds: none of them can fire and
-    /// their references stay. The tests run without branches per pixel; the list keeps its
-    /// order.
-    fn drop_bounded_runs(&mut self) {
-        let (kf0, kf1, scene) = (&self.kf0, &self.kf1, &self.scene);
-        let (on, off, reference, class) = (
-            &self.thresholds.on,
-            &self.thresholds.off,
-            &self.reference,
-            &self.class,
-        );
-        let work = &mut self.work;
-        let (mut kept, mut wi) = (0usize, 0usize);
-        while wi < work.len() {
-            let p = work[wi];
-            if class[p as usize] != STABLE {
-                work[kept] = p;
-                kept += 1;
-                wi += 1;
-                continue;
-            }
-            let (end, bound) = run_range(kf0, kf1, scene, work, wi, class);
-            // No bound: every member stays.
-            let (lo, hi) = bound.unwrap_or((f32::NEG_INFINITY, f32::INFINITY));
-            for k in wi..end {
-                let p = work[k];
-                let i = p as usize;
-                let r = reference[i];
-                let inside = (hi < r + on[i]) & (lo > r - off[i]);
-                work[kept] = p;
-                kept += usize::from(!inside);
-            }
-            wi = end;
-        }
-        work.truncate(kept);
     }
 
     /// Sorts every pixel into quiet, stable or unstable for the interval.
@@ -1005,116 +952,6 @@ fn cast_keyframe_with(kf: &mut KeyFrame, scene: &Scene, rays: &Rays, block_z: &m
     }
 }
 
-/// Texel bound (see [`Texture::path_range`]) of the union of the stable paths of a run of
-/// neighbouring pixels that starts at `work[start]`: up to `RUN_PIXELS` consecutive pixels of
-/// one row, all listed, stable and on the same surface. Returns the index in
-/// `work` after the run and the bound (`None` for a run of one pixel, or when the union spans
-/// more than `RUN_RANGE_TEXELS` texels). The union's texels include every member path's, so a
-/// member whose thresholds hold the run's bound would hold its own: the same decisions as
-/// bounding every path alone, with one setup and one texel scan per run.
-fn run_range(
-    kf0: &KeyFrame,
-    kf1: &KeyFrame,
-    scene: &Scene,
-    work: &[u32],
-    start: usize,
-    class: &[u8],
-) -> (usize, Option<(f32, f32)>) {
-    let first = work[start] as usize;
-    let key = kf0.key[first];
-    let mut end = start + 1;
-    while end < work.len()
-        && end - start < RUN_PIXELS
-        && work[end] as usize == first + (end - start)
-        && class[work[end] as usize] == STABLE
-        && kf0.key[work[end] as usize] == key
-    {
-        end += 1;
-    }
-    if end - start < 2 {
-        return (end, None);
-    }
-    let (mut u_lo, mut u_hi, mut v_lo, mut v_hi) =
-        (f32::INFINITY, f32::NEG_INFINITY, f32::INFINITY, f32::NEG_INFINITY);
-    let (mut fp_lo, mut fp_hi) = (f32::INFINITY, f32::NEG_INFINITY);
-    for i in first..first + (end - start) {
-        u_lo = fmin(u_lo, fmin(kf0.u[i], kf1.u[i]));
-        u_hi = fmax(u_hi, fmax(kf0.u[i], kf1.u[i]));
-        v_lo = fmin(v_lo, fmin(kf0.v[i], kf1.v[i]));
-        v_hi = fmax(v_hi, fmax(kf0.v[i], kf1.v[i]));
-        fp_lo = fmin(fp_lo, fmin(kf0.footprint[i], kf1.footprint[i]));
-        fp_hi = fmax(fp_hi, fmax(kf0.footprint[i], kf1.footprint[i]));
-    }
-    let key = key as usize;
-    let tex = &scene.textures[scene.key_texture[key]];
-    let texels = tex.path_range(u_lo, v_lo, u_hi, v_hi, fp_lo, fp_hi, RUN_RANGE_TEXELS);
-    (
-        end,
-        shaded_bounds(texels, kf0.geom.shade_by_key[key], kf1.geom.shade_by_key[key]),
-    )
-}
-
-/// Bounds of the log intensities along a stable path from the texel bound `texels` of its
-/// surface (see [`Texture::path_range`]), with the surface's log shading `s0` and `s1` at the
-/// key frames and the rounding allowance.
-#[inline]
-fn shaded_bounds(texels: Option<(f32, f32)>, s0: f32, s1: f32) -> Option<(f32, f32)> {
-    texels.map(|(lo, hi)| (lo + s0.min(s1) - SAMPLE_EPS_LOG, hi + s0.max(s1) + SAMPLE_EPS_LOG))
-}
-
-/// Image displacement (px) of the texture point seen by stable pixel `i` from key frame
-/// `kf0` to `kf1` (`du`, `dv`: its texture-coordinate change, m; `w`: image width): the change
-/// mapped back through the pixel-to-texture Jacobian from central differences of the
-/// neighbours' texture coordinates (when all four see the pixel's surface), the
-/// larger of both key frames' with `DISPLACEMENT_SAFETY`, and never more than the change over
-/// the smaller pixel size across the ray (the bound for any direction on a surface seen at
-/// any angle). Image borders use that bound alone.
-#[inline]
-fn stable_displacement(kf0: &KeyFrame, kf1: &KeyFrame, i: usize, w: usize, du: f32, dv: f32) -> f32 {
-    // The pixel's size on the surface across the ray at either key frame.
-    let size = (kf0.z[i] * kf0.geom.inv_f())
-        .min(kf1.z[i] * kf1.geom.inv_f())
-        .max(1e-9);
-    let any_direction = (du * du + dv * dv).sqrt() / size;
-    let n = kf0.u.len();
-    let (x, y) = (i % w, i / w);
-    if x == 0 || x + 1 >= w || y == 0 || i + w >= n {
-        return any_direction;
-    }
-    let (d0, d1) = (
-        jacobian_displacement(kf0, i, w, du, dv),
-        jacobian_displacement(kf1, i, w, du, dv),
-    );
-    (d0.max(d1) * DISPLACEMENT_SAFETY).min(any_direction)
-}
-
-/// The image displacement (px) of texture-coordinate change `(du, dv)` at pixel `i` of key
-/// frame `kf` through its pixel-to-texture Jacobian from central differences (infinite when a
-/// 4-neighbour sees another surface or the Jacobian is degenerate); see
-/// [`stable_displacement`]. Inlined: it runs twice per stable pixel.
-#[inline(always)]
-fn jacobian_displacement(kf: &KeyFrame, i: usize, w: usize, du: f32, dv: f32) -> f32 {
-    let k = kf.key[i];
-    if kf.key[i + 1] != k || kf.key[i - 1] != k || kf.key[i + w] != k || kf.key[i - w] != k {
-        // A neighbour on another surface (the pixel lies along an edge).
-        return f32::INFINITY;
-    }
-    let (a, b) = (
-        0.5 * (kf.u[i + 1] - kf.u[i - 1]),
-        0.5 * (kf.u[i + w] - kf.u[i - w]),
-    );
-    let (c, d) = (
-        0.5 * (kf.v[i + 1] - kf.v[i - 1]),
-        0.5 * (kf.v[i + w] - kf.v[i - w]),
-    );
-    let det = a * d - b * c;
-    if det.is_nan() || det.abs() <= 1e-12 {
-        return f32::INFINITY;
-    }
-    let (px, py) = ((d * du - b * dv) / det, (a * dv - c * du) / det);
-    (px * px + py * py).sqrt()
-}
-
 /// Bound of the normalized image speed (1/s) of a moving box with motion `m` relative to the
 /// camera, camera-frame `pose` and `corners`, half extents `half` (m), at image radius
 /// `<= r_max`: the smallest of the corner bound, the centred corner bound (see
@@ -1137,18 +974,6 @@ mod tests {
     use super::*;
     use crate::config::RenderConfig;
     use crate::presets::preset;
-
-    /// Key frames of a 5 x 5 image whose texture coordinates are the affine map `(a, b, c, d)`
-    /// of the pixel position (u = a x + b y, v = c x + d y), shifted by `shift`.
-    fn affine(kf: &mut KeyFrame, w: usize, j: [f32; 4], shift: (f32, f32), px_size: f32) {
-        let z = px_size / kf.geom.inv_f();
-        for i in 0..w * w {
-            let (x, y) = ((i % w) as f32, (i / w) as f32);
-            kf.u[i] = j[0] * x + j[1] * y + shift.0;
-            kf.v[i] = j[2] * x + j[3] * y + shift.1;
-            kf.z[i] = z;
-        }
-    }
 
     /// For every camera-frame point of `pts(t)` in the image at either end of the step
     /// `[ta, tb]`: its largest image distance (px) from its position at `ta` over four later
@@ -1303,31 +1128,5 @@ mod tests {
                 cfg.render.max_px_per_step,
             );
         }
-    }
-
-    #[test]
-    fn stable_displacement_follows_the_texture_jacobian() {
-        let cfg = preset("camera-only", 1).unwrap().with_resolution_scale(0.05);
-        let scene = Scene::new(&cfg.scene, cfg.camera_trajectory.clone(), 1, 0.01);
-        let geom = FrameGeom::new(&scene, &cfg.camera, 0.0);
-        let (mut kf0, mut kf1) = (KeyFrame::new(geom.clone(), 25), KeyFrame::new(geom, 25));
-        // A surface foreshortened 4x along x (4 mm per pixel) and 1 mm per pixel along y.
-        let j = [0.004, 0.0, 0.0, 0.001];
-        // The texture moves 3 px along x: 12 mm.
-        // The pixel size across the ray (0.5 mm) bounds any direction by 2x too much or more.
-        affine(&mut kf0, 5, j, (0.0, 0.0), 0.0005);
-        affine(&mut kf1, 5, j, (0.012, 0.0), 0.0005);
-        let d = stable_displacement(&kf0, &kf1, 12, 5, 0.012, 0.0);
-        assert!((d - 3.0 * DISPLACEMENT_SAFETY).abs() < 1e-3, "{d}");
-        // Along y, 3 px is 3 mm.
-        let d = stable_displacement(&kf0, &kf1, 12, 5, 0.0, 0.003);
-        assert!((d - 3.0 * DISPLACEMENT_SAFETY).abs() < 1e-3, "{d}");
-        // Border pixels get the any-direction bound (12 mm over 0.5 mm pixels).
-        let d = stable_displacement(&kf0, &kf1, 2, 5, 0.012, 0.0);
-        assert!((d - 24.0).abs() < 1e-3, "{d}");
-        // A degenerate Jacobian falls back to the any-direction bound.
-        affine(&mut kf0, 5, [0.0; 4], (0.0, 0.0), 0.0005);
-        let d = stable_displacement(&kf0, &kf1, 12, 5, 0.012, 0.0);
-        assert!((d - 24.0).abs() < 1e-3, "{d}");
     }
 }

@@ -22,6 +22,18 @@ pub(crate) struct FireCtx<'a> {
     pub refractory: f64,
 }
 
+/// What a pixel's centre ray met at one render: the object id, the surface key and the
+/// depth (m) the render located (`u16::MAX` and infinite for nothing).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct Seen {
+    /// Object id.
+    pub id: u16,
+    /// Surface key.
+    pub key: u16,
+    /// Depth along the optical axis, m.
+    pub z: f32,
+}
+
 /// One end of a pixel's path on one surface: where the pixel's ray met it (a key frame, or a
 /// render of an unstable pixel).
 pub(crate) struct PathEnd<'a> {
@@ -74,7 +86,7 @@ pub(crate) fn fire_path(
     let dfp = b.footprint - a.footprint;
     let r = *reference;
     let mf = m as f32;
-    tex.sample_path(
+    let (lo, hi) = tex.sample_path(
         [a.u, a.v, a.footprint, a.shade],
         [du, dv, dfp, b.shade - a.shade],
         m,
@@ -83,9 +95,7 @@ pub(crate) fn fire_path(
     path.push(b.l);
     let samples = (m - 1) as u64;
     let l_start = a.l;
-    let (lo, hi) = path
-        .iter()
-        .fold((l_start, l_start), |(lo, hi), &l| (fmin(lo, l), fmax(hi, l)));
+    let (lo, hi) = (fmin(fmin(lo, l_start), b.l), fmax(fmax(hi, l_start), b.l));
     if hi < r + c_on && lo > r - c_off {
         // Strictly inside both thresholds: no crossing, reference unchanged.
         return (samples, 0);
@@ -121,7 +131,7 @@ pub(crate) fn fire_path(
 }
 
 /// Threshold crossings of pixel `i` from `l0` to `l1` over `span`, with the truth of
-/// [`event_truth`] between the renders `geoms` (object ids `ids` at the pixel centre).
+/// [`event_truth`] between the renders `geoms` (which saw `seen` at the pixel centre).
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn fire(
     ctx: &FireCtx,
@@ -132,7 +142,7 @@ pub(crate) fn fire(
     l1: f32,
     span: (f64, f64),
     geoms: (&FrameGeom, &FrameGeom),
-    ids: (u16, u16),
+    seen: (Seen, Seen),
     thresholds: (f32, f32),
     batch: &mut Vec<RawEvent>,
 ) {
@@ -145,7 +155,7 @@ pub(crate) fn fire(
         span,
         thresholds,
         batch,
-        |t| event_truth(ctx, i, geoms.0, geoms.1, ids.0, ids.1, fraction(t, span)),
+        |t| event_truth(ctx, i, geoms, seen, fraction(t, span)),
     );
 }
 
@@ -231,19 +241,20 @@ fn crossings_to_events(
 }
 
 /// Object id and flow (px/s) of an event at pixel `i`, a fraction `frac` of the way from the
-/// render at `ga` (object `id_a` at the pixel centre) to the one at `gb` (object `id_b`).
+/// render at `geoms.0` (which saw `seen.0` at the pixel centre) to the one at `geoms.1`.
 /// The id is the object's if it covers the pixel at either render (leading and trailing edges
 /// belong to the object); the flow is that surface's motion field at the pixel, interpolated
-/// between the two renders when both see it.
+/// between the two renders when both see it. Where a render saw the event's object at the
+/// pixel centre, its surface and depth are what `FrameGeom::flow` would locate (the nearest
+/// surface of all is the nearest of its object's), so they are used as they are.
 fn event_truth(
     ctx: &FireCtx,
     i: usize,
-    ga: &FrameGeom,
-    gb: &FrameGeom,
-    id_a: u16,
-    id_b: u16,
+    geoms: (&FrameGeom, &FrameGeom),
+    seen: (Seen, Seen),
     frac: f32,
 ) -> (u16, f32, f32) {
+    let (id_a, id_b) = (seen.0.id, seen.1.id);
     let id = match (id_a, id_b) {
         (0, b) => b,
         (a, 0) => a,
@@ -257,9 +268,14 @@ fn event_truth(
     };
     let w = ctx.rays.width;
     let (x, y, u, v) = (ctx.rays.x[i], ctx.rays.y[i], (i % w) as i32, (i / w) as i32);
-    let fa = ga.flow(ctx.scene, ctx.cam, x, y, u, v, id);
-    let fb = gb.flow(ctx.scene, ctx.cam, x, y, u, v, id);
-    let (fx, fy) = interpolate_flow(fa, fb, frac);
+    let flow = |g: &FrameGeom, s: Seen| {
+        if s.id == id {
+            g.flow_at(ctx.cam, x, y, s.key, s.z, id)
+        } else {
+            g.flow(ctx.scene, ctx.cam, x, y, u, v, id)
+        }
+    };
+    let (fx, fy) = interpolate_flow(flow(geoms.0, seen.0), flow(geoms.1, seen.1), frac);
     (id, fx, fy)
 }
 

@@ -18,9 +18,10 @@
 //! interpolate their texture coordinates or are skipped when they provably cannot fire. [`SimStats::skip_violations`] counts skipped pixels
 //! that fired anyway (their events are kept, with times spread over the interval).
 //!
-//! Speed: about 0.38 to 1.17 sensor-seconds per CPU-second on one core at 640x480 (0.4 to 1.9 M
-//! events per sensor second); real time is not reached yet at about 1 M events per second.
-//! Figures, how to reproduce them and what remains are in the crate README.
+//! Speed: about 0.45 to 1.5 sensor-seconds per CPU-second on one core at 640x480 (0.4 to 1.9 M
+//! events per sensor second; the presets near 1 M events per second about 0.8 to 0.95 over
+//! their first 0.5 s and about real time over whole sequences on a quiet machine). Figures,
+//! how to reproduce them and what remains are in the crate README.
 
 pub mod camera;
 pub mod config;
@@ -36,6 +37,7 @@ pub mod radix;
 pub mod render;
 pub mod rng;
 pub mod scene;
+mod stable;
 pub mod texture;
 pub mod trajectory;
 pub mod truth;

@@ -14,6 +14,9 @@ use crate::scene::{BoxPose, RelativeMotion, Scene};
 use crate::texture::LANES;
 use crate::trajectory::RigidState;
 
+#[cfg(target_arch = "x86_64")]
+mod lane_search;
+
 /// Texture coordinate offsets (m) that make the six faces of a box show different parts of its
 /// texture.
 const FACE_OFFSET: [[f32; 2]; 6] = [
@@ -194,8 +197,8 @@ struct LaneSearch<const N: usize> {
     best_box: [u32; N],
     /// Face of that box.
     box_face: [u32; N],
-    /// Ray direction in that box's coordinates.
-    box_db: [[f32; 3]; N],
+    /// Ray direction in that box's coordinates, component by component.
+    box_db: [[f32; N]; 3],
     /// Depth of the nearest surface (infinite: none).
     s: [f32; N],
 }
@@ -206,14 +209,35 @@ impl<const N: usize> LaneSearch<N> {
     fn located(&self, g: &FrameGeom) -> [Located; N] {
         let mut out = [Located::NOTHING; N];
         for (l, o) in out.iter_mut().enumerate() {
-            *o = if self.best_box[l] != u32::MAX {
+            *o = self.located_lane(g, l);
+        }
+        out
+    }
+
+    /// The surface key of lane `l` (as in [`LaneSearch::located`]).
+    #[inline(always)]
+    fn key(&self, g: &FrameGeom, l: usize) -> u16 {
+        if self.best_box[l] != u32::MAX {
+            g.boxes[self.best_box[l] as usize].key_base + self.box_face[l] as u16
+        } else if self.best_plane[l] == u32::MAX {
+            u16::MAX
+        } else {
+            g.planes[self.best_plane[l] as usize].key
+        }
+    }
+
+    /// Lane `l` as a [`Located`] surface of `g`.
+    #[inline(always)]
+    fn located_lane(&self, g: &FrameGeom, l: usize) -> Located {
+        {
+            if self.best_box[l] != u32::MAX {
                 let b = &g.boxes[self.best_box[l] as usize];
                 let face = self.box_face[l] as usize;
                 Located {
                     surface: Surface::Box {
                         index: self.best_box[l] as usize,
                         face,
-                        db: self.box_db[l],
+                        db: [self.box_db[0][l], self.box_db[1][l], self.box_db[2][l]],
                     },
                     key: b.key_base + face as u16,
                     id: b.id,
@@ -229,9 +253,8 @@ impl<const N: usize> LaneSearch<N> {
                     id: 0,
                     z: self.s[l],
                 }
-            };
+            }
         }
-        out
     }
 }
 
@@ -593,7 +616,29 @@ impl FrameGeom {
         self.search_lanes(x, y, px, py).located(self)
     }
 
-    /// The search of [`FrameGeom::locate_lanes`], lane by lane in arrays.
+    /// The object ids of [`FrameGeom::locate_lanes`] (0 for the background and for nothing),
+    /// without assembling the located surfaces.
+    #[inline(always)]
+    pub fn object_ids_lanes(
+        &self,
+        x: &[f32; LANES],
+        y: &[f32; LANES],
+        px: &[i32; LANES],
+        py: &[i32; LANES],
+    ) -> [u16; LANES] {
+        let found = self.search_lanes(x, y, px, py);
+        let mut ids = [0u16; LANES];
+        for (l, id) in ids.iter_mut().enumerate() {
+            if found.best_box[l] != u32::MAX {
+                *id = self.boxes[found.best_box[l] as usize].id;
+            }
+        }
+        ids
+    }
+
+    /// The search of [`FrameGeom::locate_lanes`], lane by lane in arrays. With `LANES` rays
+    /// and AVX2 (detected at run time) in vector registers (see `lane_search`): the same
+    /// results.
     #[inline(always)]
     fn search_lanes<const N: usize>(
         &self,
@@ -602,6 +647,34 @@ impl FrameGeom {
         px: &[i32; N],
         py: &[i32; N],
     ) -> LaneSearch<N> {
+        #[cfg(target_arch = "x86_64")]
+        if N == LANES && std::is_x86_feature_detected!("avx2") {
+            // The same arrays at their fixed length (N == LANES: copies the optimiser drops).
+            let (mut x8, mut y8, mut px8, mut py8) =
+                ([0.0f32; LANES], [0.0f32; LANES], [0i32; LANES], [0i32; LANES]);
+            for l in 0..LANES {
+                (x8[l], y8[l], px8[l], py8[l]) = (x[l], y[l], px[l], py[l]);
+            }
+            // SAFETY: AVX2 is available (checked just above).
+            let r = unsafe { self.search_lanes_avx2(&x8, &y8, &px8, &py8) };
+            let mut out = LaneSearch {
+                best_plane: [0; N],
+                best_box: [0; N],
+                box_face: [0; N],
+                box_db: [[0.0; N]; 3],
+                s: [0.0; N],
+            };
+            for l in 0..N {
+                out.best_plane[l] = r.best_plane[l];
+                out.best_box[l] = r.best_box[l];
+                out.box_face[l] = r.box_face[l];
+                for k in 0..3 {
+                    out.box_db[k][l] = r.box_db[k][l];
+                }
+                out.s[l] = r.s[l];
+            }
+            return out;
+        }
         let mut best_inv = [0.0f32; N];
         let mut best_plane = [u32::MAX; N];
         for (i, p) in self.planes.iter().enumerate() {
@@ -622,7 +695,7 @@ impl FrameGeom {
         }
         let mut best_box = [u32::MAX; N];
         let mut box_face = [0u32; N];
-        let mut box_db = [[0.0f32; 3]; N];
+        let mut box_db = [[0.0f32; N]; 3];
         for (j, b) in self.boxes.iter().enumerate() {
             let mut inside = [false; N];
             for l in 0..N {
@@ -660,7 +733,9 @@ impl FrameGeom {
                     best_box[l] = j as u32;
                     let a = axis[l] as usize;
                     box_face[l] = 2 * axis[l] + u32::from(db[a][l] < 0.0);
-                    box_db[l] = [db[0][l], db[1][l], db[2][l]];
+                    for k in 0..3 {
+                        box_db[k][l] = db[k][l];
+                    }
                 }
             }
         }
@@ -758,7 +833,7 @@ impl FrameGeom {
         let s = &found.s;
         let (mut u, mut v, mut cos) = ([0.0f32; LANES], [0.0f32; LANES], [0.0f32; LANES]);
         for l in 0..LANES {
-            let db = found.box_db[l];
+            let db = [found.box_db[0][l], found.box_db[1][l], found.box_db[2][l]];
             let dn = (x[l] * x[l] + y[l] * y[l] + 1.0).sqrt();
             u[l] = (b.o_b[j] + s[l] * db[j]) + off[0];
             v[l] = (b.o_b[k] + s[l] * db[k]) + off[1];
@@ -1032,23 +1107,70 @@ impl FrameGeom {
         py: i32,
         centre: (f32, u16),
     ) -> (f32, bool) {
+        #[cfg(target_arch = "x86_64")]
+        if std::is_x86_feature_detected!("avx2") {
+            // SAFETY: AVX2 is available (checked just above).
+            return unsafe { self.edge_mix_avx2(scene, x, y, du, dv, px, py, centre) };
+        }
+        self.edge_mix_with(scene, x, y, du, dv, px, py, centre)
+    }
+
+    /// [`FrameGeom::edge_mix`] compiled with AVX2 (the lane search inlined).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    #[allow(clippy::too_many_arguments)]
+    fn edge_mix_avx2(
+        &self,
+        scene: &Scene,
+        x: f32,
+        y: f32,
+        du: [f32; 2],
+        dv: [f32; 2],
+        px: i32,
+        py: i32,
+        centre: (f32, u16),
+    ) -> (f32, bool) {
+        self.edge_mix_with(scene, x, y, du, dv, px, py, centre)
+    }
+
+    /// The body of [`FrameGeom::edge_mix`].
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn edge_mix_with(
+        &self,
+        scene: &Scene,
+        x: f32,
+        y: f32,
+        du: [f32; 2],
+        dv: [f32; 2],
+        px: i32,
+        py: i32,
+        centre: (f32, u16),
+    ) -> (f32, bool) {
         let (mut rx, mut ry) = ([0.0f32; 4], [0.0f32; 4]);
         for (k, (ou, ov)) in SUBSAMPLES.into_iter().enumerate() {
             (rx[k], ry[k]) = (x + ou * du[0] + ov * dv[0], y + ou * du[1] + ov * dv[1]);
         }
         let rays: [(f32, f32); 4] = [(rx[0], ry[0]), (rx[1], ry[1]), (rx[2], ry[2]), (rx[3], ry[3])];
-        let found = self.locate_lanes(&rx, &ry, &[px; 4], &[py; 4]);
-        if found.iter().all(|f| f.key == centre.1) {
+        // Searched in `LANES` lanes (the four sub-rays twice: the vector search, see
+        // `search_lanes`, costs no more than four lanes).
+        let (mut x8, mut y8) = ([0.0f32; LANES], [0.0f32; LANES]);
+        for l in 0..LANES {
+            (x8[l], y8[l]) = (rx[l % 4], ry[l % 4]);
+        }
+        let found = self.search_lanes(&x8, &y8, &[px; LANES], &[py; LANES]);
+        let keys = [0, 1, 2, 3].map(|l| found.key(self, l));
+        if keys.iter().all(|&k| k == centre.1) {
             return (centre.0, false);
         }
         // Sub-rays on the centre's surface take its value (as above); the others are textured.
         let centre_lin = centre.0.exp();
         let mut acc = 0.0f32;
-        for ((sx, sy), f) in rays.iter().zip(&found) {
-            acc += if f.key == centre.1 {
+        for (l, (sx, sy)) in rays.iter().enumerate() {
+            acc += if keys[l] == centre.1 {
                 centre_lin
             } else {
-                self.shade(scene, *sx, *sy, f).l.exp()
+                self.shade(scene, *sx, *sy, &found.located_lane(self, l)).l.exp()
             };
         }
         ((0.25 * acc).ln(), true)

@@ -15,6 +15,9 @@ use crate::SimError;
 use crate::math::{fmax, fmin};
 use crate::rng::Rng;
 
+#[cfg(target_arch = "x86_64")]
+mod lanes;
+
 /// The pattern of a texture, before the value-noise layer is mixed in.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub enum Pattern {
@@ -103,9 +106,13 @@ impl TextureConfig {
 pub struct Texture {
     /// Mip levels, finest first.
     mips: Vec<MipLevel>,
-    /// Texels of every level, finest first, one after the other (levels index into it; one
-    /// array so that 8-lane samples gather from any level with one base pointer).
+    /// Texels of every level, finest first, one after the other (levels index into it).
     texels: Vec<f32>,
+    /// For every texel of `texels`, the four taps of a bilinear sample whose floor it is:
+    /// itself, its right neighbour, the one below and the one below right (wrapping within its
+    /// level), so that 8-lane samples load each lane's taps with one 16-byte load (hardware
+    /// gathers of single texels took twice as long; see `lanes`).
+    quads: Vec<[f32; 4]>,
     /// Per level (the last repeated up to 8): texels per metre, side and first texel, the
     /// tables [`Texture::sample_lanes`] looks levels up in.
     lane_scale: [f32; LANES],
@@ -261,6 +268,7 @@ impl Texture {
             });
             texels.extend_from_slice(&data);
         }
+        let quads = Self::bilinear_quads(&texels, &mips);
         let table = |k: usize| &mips[k.min(mips.len() - 1)];
         let lane_scale = std::array::from_fn(|k| table(k).scale);
         let lane_size = std::array::from_fn(|k| table(k).size as i32);
@@ -269,6 +277,7 @@ impl Texture {
         Self {
             mips,
             texels,
+            quads,
             lane_scale,
             lane_size,
             lane_start,
@@ -278,6 +287,23 @@ impl Texture {
             range_max,
             grad_max,
         }
+    }
+
+    /// The bilinear taps of every texel of `texels` (see `quads`).
+    fn bilinear_quads(texels: &[f32], mips: &[MipLevel]) -> Vec<[f32; 4]> {
+        let mut quads = vec![[0.0f32; 4]; texels.len()];
+        for m in mips {
+            let (n, mask) = (m.size as usize, m.size as usize - 1);
+            let d = &texels[m.start..m.start + n * n];
+            for y in 0..n {
+                let y1 = (y + 1) & mask;
+                for x in 0..n {
+                    let x1 = (x + 1) & mask;
+                    quads[m.start + y * n + x] = [d[y * n + x], d[y * n + x1], d[y1 * n + x], d[y1 * n + x1]];
+                }
+            }
+        }
+        quads
     }
 
     /// Pyramid of the largest level-0 neighbour difference per aligned cell (see `grad_max`).
@@ -421,12 +447,10 @@ impl Texture {
         let (iv, b) = floor_split(v * m.scale - 0.5);
         let x0 = (iu as u32) & mask;
         let y0 = (iv as u32) & mask;
-        let x1 = (x0 + 1) & mask;
-        let y1 = (y0 + 1) & mask;
-        let d = self.level(m);
-        let (r0, r1) = ((y0 * size) as usize, (y1 * size) as usize);
-        let top = d[r0 + x0 as usize] + a * (d[r0 + x1 as usize] - d[r0 + x0 as usize]);
-        let bot = d[r1 + x0 as usize] + a * (d[r1 + x1 as usize] - d[r1 + x0 as usize]);
+        // The four taps (wrapping) in one quad (see `quads`), the memory the lane samples use.
+        let [d00, d01, d10, d11] = self.quads[m.start + (y0 * size + x0) as usize];
+        let top = d00 + a * (d01 - d00);
+        let bot = d10 + a * (d11 - d10);
         top + b * (bot - top)
     }
 
@@ -449,8 +473,8 @@ impl Texture {
     }
 
     /// [`Texture::sample`] of [`LANES`] points at once: the same arithmetic lane by lane, so
-    /// the same values. With AVX2 (detected at run time) the lanes run in SIMD registers and
-    /// the texels are gathered; otherwise the points are sampled one by one.
+    /// the same values. With AVX2 (detected at run time) the lanes run in SIMD registers (see
+    /// `lanes`); otherwise the points are sampled one by one.
     #[inline(always)]
     pub fn sample_lanes(&self, u: &[f32; LANES], v: &[f32; LANES], fp: &[f32; LANES]) -> [f32; LANES] {
         #[cfg(target_arch = "x86_64")]
@@ -461,135 +485,38 @@ impl Texture {
         std::array::from_fn(|l| self.sample(u[l], v[l], fp[l]))
     }
 
-    /// [`Texture::sample_lanes`] with AVX2: `sample` written out in vector operations in the
-    /// same order (no fused multiply-adds). Both mip levels a lane may blend are sampled for
-    /// every lane and the second is blended in where `sample` would; integer conversions
-    /// truncate like `as i32` for the |x| < 2^31 that texture coordinates stay within.
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
-    #[inline]
-    fn sample_lanes_avx2(&self, u: &[f32; LANES], v: &[f32; LANES], fp: &[f32; LANES]) -> [f32; LANES] {
-        use std::arch::x86_64::*;
-        // SAFETY: unaligned loads of 8 values from arrays of 8.
-        let (u, v, fp) = unsafe {
-            (
-                _mm256_loadu_ps(u.as_ptr()),
-                _mm256_loadu_ps(v.as_ptr()),
-                _mm256_loadu_ps(fp.as_ptr()),
-            )
-        };
-        // SAFETY: as above.
-        let (scales, sizes, starts) = unsafe {
-            (
-                _mm256_loadu_ps(self.lane_scale.as_ptr()),
-                _mm256_loadu_si256(self.lane_size.as_ptr().cast()),
-                _mm256_loadu_si256(self.lane_start.as_ptr().cast()),
-            )
-        };
-        let ones = _mm256_set1_epi32(1);
-        // `floor_split`: truncation, minus one where that rounded up.
-        let floor_split = |x: __m256| {
-            let t = _mm256_cvttps_epi32(x);
-            let up = _mm256_castps_si256(_mm256_cmp_ps::<_CMP_GT_OQ>(_mm256_cvtepi32_ps(t), x));
-            let i = _mm256_add_epi32(t, up);
-            (i, _mm256_sub_ps(x, _mm256_cvtepi32_ps(i)))
-        };
-        let bilinear = |level: __m256i| {
-            let scale = _mm256_permutevar8x32_ps(scales, level);
-            let size = _mm256_permutevar8x32_epi32(sizes, level);
-            let start = _mm256_permutevar8x32_epi32(starts, level);
-            let mask = _mm256_sub_epi32(size, ones);
-            let half = _mm256_set1_ps(0.5);
-            let (iu, a) = floor_split(_mm256_sub_ps(_mm256_mul_ps(u, scale), half));
-            let (iv, b) = floor_split(_mm256_sub_ps(_mm256_mul_ps(v, scale), half));
-            let x0 = _mm256_and_si256(iu, mask);
-            let y0 = _mm256_and_si256(iv, mask);
-            let x1 = _mm256_and_si256(_mm256_add_epi32(x0, ones), mask);
-            let y1 = _mm256_and_si256(_mm256_add_epi32(y0, ones), mask);
-            let r0 = _mm256_add_epi32(start, _mm256_mullo_epi32(y0, size));
-            let r1 = _mm256_add_epi32(start, _mm256_mullo_epi32(y1, size));
-            let base = self.texels.as_ptr();
-            // SAFETY: every index is a level's start plus a row and a column below its side,
-            // inside `texels`.
-            let (d00, d01, d10, d11) = unsafe {
-                (
-                    _mm256_i32gather_ps::<4>(base, _mm256_add_epi32(r0, x0)),
-                    _mm256_i32gather_ps::<4>(base, _mm256_add_epi32(r0, x1)),
-                    _mm256_i32gather_ps::<4>(base, _mm256_add_epi32(r1, x0)),
-                    _mm256_i32gather_ps::<4>(base, _mm256_add_epi32(r1, x1)),
-                )
-            };
-            let top = _mm256_add_ps(d00, _mm256_mul_ps(a, _mm256_sub_ps(d01, d00)));
-            let bot = _mm256_add_ps(d10, _mm256_mul_ps(a, _mm256_sub_ps(d11, d10)));
-            _mm256_add_ps(top, _mm256_mul_ps(b, _mm256_sub_ps(bot, top)))
-        };
-        // Level of detail: `fast_log2` of the footprint in texels, clamped.
-        let x = _mm256_max_ps(
-            _mm256_mul_ps(fp, _mm256_set1_ps(self.inv_texel)),
-            _mm256_set1_ps(1e-6),
-        );
-        let bits = _mm256_castps_si256(x);
-        let e = _mm256_sub_epi32(
-            _mm256_and_si256(_mm256_srli_epi32::<23>(bits), _mm256_set1_epi32(255)),
-            _mm256_set1_epi32(127),
-        );
-        let m = _mm256_castsi256_ps(_mm256_or_si256(
-            _mm256_and_si256(bits, _mm256_set1_epi32(0x007f_ffff)),
-            _mm256_set1_epi32(0x3f80_0000),
-        ));
-        let lod = _mm256_add_ps(_mm256_cvtepi32_ps(e), _mm256_sub_ps(m, _mm256_set1_ps(1.0)));
-        let (zero, max_level) = (_mm256_setzero_ps(), _mm256_set1_ps(self.max_level));
-        let lod = _mm256_blendv_ps(lod, zero, _mm256_cmp_ps::<_CMP_LT_OQ>(lod, zero));
-        let lod = _mm256_blendv_ps(lod, max_level, _mm256_cmp_ps::<_CMP_GT_OQ>(lod, max_level));
-        // lod >= 0 (or -0): truncation is `floor_fast`; lod <= 0 gives level 0 with f <= 0,
-        // which is `sample`'s level-0 branch.
-        let l0 = _mm256_cvttps_epi32(lod);
-        let f = _mm256_sub_ps(lod, _mm256_cvtepi32_ps(l0));
-        let a = bilinear(l0);
-        let blend = _mm256_and_ps(
-            _mm256_cmp_ps::<_CMP_GT_OQ>(f, zero),
-            _mm256_cmp_ps::<_CMP_LT_OQ>(_mm256_cvtepi32_ps(l0), max_level),
-        );
-        let out = if _mm256_movemask_ps(blend) == 0 {
-            a
-        } else {
-            // Lanes that do not blend take their own level again (always a valid level).
-            let l1 = _mm256_add_epi32(l0, _mm256_and_si256(_mm256_castps_si256(blend), ones));
-            let b = bilinear(l1);
-            _mm256_blendv_ps(a, _mm256_add_ps(a, _mm256_mul_ps(f, _mm256_sub_ps(b, a))), blend)
-        };
-        let mut r = [0.0f32; LANES];
-        // SAFETY: unaligned store of 8 values into an array of 8.
-        unsafe { _mm256_storeu_ps(r.as_mut_ptr(), out) };
-        r
-    }
-
     /// Samples at `j / m` for `j = 1..m` (exclusive) of the straight path from `start` to
-    /// `start + delta`, replacing `out`. Both hold `[u (m), v (m), footprint (m), offset (log
-    /// units)]`; each sample is `sample(u, v, footprint) + offset` at the interpolated values.
-    #[inline(never)]
-    pub fn sample_path(&self, start: [f32; 4], delta: [f32; 4], m: usize, out: &mut Vec<f32>) {
-        out.clear();
-        let mf = m as f32;
+    /// `start + delta`, replacing `out`, and their smallest and largest value (infinite for
+    /// none). Both hold `[u (m), v (m), footprint (m), offset (log units)]`; each sample is
+    /// `sample(u, v, footprint) + offset` at the interpolated values. With AVX2 (detected at
+    /// run time) 8 at a time (see `lanes`): the same values.
+    #[inline(always)]
+    pub fn sample_path(&self, start: [f32; 4], delta: [f32; 4], m: usize, out: &mut Vec<f32>) -> (f32, f32) {
         let n = m.saturating_sub(1);
+        out.clear();
         out.resize(n, 0.0);
-        // `LANES` samples at a time (`sample_lanes`), the last group padded with the path's
-        // last point.
-        for j0 in (0..n).step_by(LANES) {
-            // Plain loops: `array::from_fn` closures were left out of line.
-            let mut f = [0.0f32; LANES];
-            let (mut u, mut v, mut fp) = ([0.0f32; LANES], [0.0f32; LANES], [0.0f32; LANES]);
-            for l in 0..LANES {
-                f[l] = ((j0 + l).min(n - 1) + 1) as f32 / mf;
-                u[l] = start[0] + f[l] * delta[0];
-                v[l] = start[1] + f[l] * delta[1];
-                fp[l] = start[2] + f[l] * delta[2];
-            }
-            let s = self.sample_lanes(&u, &v, &fp);
-            for (l, o) in out[j0..(j0 + LANES).min(n)].iter_mut().enumerate() {
-                *o = s[l] + start[3] + f[l] * delta[3];
-            }
+        if n == 0 {
+            return (f32::INFINITY, f32::NEG_INFINITY);
         }
+        #[cfg(target_arch = "x86_64")]
+        if std::is_x86_feature_detected!("avx2") {
+            // SAFETY: AVX2 is available (checked just above).
+            return unsafe { self.sample_path_avx2(start, delta, m, out) };
+        }
+        let mf = m as f32;
+        let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+        for (j, o) in out.iter_mut().enumerate() {
+            let f = (j + 1) as f32 / mf;
+            let s = self.sample(
+                start[0] + f * delta[0],
+                start[1] + f * delta[1],
+                start[2] + f * delta[2],
+            );
+            *o = s + start[3] + f * delta[3];
+            lo = fmin(lo, *o);
+            hi = fmax(hi, *o);
+        }
+        (lo, hi)
     }
 
     /// Bounds `(min, max)` of every value [`Texture::sample`] returns on the straight path
@@ -633,18 +560,62 @@ impl Texture {
             if nx > max_texels || ny > max_texels {
                 return None;
             }
-            let mask = m.size - 1;
-            let d = self.level(m);
-            for dy in 0..ny {
-                let row = (((y0 as u32).wrapping_add(dy) & mask) * m.size) as usize;
-                for dx in 0..nx {
-                    let t = d[row + ((x0 as u32).wrapping_add(dx) & mask) as usize];
-                    lo = fmin(lo, t);
-                    hi = fmax(hi, t);
-                }
-            }
+            let (a, b) = self.texel_range(m, (x0 as u32, y0 as u32), (nx, ny));
+            lo = fmin(lo, a);
+            hi = fmax(hi, b);
         }
         Some((lo, hi))
+    }
+
+    /// The extremes of the `nx` x `ny` texels (both at least 2) of level `m` from texel `x0`,
+    /// `y0` on (wrapping): read as the bilinear quads (see `quads`, each 2 x 2 texels) at
+    /// every other texel, the last row and column of quads moved back to end at the
+    /// region's edge (quads may overlap; extremes do not mind).
+    #[inline]
+    fn texel_range(&self, m: &MipLevel, (x0, y0): (u32, u32), (nx, ny): (u32, u32)) -> (f32, f32) {
+        let mask = m.size - 1;
+        let quads = &self.quads[m.start..m.start + (m.size * m.size) as usize];
+        let at = |k: u32, n: u32| (2 * k).min(n - 2);
+        #[cfg(target_arch = "x86_64")]
+        {
+            use std::arch::x86_64::*;
+            // SSE (part of every x86_64): 4 texels per load.
+            let (mut a, mut b) = ([0.0f32; 4], [0.0f32; 4]);
+            // SAFETY: SSE is available on every x86_64; unaligned loads of the 4 floats of one
+            // quad and stores of 4 floats into arrays of 4.
+            unsafe {
+                let (mut lo, mut hi) = (_mm_set1_ps(f32::INFINITY), _mm_set1_ps(f32::NEG_INFINITY));
+                for ky in 0..ny.div_ceil(2) {
+                    let row = ((y0.wrapping_add(at(ky, ny)) & mask) * m.size) as usize;
+                    for kx in 0..nx.div_ceil(2) {
+                        let q = &quads[row + (x0.wrapping_add(at(kx, nx)) & mask) as usize];
+                        let t = _mm_loadu_ps(q.as_ptr());
+                        lo = _mm_min_ps(lo, t);
+                        hi = _mm_max_ps(hi, t);
+                    }
+                }
+                _mm_storeu_ps(a.as_mut_ptr(), lo);
+                _mm_storeu_ps(b.as_mut_ptr(), hi);
+            }
+            (
+                fmin(fmin(a[0], a[1]), fmin(a[2], a[3])),
+                fmax(fmax(b[0], b[1]), fmax(b[2], b[3])),
+            )
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        {
+            let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+            for ky in 0..ny.div_ceil(2) {
+                let row = ((y0.wrapping_add(at(ky, ny)) & mask) * m.size) as usize;
+                for kx in 0..nx.div_ceil(2) {
+                    for &t in &quads[row + (x0.wrapping_add(at(kx, nx)) & mask) as usize] {
+                        lo = fmin(lo, t);
+                        hi = fmax(hi, t);
+                    }
+                }
+            }
+            (lo, hi)
+        }
     }
 
     /// Bounds `(min, max)` of every value [`Texture::sample`] can return at points of the
@@ -931,6 +902,47 @@ mod tests {
                 let one = t.sample(u[l], v[l], fp[l]);
                 assert_eq!(lanes[l].to_bits(), one.to_bits(), "{} {} {}", u[l], v[l], fp[l]);
             }
+        }
+    }
+
+    #[test]
+    fn path_samples_equal_samples_one_by_one() {
+        // Paths on the finest level only (the shortcut), across levels and blends, short and
+        // long, with a shading ramp: bit-identical to `sample` at the interpolated points,
+        // and their extremes.
+        let t = Texture::bake(&cfg(Pattern::Checker { square_m: 0.05 }), 4, 0.01);
+        let mut rng = Rng::new(11, 5);
+        let mut out = Vec::new();
+        for round in 0..3000 {
+            let fp0 = [0.002f32, 0.006, 0.0099, 0.03, 0.2][round % 5];
+            let start = [
+                rng.range(-2.0, 2.0) as f32,
+                rng.range(-2.0, 2.0) as f32,
+                fp0,
+                rng.range(-1.0, 0.0) as f32,
+            ];
+            let delta = [
+                rng.range(-0.05, 0.05) as f32,
+                rng.range(-0.05, 0.05) as f32,
+                fp0 * rng.range(-0.2, 0.2) as f32,
+                rng.range(-0.01, 0.01) as f32,
+            ];
+            let m = 1 + rng.below(40) as usize;
+            let (lo, hi) = t.sample_path(start, delta, m, &mut out);
+            assert_eq!(out.len(), m - 1);
+            let (mut lo1, mut hi1) = (f32::INFINITY, f32::NEG_INFINITY);
+            for (j, &s) in out.iter().enumerate() {
+                let f = (j + 1) as f32 / m as f32;
+                let one = t.sample(
+                    start[0] + f * delta[0],
+                    start[1] + f * delta[1],
+                    start[2] + f * delta[2],
+                ) + start[3]
+                    + f * delta[3];
+                assert_eq!(s.to_bits(), one.to_bits(), "round {round} sample {j}");
+                (lo1, hi1) = (lo1.min(one), hi1.max(one));
+            }
+            assert_eq!((lo.to_bits(), hi.to_bits()), (lo1.to_bits(), hi1.to_bits()));
         }
     }
 

@@ -9,7 +9,7 @@ use crate::scene::{BoxPose, Scene};
 use crate::trajectory::RigidState;
 
 /// Pixels located together by [`mask`] (a multiple of the SIMD width).
-const MASK_LANES: usize = 8;
+const MASK_LANES: usize = crate::texture::LANES;
 
 /// Camera motion sample of a camera state at `t`: pose camera -> world, velocities in the
 /// camera frame.
@@ -40,6 +40,24 @@ pub fn object_poses(t: f64, scene: &Scene, cam: &RigidState, out: &mut Vec<Objec
 /// Only pixels inside a moving object's bounding box are located, a group of
 /// `MASK_LANES` along the row at a time (see `FrameGeom::locate_lanes`).
 pub fn mask(_scene: &Scene, rays: &Rays, geom: &FrameGeom) -> Mask {
+    #[cfg(target_arch = "x86_64")]
+    if std::is_x86_feature_detected!("avx2") {
+        // SAFETY: AVX2 is available (checked just above).
+        return unsafe { mask_avx2(rays, geom) };
+    }
+    mask_with(rays, geom)
+}
+
+/// [`mask`] compiled with AVX2 (the lane search inlined).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn mask_avx2(rays: &Rays, geom: &FrameGeom) -> Mask {
+    mask_with(rays, geom)
+}
+
+/// The body of [`mask`].
+#[inline(always)]
+fn mask_with(rays: &Rays, geom: &FrameGeom) -> Mask {
     let (w, h) = (rays.width, rays.height);
     let mut ids = vec![0u16; w * h];
     for (_, b) in geom.object_bboxes() {
@@ -55,10 +73,8 @@ pub fn mask(_scene: &Scene, rays: &Rays, geom: &FrameGeom) -> Mask {
                     let x: &[f32; MASK_LANES] = rays.x[i..i + MASK_LANES].try_into().expect("lane slice");
                     let y: &[f32; MASK_LANES] = rays.y[i..i + MASK_LANES].try_into().expect("lane slice");
                     let px = std::array::from_fn(|l| (u + l) as i32);
-                    let found = geom.locate_lanes(x, y, &px, &[v as i32; MASK_LANES]);
-                    for (l, f) in found.iter().enumerate() {
-                        ids[i + l] = f.id;
-                    }
+                    let found = geom.object_ids_lanes(x, y, &px, &[v as i32; MASK_LANES]);
+                    ids[i..i + MASK_LANES].copy_from_slice(&found);
                     u += MASK_LANES;
                 } else {
                     ids[i] = geom.locate(rays.x[i], rays.y[i], u as i32, v as i32, None).id;

@@ -9,6 +9,8 @@
 //! render slots its local speed bound needs (see `local_speed::render_slots`).
 
 use crate::camera::Rays;
+use crate::engine::KeyFrame;
+use crate::firing::Seen;
 use crate::render::FrameGeom;
 use crate::scene::Scene;
 
@@ -45,14 +47,16 @@ pub struct UnstableList {
     pub c_off: Vec<f32>,
     /// Log intensity at the previous render step.
     pub l_prev: Vec<f32>,
-    /// Object id at the pixel centre at the previous render step.
-    pub id_prev: Vec<u16>,
+    /// What the pixel centre saw at the previous render step.
+    pub(crate) seen_prev: Vec<Seen>,
     /// Log intensity of the current render step.
     pub l: Vec<f32>,
     /// Surface key of the current render step.
     pub key: Vec<u16>,
     /// Object id of the current render step.
     pub id: Vec<u16>,
+    /// Depth of the current render step's centre surface, m.
+    pub z: Vec<f32>,
     /// Render schedule: index into `local_speed::Schedules::lists`.
     pub schedule: Vec<u32>,
     /// Position of the pixel's next render in its schedule.
@@ -62,9 +66,11 @@ pub struct UnstableList {
     pub s_prev: Vec<u32>,
     /// List indices of the pixels rendered at the current slot.
     pub active: Vec<u32>,
-    /// Image-sized map from pixel index to list index ([`NONE`] outside the list); all
-    /// [`NONE`] between calls.
-    index_of: Vec<u32>,
+    /// `active` grouped by the surface key of the pixels' previous renders (scratch of
+    /// [`UnstableList::render`]).
+    by_key: Vec<u32>,
+    /// Counts and offsets of the key groups of `by_key`.
+    key_counts: Vec<u32>,
 }
 
 /// The per-pixel image arrays an [`UnstableList`] is gathered from.
@@ -79,12 +85,8 @@ pub struct PixelState<'a> {
     pub c_on: &'a [f32],
     /// OFF thresholds, log units.
     pub c_off: &'a [f32],
-    /// Log intensities of the interval's first key frame.
-    pub l0: &'a [f32],
-    /// Object ids of the interval's first key frame.
-    pub id0: &'a [u16],
-    /// Surface keys of the interval's first key frame.
-    pub key0: &'a [u16],
+    /// The interval's first key frame.
+    pub kf0: &'a KeyFrame,
 }
 
 impl UnstableList {
@@ -127,7 +129,7 @@ impl UnstableList {
         g(&mut self.reference, src.reference);
         g(&mut self.c_on, src.c_on);
         g(&mut self.c_off, src.c_off);
-        g(&mut self.l_prev, src.l0);
+        g(&mut self.l_prev, &src.kf0.l);
         self.d_du.clear();
         self.d_du.extend(pix.iter().map(|&p| r.d_du[p as usize]));
         self.d_dv.clear();
@@ -135,13 +137,14 @@ impl UnstableList {
         self.last_event.clear();
         self.last_event
             .extend(pix.iter().map(|&p| src.last_event[p as usize]));
-        self.id_prev.clear();
-        self.id_prev.extend(pix.iter().map(|&p| src.id0[p as usize]));
+        self.seen_prev.clear();
+        self.seen_prev
+            .extend(pix.iter().map(|&p| src.kf0.seen(p as usize)));
         let m = pix.len();
         self.l.clear();
         self.l.resize(m, 0.0);
         self.key.clear();
-        self.key.extend(pix.iter().map(|&p| src.key0[p as usize]));
+        self.key.extend(pix.iter().map(|&p| src.kf0.key[p as usize]));
         self.schedule.clear();
         self.schedule.resize(m, 0);
         self.next.clear();
@@ -150,26 +153,42 @@ impl UnstableList {
         self.s_prev.resize(m, 0);
         self.id.clear();
         self.id.resize(m, 0);
-        if self.index_of.len() != n {
-            self.index_of = vec![NONE; n];
-        }
-        for (j, &p) in pix.iter().enumerate() {
-            self.index_of[p as usize] = j as u32;
-        }
+        self.z.clear();
+        self.z.resize(m, 0.0);
+        // Neighbours by walking the list (in pixel order): the left and right ones are the
+        // adjacent entries, the lower and upper ones found by two cursors that only move on.
         self.neighbours.clear();
-        for &p in pix {
+        let (mut down, mut up) = (0usize, 0usize);
+        let find = |cursor: &mut usize, target: u32| {
+            while *cursor < m && pix[*cursor] < target {
+                *cursor += 1;
+            }
+            if *cursor < m && pix[*cursor] == target {
+                *cursor as u32
+            } else {
+                NONE
+            }
+        };
+        for (j, &p) in pix.iter().enumerate() {
             let i = p as usize;
             let (x, y) = (i % w, i / w);
-            let at = |ok: bool, k: usize| if ok { self.index_of[k] } else { NONE };
-            self.neighbours.push([
-                at(x + 1 < w, i + 1),
-                at(x > 0, i.wrapping_sub(1)),
-                at(i + w < n, i + w),
-                at(y > 0, i.wrapping_sub(w)),
-            ]);
-        }
-        for &p in pix {
-            self.index_of[p as usize] = NONE;
+            let right = if x + 1 < w && j + 1 < m && pix[j + 1] == p + 1 {
+                (j + 1) as u32
+            } else {
+                NONE
+            };
+            let left = if x > 0 && j > 0 && pix[j - 1] == p - 1 {
+                (j - 1) as u32
+            } else {
+                NONE
+            };
+            let below = if i + w < n {
+                find(&mut down, p + w as u32)
+            } else {
+                NONE
+            };
+            let above = if y > 0 { find(&mut up, p - w as u32) } else { NONE };
+            self.neighbours.push([right, left, below, above]);
         }
     }
 
@@ -195,9 +214,12 @@ impl UnstableList {
     /// The body of [`UnstableList::render`].
     #[inline(always)]
     fn render_with(&mut self, scene: &Scene, geom: &FrameGeom, w: usize, supersample: bool) -> u64 {
-        // Centres located and shaded `LANES` at a time (see `FrameGeom::locate_lanes` and
-        // `FrameGeom::shade_lanes`).
-        let mut groups = self.active.chunks_exact(LANES);
+        self.group_by_key(scene.key_texture.len());
+        // Centres cast `LANES` at a time (see `FrameGeom::cast_lanes`), grouped by the surface
+        // of their previous render: it rarely changes between renders, so most groups hit one
+        // plane or box face and are shaded in vector form. Each pixel's value is its own, so
+        // the order does not matter.
+        let mut groups = self.by_key.chunks_exact(LANES);
         for g in &mut groups {
             // Plain loops: `array::from_fn` and `array::map` closures were left out of line.
             let mut js = [0usize; LANES];
@@ -208,13 +230,12 @@ impl UnstableList {
                 let p = self.pixel[j] as usize;
                 (js[l], px[l], py[l], x[l], y[l]) = (j, (p % w) as i32, (p / w) as i32, self.x[j], self.y[j]);
             }
-            let found = geom.locate_lanes(&x, &y, &px, &py);
-            let hits = geom.shade_lanes(scene, &x, &y, &found);
-            for (l, hit) in hits.iter().enumerate() {
-                let j = js[l];
-                self.l[j] = hit.l;
-                self.key[j] = hit.key;
-                self.id[j] = hit.id;
+            let hits = geom.cast_lanes(scene, &x, &y, &px, &py);
+            for (l, &j) in js.iter().enumerate() {
+                self.l[j] = hits.l[l];
+                self.key[j] = hits.key[l];
+                self.id[j] = hits.id[l];
+                self.z[j] = hits.z[l];
             }
         }
         for &a in groups.remainder() {
@@ -224,6 +245,7 @@ impl UnstableList {
             self.l[j] = hit.l;
             self.key[j] = hit.key;
             self.id[j] = hit.id;
+            self.z[j] = hit.z;
         }
         if !supersample {
             return 0;
@@ -260,6 +282,37 @@ impl UnstableList {
             }
         }
         count
+    }
+
+    /// `active` into `by_key`, grouped by the surface keys of the pixels' previous renders
+    /// (`keys` surface keys; "nothing" last), in their order within a group (counting sort).
+    fn group_by_key(&mut self, keys: usize) {
+        let slot = |k: u16| (k as usize).min(keys);
+        self.key_counts.clear();
+        self.key_counts.resize(keys + 2, 0);
+        for &a in &self.active {
+            self.key_counts[slot(self.key[a as usize]) + 1] += 1;
+        }
+        for k in 1..self.key_counts.len() {
+            self.key_counts[k] += self.key_counts[k - 1];
+        }
+        self.by_key.clear();
+        self.by_key.resize(self.active.len(), 0);
+        for &a in &self.active {
+            let c = &mut self.key_counts[slot(self.key[a as usize])];
+            self.by_key[*c as usize] = a;
+            *c += 1;
+        }
+    }
+
+    /// What pixel `j`'s centre saw at its latest render.
+    #[inline]
+    pub(crate) fn seen(&self, j: usize) -> Seen {
+        Seen {
+            id: self.id[j],
+            key: self.key[j],
+            z: self.z[j],
+        }
     }
 
     /// Writes the reference levels and last-event times back to the image arrays.
