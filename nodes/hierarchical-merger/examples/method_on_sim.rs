@@ -7,7 +7,11 @@
 //! makes the SVM degenerate), SET ("name=value,...": background-merger, hierarchical-merger and
 //! planar parameters, several variants separated by ';'), VERBOSE (per-slice cluster reports),
 //! FLOW_MIN_CONF (the plane-fit estimator's min_confidence; default 0 as in graph.yaml),
-//! NF_LOOKAHEAD_MS / NF_RADIUS / NF_DT_MAX_MS / NF_OUTLIER_MS / NF_MAX_SD_DEG (its other settings), CONS
+//! NF_MAX_SD_DEG (default 16 as in graph.yaml; "inf" = no test), NF_LOOKAHEAD_MS / NF_RADIUS /
+//! NF_DT_MAX_MS / NF_OUTLIER_MS / NF_CHECK_RADIUS / NF_CHECK_DEG / NF_CHECK_SPEED (its other
+//! settings), PREV_FINAL (the planar segmenter's feedback is the final labels instead of the
+//! background merger's coarse groups that graph.yaml wires; the default was the final labels
+//! before 2026-11-27, which scored low-contrast higher than the graph does), CONS
 //! ("cell,min_neighbours,max_deviation[,ridge]" of the normal-flow consensus, default as the
 //! node; "0" = off), DUMP=k (PNG panels of slice k: truth, planar, coarse, final, in
 //! /tmp/dump-<scene>.png). It prints the share of normal-flow lengths more than 30 % off the
@@ -98,6 +102,7 @@ fn apply(
             "min_segment_fraction" => hier.min_segment_fraction = f,
             "touch_px" => hier.touch_px = f as f32,
             "sigma_px" => planar.sigma_px = f,
+            "planar_min_conf" => planar.min_confidence = f as f32,
             "split_power" => planar.split_power = f,
             "min_center_gap" => planar.min_center_gap = f,
             "density_cell_px" => planar.density_cell_px = f as u16,
@@ -309,7 +314,17 @@ fn main() -> anyhow::Result<()> {
                 radius: env_or("NF_RADIUS", PlaneFitParams::default().radius)?,
                 dt_max_s: env_or("NF_DT_MAX_MS", PlaneFitParams::default().dt_max_s * 1e3)? * 1e-3,
                 outlier_s: env_or("NF_OUTLIER_MS", PlaneFitParams::default().outlier_s * 1e3)? * 1e-3,
-                max_direction_sd_rad: env_or("NF_MAX_SD_DEG", f64::INFINITY)?.to_radians(),
+                max_direction_sd_rad: env_or("NF_MAX_SD_DEG", 16.0f64)?.to_radians(),
+                check_radius: env_or("NF_CHECK_RADIUS", PlaneFitParams::default().check_radius)?,
+                check_max_angle_rad: env_or(
+                    "NF_CHECK_DEG",
+                    PlaneFitParams::default().check_max_angle_rad.to_degrees(),
+                )?
+                .to_radians(),
+                check_max_speed_diff: env_or(
+                    "NF_CHECK_SPEED",
+                    PlaneFitParams::default().check_max_speed_diff,
+                )?,
                 ..PlaneFitParams::default()
             },
         )?;
@@ -471,8 +486,8 @@ fn main() -> anyhow::Result<()> {
             let mut bg = BackgroundMerger::new(bgp)?;
             let mut hier = HierarchicalMerger::new(hp)?;
             let mut prev: Option<Vec<u32>> = None;
-            // The planar segmenter's feedback: the final labels, or (PREV_COARSE) the background
-            // merger's coarse groups (group != 0 = foreground).
+            // The planar segmenter's feedback: the background merger's coarse groups (group != 0
+            // = foreground), as graph.yaml wires it, or (PREV_FINAL) the final labels.
             let mut prev_planar: Option<Vec<u32>> = None;
             let (mut ious, mut dirs, mut planar_ious) = (Vec::new(), Vec::new(), Vec::new());
             let mut fp_dist = [0usize; 10];
@@ -782,7 +797,7 @@ fn main() -> anyhow::Result<()> {
                     }
                 }
                 prev = Some(label.clone());
-                prev_planar = Some(if std::env::var("PREV_COARSE").is_ok() {
+                prev_planar = Some(if std::env::var("PREV_FINAL").is_err() {
                     m.coarse
                         .group
                         .iter()
