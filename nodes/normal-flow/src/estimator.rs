@@ -7,6 +7,11 @@ use evseg_schemas::{CameraInfo, Events, NormalFlow};
 use crate::fit::{Neighbourhood, PlaneFit, fit_plane};
 use crate::params::{ParamsError, PlaneFitParams};
 
+/// Refits after outlier rejection of the scale check's larger window (at most; the fit's own
+/// `max_refits` if smaller): one re-selection of the inliers removes what a first fit over all
+/// points shows to be far off, which is what the comparison needs.
+const CHECK_REFITS: usize = 1;
+
 /// Errors of the estimator.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum EstimatorError {
@@ -49,6 +54,9 @@ pub struct EstimatorStats {
     /// Events older than an event processed before them (input not time-ordered); still
     /// processed, but the surface never moves back in time.
     pub out_of_order: u64,
+    /// Fits left invalid because the plane of the larger check window disagreed
+    /// ([`PlaneFitParams::check_radius`]).
+    pub disagreed: u64,
 }
 
 /// One event's estimate in pixel units.
@@ -84,6 +92,8 @@ pub struct PlaneFitEstimator {
     /// Pixel flow to normalized flow per pixel, see [`jacobian_table`].
     jacobian: Vec<[f32; 4]>,
     nb: Neighbourhood,
+    /// Points of the check window ([`PlaneFitParams::check_radius`]).
+    nb_check: Neighbourhood,
     last_t: f64,
     stats: EstimatorStats,
     last_fit: Option<PlaneFit>,
@@ -114,6 +124,7 @@ impl PlaneFitEstimator {
             ],
             jacobian,
             nb: Neighbourhood::default(),
+            nb_check: Neighbourhood::default(),
             last_t: f64::NEG_INFINITY,
             stats: EstimatorStats::default(),
             last_fit: None,
@@ -283,37 +294,63 @@ impl PlaneFitEstimator {
     }
 
     /// Fits the plane of a written event to the neighbours on its surface whose age is within
-    /// `[-lookahead, dt_max]` (and at least `dt_min` in magnitude).
+    /// `[-lookahead, dt_max]` (and at least `dt_min` in magnitude); with a check window
+    /// ([`PlaneFitParams::check_radius`]) a valid estimate is kept only when that window's plane
+    /// agrees with it.
     fn fit_event(&mut self, t: f64, x: u16, y: u16, p: u8, lookahead: f64) -> PixelEstimate {
         let (xu, yu) = (x as usize, y as usize);
-        let pol = usize::from(p != 0);
-        let w = self.width;
-        let surface = &self.surface[pol];
+        let (width, height) = (self.width, self.height);
+        let window = |radius: usize| Window {
+            x0: xu.saturating_sub(radius),
+            x1: (xu + radius).min(width - 1),
+            y0: yu.saturating_sub(radius),
+            y1: (yu + radius).min(height - 1),
+        };
         let r = self.params.radius;
-        let (x0, x1) = (xu.saturating_sub(r), (xu + r).min(self.width - 1));
-        let (y0, y1) = (yu.saturating_sub(r), (yu + r).min(self.height - 1));
-        let (dt_min, dt_max) = (self.params.dt_min_s, self.params.dt_max_s);
-        let nb = &mut self.nb;
-        nb.clear();
-        for yy in y0..=y1 {
-            let row = &surface[yy * w + x0..=yy * w + x1];
-            let dy = yy as f64 - yu as f64;
-            for (k, &ts) in row.iter().enumerate() {
-                let xx = x0 + k;
-                let age = t - ts;
-                let own_pixel = xx == xu && yy == yu;
-                if own_pixel || (age.abs() >= dt_min && age <= dt_max && age >= -lookahead) {
-                    nb.push(xx as f64 - xu as f64, dy, if own_pixel { 0.0 } else { -age });
-                }
-            }
-        }
-        self.last_fit = fit_plane(
-            nb,
+        let at = Centre {
+            t,
+            x: xu,
+            y: yu,
+            lookahead,
+        };
+        let surface = &self.surface[usize::from(p != 0)];
+        self.nb.clear();
+        gather(&mut self.nb, surface, width, &self.params, &at, window(r), None);
+        let (outlier, refits, min_points) = (
             self.params.outlier_s,
             self.params.max_refits,
             self.params.min_points,
         );
-        let estimate = self.last_fit.and_then(|fit| self.judge(&fit));
+        self.last_fit = fit_plane(&self.nb, outlier, refits, min_points);
+        let mut estimate = self.last_fit.and_then(|fit| self.judge(&fit));
+        let rc = self.params.check_radius;
+        let clearly_planar = |e: &PixelEstimate, f: Option<PlaneFit>| {
+            e.confidence >= self.params.check_skip_confidence
+                && f.is_some_and(|f| f.direction_sd_rad <= self.params.check_skip_direction_sd_rad)
+        };
+        if let Some(e) = estimate
+            && rc > r
+            && !clearly_planar(&e, self.last_fit)
+        {
+            // The larger window: the small one's points and the ring around them.
+            self.nb_check.copy_from(&self.nb);
+            gather(
+                &mut self.nb_check,
+                surface,
+                width,
+                &self.params,
+                &at,
+                window(rc),
+                Some(window(r)),
+            );
+            let agreed = fit_plane(&self.nb_check, outlier, CHECK_REFITS.min(refits), min_points)
+                .and_then(|f| f.normal_flow_px())
+                .is_some_and(|c| self.agrees(e.flow_px, c));
+            if !agreed {
+                self.stats.disagreed += 1;
+                estimate = None;
+            }
+        }
         match estimate {
             Some(e) => {
                 self.stats.valid += 1;
@@ -321,6 +358,22 @@ impl PlaneFitEstimator {
             }
             None => PixelEstimate::INVALID,
         }
+    }
+
+    /// True when normal flows `a` and `b` (pixels/s) point within
+    /// [`PlaneFitParams::check_max_angle_rad`] of each other and their lengths differ by at most
+    /// [`PlaneFitParams::check_max_speed_diff`] of `b`'s.
+    fn agrees(&self, a: [f64; 2], b: [f64; 2]) -> bool {
+        let (sa, sb) = (
+            (a[0] * a[0] + a[1] * a[1]).sqrt(),
+            (b[0] * b[0] + b[1] * b[1]).sqrt(),
+        );
+        if !(sa > 0.0 && sb > 0.0) {
+            return false;
+        }
+        let cos = (a[0] * b[0] + a[1] * b[1]) / (sa * sb);
+        cos >= self.params.check_max_angle_rad.cos()
+            && (sa / sb - 1.0).abs() <= self.params.check_max_speed_diff
     }
 
     /// Turns a fit into an estimate, or `None` when it is too fast, flat, or its confidence is at
@@ -345,6 +398,60 @@ impl PlaneFitEstimator {
             flow_px: flow,
             confidence,
         })
+    }
+}
+
+/// An inclusive pixel window `[x0, x1] x [y0, y1]`.
+#[derive(Debug, Clone, Copy)]
+struct Window {
+    x0: usize,
+    x1: usize,
+    y0: usize,
+    y1: usize,
+}
+
+impl Window {
+    fn contains(&self, x: usize, y: usize) -> bool {
+        (self.x0..=self.x1).contains(&x) && (self.y0..=self.y1).contains(&y)
+    }
+}
+
+/// The event a neighbourhood is gathered for: time (s), pixel, and how far ahead neighbours may
+/// lie (s).
+struct Centre {
+    t: f64,
+    x: usize,
+    y: usize,
+    lookahead: f64,
+}
+
+/// Adds to `nb` the pixels of `window` on `surface` (row-major, `width` wide) whose age relative
+/// to the centre event is within `[-lookahead, dt_max]` and at least `dt_min` in magnitude (the
+/// centre's own pixel always, at time 0), leaving out the pixels of `skip` (already added).
+fn gather(
+    nb: &mut Neighbourhood,
+    surface: &[f64],
+    width: usize,
+    params: &PlaneFitParams,
+    at: &Centre,
+    window: Window,
+    skip: Option<Window>,
+) {
+    let (dt_min, dt_max) = (params.dt_min_s, params.dt_max_s);
+    for yy in window.y0..=window.y1 {
+        let row = &surface[yy * width + window.x0..=yy * width + window.x1];
+        let dy = yy as f64 - at.y as f64;
+        for (k, &ts) in row.iter().enumerate() {
+            let xx = window.x0 + k;
+            if skip.is_some_and(|s| s.contains(xx, yy)) {
+                continue;
+            }
+            let age = at.t - ts;
+            let own_pixel = xx == at.x && yy == at.y;
+            if own_pixel || (age.abs() >= dt_min && age <= dt_max && age >= -at.lookahead) {
+                nb.push(xx as f64 - at.x as f64, dy, if own_pixel { 0.0 } else { -age });
+            }
+        }
     }
 }
 

@@ -51,6 +51,16 @@ impl Neighbourhood {
         self.len == 0
     }
 
+    /// Makes this neighbourhood a copy of `other` (its points only, not the unused capacity).
+    #[inline]
+    pub fn copy_from(&mut self, other: &Self) {
+        let n = other.len;
+        self.dx[..n].copy_from_slice(&other.dx[..n]);
+        self.dy[..n].copy_from_slice(&other.dy[..n]);
+        self.dt[..n].copy_from_slice(&other.dt[..n]);
+        self.len = n;
+    }
+
     /// Adds a point at pixel offset `(dx, dy)` with time `dt` seconds relative to the event;
     /// returns false (and ignores it) when the neighbourhood is full.
     #[inline]
@@ -233,7 +243,7 @@ pub fn fit_plane(
             ss += r * r;
         }
     }
-    let g = sol[0].hypot(sol[1]);
+    let g = (sol[0] * sol[0] + sol[1] * sol[1]).sqrt();
     let direction_sd_rad = match sums.gradient_covariance() {
         Some([cxx, cxy, cyy]) if kept > 3 && g > 0.0 => {
             let (qx, qy) = (-sol[1] / g, sol[0] / g);
@@ -318,7 +328,7 @@ mod tests {
 
     #[test]
     fn full_neighbourhood_refuses_more_points() {
-        let mut nb = window(3, |_, _| 0.0);
+        let mut nb = window(MAX_RADIUS as i32, |_, _| 0.0);
         assert_eq!(nb.len(), MAX_POINTS);
         assert!(!nb.push(0.0, 0.0, 0.0));
         nb.clear();

@@ -39,6 +39,9 @@ struct RunReport<'a> {
     outlier_ms: f64,
     max_speed_px_s: f64,
     min_confidence: f64,
+    check_radius: usize,
+    check_max_angle_deg: f64,
+    check_max_speed_diff: f64,
     consensus_cell_px: u16,
     consensus_max_deviation: f64,
     /// Estimates whose length the neighbourhood consensus replaced.
@@ -48,6 +51,8 @@ struct RunReport<'a> {
     out_of_sensor: u64,
     bad_time: u64,
     out_of_order: u64,
+    /// Fits the larger window's plane disagreed with (left invalid).
+    disagreed: u64,
     score: Score,
 }
 
@@ -109,6 +114,9 @@ impl Stage for NormalFlowNode {
             outlier_ms: p.outlier_s * 1e3,
             max_speed_px_s: p.max_speed_px_s,
             min_confidence: p.min_confidence,
+            check_radius: p.check_radius,
+            check_max_angle_deg: p.check_max_angle_rad.to_degrees(),
+            check_max_speed_diff: p.check_max_speed_diff,
             consensus_cell_px: self.consensus.cell_px,
             consensus_max_deviation: self.consensus.max_deviation,
             consensus_replaced: self.replaced,
@@ -117,6 +125,7 @@ impl Stage for NormalFlowNode {
             out_of_sensor: stats.out_of_sensor,
             bad_time: stats.bad_time,
             out_of_order: stats.out_of_order,
+            disagreed: stats.disagreed,
             score,
         };
         write_run_score(&self.run_dir, &self.node, &report, &report.score)?;
@@ -192,6 +201,31 @@ fn main() -> ExitCode {
         "min_confidence",
         d.min_confidence,
         "fits with a confidence at or below this are invalid, [0, 1)",
+    )
+    .param(
+        "check_radius",
+        d.check_radius as u64,
+        "half-width of a larger window whose plane must agree with the fit's, pixels (0 = no check; else radius+1..=4)",
+    )
+    .param(
+        "check_max_angle_deg",
+        d.check_max_angle_rad.to_degrees(),
+        "largest angle between the two windows' normal flows, degrees",
+    )
+    .param(
+        "check_max_speed_diff",
+        d.check_max_speed_diff,
+        "largest relative difference of the two windows' speeds",
+    )
+    .param(
+        "check_skip_confidence",
+        d.check_skip_confidence,
+        "fits at least this confident (and within check_skip_direction_sd_deg) skip the check",
+    )
+    .param(
+        "check_skip_direction_sd_deg",
+        d.check_skip_direction_sd_rad.to_degrees(),
+        "fits this certain of their direction, degrees (and within check_skip_confidence) skip the check",
     );
     let description = describe_consensus(description, &dc).build();
     run_stage(description, |cfg: &NodeConfig| {
@@ -208,6 +242,11 @@ fn main() -> ExitCode {
             max_direction_sd_rad: cfg
                 .param_opt::<f64>("max_direction_sd_deg")?
                 .map_or(f64::INFINITY, f64::to_radians),
+            check_radius: cfg.param::<usize>("check_radius")?,
+            check_max_angle_rad: cfg.param::<f64>("check_max_angle_deg")?.to_radians(),
+            check_max_speed_diff: cfg.param::<f64>("check_max_speed_diff")?,
+            check_skip_confidence: cfg.param::<f64>("check_skip_confidence")?,
+            check_skip_direction_sd_rad: cfg.param::<f64>("check_skip_direction_sd_deg")?.to_radians(),
         };
         params.validate()?;
         let consensus = consensus_from_config(cfg)?;

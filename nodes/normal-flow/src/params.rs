@@ -68,10 +68,52 @@ pub struct PlaneFitParams {
     /// measured along a wrong direction is off by the flow along the edge times the sine of the
     /// error. Infinite = no test. Default: see the crate README (length study).
     pub max_direction_sd_rad: f64,
+    /// Half-width, pixels, of a second, larger window whose plane must agree with the event's
+    /// own ([`PlaneFitParams::radius`]) fit for the estimate to be valid; 0 = no check. A moving
+    /// edge's surface of active events is a plane at every scale, so the two fits agree; where
+    /// they do not, the small window saw something else: crossings of several intensity levels
+    /// of a smooth or high-contrast texture (each pixel's timestamp then depends on its own
+    /// reference level, not only on when the edge passed), two surfaces, or timing noise. Must
+    /// exceed `radius`, at most [`MAX_RADIUS`]. The estimate stays the small window's.
+    ///
+    /// Default 3 (7 x 7 around the 5 x 5). Measured on the simulator (`examples/scale_check.rs`,
+    /// seed 11, 1 s; background events that are not object edges; `|e|` the length error along
+    /// the estimated direction over the true flow's speed; crate README, "Scale check"):
+    /// one-object median `|e|` 0.038 -> 0.033, share with `|e|` > 0.2 0.139 -> 0.086, reversed
+    /// directions 0.042 -> 0.021, coverage 0.758 -> 0.675; fast-rotation 0.038 -> 0.031, 0.126
+    /// -> 0.050, 0.038 -> 0.003, 0.788 -> 0.669; high-contrast share > 0.2 0.265 -> 0.136. In the
+    /// whole method (hierarchical merger's `method_on_sim` with the graph's feedback, six object
+    /// presets and camera-only, unseen seeds; every fit checked): seeds 11-13, 2 s, mean IoU
+    /// 0.797 -> 0.812, mean median direction error 11.4 -> 10.1 deg; seeds 11-15, 3 s, 0.767 ->
+    /// 0.770 and 11.1 -> 9.9 deg (fast-rotation 0.671 -> 0.749, low-contrast 0.727 -> 0.689).
+    pub check_radius: usize,
+    /// Largest angle, radians, between the two fits' normal-flow directions (default 10 deg;
+    /// 5 / 10 / 15 deg with 0.1 / 0.2 / 0.3 for the speed: mean IoU 0.804 / 0.814 / 0.811
+    /// on seeds 11-13, 2 s, with the final labels as the planar feedback; 8 deg / 0.15 0.811;
+    /// a 9 x 9 check window 0.811).
+    pub check_max_angle_rad: f64,
+    /// Largest relative difference of the two fits' speeds, `|s / s_check - 1|` (default 0.2).
+    pub check_max_speed_diff: f64,
+    /// Fits with at least this confidence and at most
+    /// [`PlaneFitParams::check_skip_direction_sd_rad`] of direction uncertainty are kept without
+    /// the scale check: a second fit on up to 49 points halves the estimator's throughput when
+    /// every fit takes it, and the check hardly ever rejects such fits. Default 0.6 (above 1:
+    /// every fit is checked); see the direction threshold.
+    pub check_skip_confidence: f64,
+    /// See [`PlaneFitParams::check_skip_confidence`]. Default 4 deg. `scale_check` (seed 11, 1 s)
+    /// with every fit checked / with 0.8 and 2 deg / 0.7 and 3 deg / 0.6 and 4 deg: background
+    /// share of `|e|` > 0.2 0.082 / 0.083 / 0.084 / 0.086 (one-object), 0.049 / 0.049 / 0.049 /
+    /// 0.050 (fast-rotation), 0.137 / 0.136 / 0.135 / 0.136 (high-contrast), coverage 0.638 /
+    /// 0.647 / 0.660 / 0.675 (one-object); throughput (`cargo bench -p evseg-normal-flow --bench
+    /// plane_fit`, shared 2-core machine) 1.5 / 2.1 / - / 2.5 M events/s against 3.1 without the
+    /// check. `method_on_sim` (seeds 11-15, 3 s): mean IoU 0.770 both, direction error 9.9 /
+    /// 10.3 deg.
+    pub check_skip_direction_sd_rad: f64,
 }
 
-/// Largest supported [`PlaneFitParams::radius`] (a 7 x 7 window; fixed-size buffers).
-pub const MAX_RADIUS: usize = 3;
+/// Largest supported [`PlaneFitParams::radius`] and [`PlaneFitParams::check_radius`] (a 9 x 9
+/// window; fixed-size buffers).
+pub const MAX_RADIUS: usize = 4;
 
 impl Default for PlaneFitParams {
     fn default() -> Self {
@@ -86,6 +128,11 @@ impl Default for PlaneFitParams {
             min_confidence: 0.5,
             lookahead_s: 0.03,
             max_direction_sd_rad: f64::INFINITY,
+            check_radius: 3,
+            check_max_angle_rad: 10f64.to_radians(),
+            check_max_speed_diff: 0.2,
+            check_skip_confidence: 0.6,
+            check_skip_direction_sd_rad: 4f64.to_radians(),
         }
     }
 }
@@ -96,6 +143,16 @@ pub enum ParamsError {
     /// Radius 0 or above [`MAX_RADIUS`].
     #[error("radius must be 1..={MAX_RADIUS} pixels, got {0}")]
     Radius(usize),
+    /// A check window that is not larger than the fit's window, or above [`MAX_RADIUS`].
+    #[error(
+        "check_radius must be 0 (no check) or in {radius}+1..={MAX_RADIUS} pixels (radius is {radius}), got {check}"
+    )]
+    CheckRadius {
+        /// The value given.
+        check: usize,
+        /// The fit's radius.
+        radius: usize,
+    },
     /// `min_points` below 3 (a plane needs 3 points) or above the window size.
     #[error("min_points must be between 3 and {window} (the window's pixels), got {got}")]
     MinPoints {
@@ -122,6 +179,12 @@ impl PlaneFitParams {
         if self.radius == 0 || self.radius > MAX_RADIUS {
             return Err(ParamsError::Radius(self.radius));
         }
+        if self.check_radius != 0 && (self.check_radius <= self.radius || self.check_radius > MAX_RADIUS) {
+            return Err(ParamsError::CheckRadius {
+                check: self.check_radius,
+                radius: self.radius,
+            });
+        }
         let window = (2 * self.radius + 1).pow(2);
         if self.min_points < 3 || self.min_points > window {
             return Err(ParamsError::MinPoints {
@@ -136,7 +199,31 @@ impl PlaneFitParams {
                 value: self.max_direction_sd_rad,
             });
         }
-        let checks: [(&'static str, f64, bool, &'static str); 5] = [
+        let checks: [(&'static str, f64, bool, &'static str); 9] = [
+            (
+                "check_skip_confidence",
+                self.check_skip_confidence,
+                self.check_skip_confidence >= 0.0,
+                ">= 0 (above 1: every fit is checked)",
+            ),
+            (
+                "check_skip_direction_sd",
+                self.check_skip_direction_sd_rad,
+                self.check_skip_direction_sd_rad >= 0.0,
+                ">= 0",
+            ),
+            (
+                "check_max_angle",
+                self.check_max_angle_rad,
+                self.check_max_angle_rad > 0.0,
+                "> 0",
+            ),
+            (
+                "check_max_speed_diff",
+                self.check_max_speed_diff,
+                self.check_max_speed_diff > 0.0,
+                "> 0",
+            ),
             ("lookahead", self.lookahead_s, self.lookahead_s >= 0.0, ">= 0"),
             ("dt_min", self.dt_min_s, self.dt_min_s >= 0.0, ">= 0"),
             ("dt_max", self.dt_max_s, self.dt_max_s > self.dt_min_s, "> dt_min"),

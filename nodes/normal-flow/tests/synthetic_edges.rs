@@ -284,6 +284,23 @@ fn bad_parameters_are_refused() {
             min_confidence: 1.0,
             ..PlaneFitParams::default()
         },
+        // The check window must be larger than the fit's and at most MAX_RADIUS.
+        PlaneFitParams {
+            check_radius: 2,
+            ..PlaneFitParams::default()
+        },
+        PlaneFitParams {
+            check_radius: 5,
+            ..PlaneFitParams::default()
+        },
+        PlaneFitParams {
+            check_max_angle_rad: 0.0,
+            ..PlaneFitParams::default()
+        },
+        PlaneFitParams {
+            check_max_speed_diff: f64::NAN,
+            ..PlaneFitParams::default()
+        },
     ] {
         assert!(
             PlaneFitEstimator::new(&cam, params).is_err(),
@@ -384,4 +401,67 @@ fn direction_test_drops_uncertain_fits_only() {
     a.process(&clean).expect("consistent");
     b.process(&clean).expect("consistent");
     assert_eq!(a.stats().valid, b.stats().valid);
+}
+
+/// Events of a vertical edge moving right whose time surface bends: within `inner` columns of
+/// column `x_c` it crosses a pixel every `1 / fast` s, farther out every `1 / slow` s (a surface
+/// that is a plane in a small window and not in a larger one).
+fn kinked_edge_events(x_c: u16, inner: u16, fast: f64, slow: f64) -> Events {
+    let mut list = Vec::new();
+    for y in 0..H {
+        for x in 0..W {
+            let d = f64::from(x) - f64::from(x_c);
+            let k = f64::from(inner);
+            let t = if d.abs() <= k {
+                d / fast
+            } else {
+                d.signum() * (k / fast + (d.abs() - k) / slow)
+            };
+            list.push((0.1 + (t * 1e6).round() * 1e-6, x, y));
+        }
+    }
+    list.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let mut ev = Events::with_capacity(list.len());
+    for (t, x, y) in list {
+        ev.push(t, x, y, 1);
+    }
+    ev
+}
+
+#[test]
+fn a_surface_that_bends_outside_the_window_fails_the_scale_check() {
+    // Plane at 400 px/s over the 5 x 5 window, 100 px/s beyond it: the 7 x 7 plane says about
+    // 240 px/s, 40 % slower, so the check leaves the estimate out; without the check it is
+    // the 5 x 5 window's 400 px/s.
+    let events = kinked_edge_events(32, 2, 400.0, 100.0);
+    let centre: Vec<usize> = (0..events.len())
+        .filter(|&i| events.x[i] == 32 && (8..H - 8).contains(&events.y[i]))
+        .collect();
+    assert!(centre.len() > 40);
+    let unchecked = PlaneFitParams {
+        check_radius: 0,
+        ..PlaneFitParams::default()
+    };
+    let mut plain = PlaneFitEstimator::new(&camera(), unchecked).expect("valid");
+    let px = plain.process_pixels(&events).expect("consistent");
+    for &i in &centre {
+        let [vx, vy] = px[i].flow_px;
+        assert!(px[i].confidence > 0.5, "event {i} invalid without the check");
+        assert!((vx - 400.0).abs() < 20.0 && vy.abs() < 20.0, "({vx}, {vy})");
+    }
+    assert_eq!(plain.stats().disagreed, 0);
+    let mut checked = PlaneFitEstimator::new(&camera(), PlaneFitParams::default()).expect("valid");
+    let px = checked.process_pixels(&events).expect("consistent");
+    for &i in &centre {
+        assert_eq!(px[i].confidence, 0.0, "event {i} kept despite the bend");
+    }
+    assert!(checked.stats().disagreed >= centre.len() as u64);
+    // A gentler bend (400 -> 340 px/s) stays within the 20 % the check allows.
+    let gentle = kinked_edge_events(32, 2, 400.0, 340.0);
+    let mut checked = PlaneFitEstimator::new(&camera(), PlaneFitParams::default()).expect("valid");
+    let px = checked.process_pixels(&gentle).expect("consistent");
+    let kept = (0..gentle.len())
+        .filter(|&i| gentle.x[i] == 32 && (8..H - 8).contains(&gentle.y[i]) && px[i].confidence > 0.5)
+        .count();
+    assert_eq!(kept, centre.len());
 }
