@@ -450,15 +450,26 @@ fn a_surface_that_bends_outside_the_window_fails_the_scale_check() {
         assert!((vx - 400.0).abs() < 20.0 && vy.abs() < 20.0, "({vx}, {vy})");
     }
     assert_eq!(plain.stats().disagreed, 0);
-    let mut checked = PlaneFitEstimator::new(&camera(), PlaneFitParams::default()).expect("valid");
+    // The synthetic 5 x 5 surface is an exact plane, so its fit is confident enough to skip the
+    // check by default; every fit is checked when no confidence is high enough to skip it.
+    let always = PlaneFitParams {
+        check_skip_confidence: 2.0,
+        ..PlaneFitParams::default()
+    };
+    let mut checked = PlaneFitEstimator::new(&camera(), always).expect("valid");
     let px = checked.process_pixels(&events).expect("consistent");
     for &i in &centre {
         assert_eq!(px[i].confidence, 0.0, "event {i} kept despite the bend");
     }
     assert!(checked.stats().disagreed >= centre.len() as u64);
+    let mut skipping = PlaneFitEstimator::new(&camera(), PlaneFitParams::default()).expect("valid");
+    let px = skipping.process_pixels(&events).expect("consistent");
+    for &i in &centre {
+        assert!(px[i].confidence > 0.5, "confident exact fit {i} was not skipped");
+    }
     // A gentler bend (400 -> 340 px/s) stays within the 20 % the check allows.
     let gentle = kinked_edge_events(32, 2, 400.0, 340.0);
-    let mut checked = PlaneFitEstimator::new(&camera(), PlaneFitParams::default()).expect("valid");
+    let mut checked = PlaneFitEstimator::new(&camera(), always).expect("valid");
     let px = checked.process_pixels(&gentle).expect("consistent");
     let kept = (0..gentle.len())
         .filter(|&i| gentle.x[i] == 32 && (8..H - 8).contains(&gentle.y[i]) && px[i].confidence > 0.5)
