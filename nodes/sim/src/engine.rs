@@ -80,12 +80,23 @@ pub struct KeyFrame {
     pub edge: Vec<bool>,
     /// True where the pixel's value mixes surfaces (edge sub-samples on another surface).
     pub mixed: Vec<bool>,
+    /// Mixed pixels whose centre sees the background while a sub-sample meets a moving
+    /// object, by pixel index (ascending), with what that sub-sample met: the object covers
+    /// part of the pixel, so it is the pixel's surface for the truth (see [`KeyFrame::seen`]).
+    pub(crate) edge_objects: Vec<(u32, Seen)>,
 }
 
 impl KeyFrame {
-    /// What pixel `i`'s centre ray met.
+    /// What pixel `i` saw for the truth: its centre ray's surface, or the moving object that
+    /// covers part of a pixel whose centre sees the background (`edge_objects`).
     #[inline]
     pub(crate) fn seen(&self, i: usize) -> Seen {
+        if self.mixed[i]
+            && self.id[i] == 0
+            && let Ok(k) = self.edge_objects.binary_search_by_key(&(i as u32), |e| e.0)
+        {
+            return self.edge_objects[k].1;
+        }
         Seen {
             id: self.id[i],
             key: self.key[i],
@@ -123,6 +134,7 @@ impl KeyFrame {
             z: vec![0.0; n],
             edge: vec![false; n],
             mixed: vec![false; n],
+            edge_objects: Vec::new(),
         }
     }
 }
@@ -473,6 +485,7 @@ impl Engine {
         // Edges row by row without branches: outside the image a pixel is compared with
         // itself (never different).
         kf.mixed.fill(false);
+        kf.edge_objects.clear();
         for y in 0..h {
             let row = &kf.key[y * w..(y + 1) * w];
             let up = if y > 0 { &kf.key[(y - 1) * w..y * w] } else { row };
@@ -508,7 +521,7 @@ impl Engine {
                 if kf.edge[i] {
                     let r = &self.rays;
                     let (x, y) = ((i % w) as i32, (i / w) as i32);
-                    (kf.l[i], kf.mixed[i]) = kf.geom.edge_sample(
+                    let value = kf.geom.edge_sample(
                         &self.scene,
                         r.x[i],
                         r.y[i],
@@ -518,6 +531,12 @@ impl Engine {
                         y,
                         (kf.l[i], kf.key[i]),
                     );
+                    (kf.l[i], kf.mixed[i]) = (value.l, value.mixed);
+                    if let Some(o) = value.object
+                        && kf.id[i] == 0
+                    {
+                        kf.edge_objects.push((i as u32, Seen::from(o)));
+                    }
                     self.stats.supersampled += 1;
                 }
             }

@@ -6,7 +6,7 @@ use crate::camera::{CameraConfig, Rays};
 use crate::engine::RawEvent;
 use crate::esim;
 use crate::math::{fmax, fmin};
-use crate::render::FrameGeom;
+use crate::render::{FrameGeom, Located};
 use crate::scene::Scene;
 use crate::texture::Texture;
 
@@ -22,8 +22,10 @@ pub(crate) struct FireCtx<'a> {
     pub refractory: f64,
 }
 
-/// What a pixel's centre ray met at one render: the object id, the surface key and the
-/// depth (m) the render located (`u16::MAX` and infinite for nothing).
+/// What a pixel saw at one render for the truth: the object id, the surface key and the
+/// depth (m) the render located (`u16::MAX` and infinite for nothing); its centre ray's
+/// surface, or a moving object that covers part of a pixel whose centre sees the background
+/// (met by an edge sub-sample, the depth that sub-sample's).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(crate) struct Seen {
     /// Object id.
@@ -32,6 +34,16 @@ pub(crate) struct Seen {
     pub key: u16,
     /// Depth along the optical axis, m.
     pub z: f32,
+}
+
+impl From<Located> for Seen {
+    fn from(hit: Located) -> Self {
+        Self {
+            id: hit.id,
+            key: hit.key,
+            z: hit.z,
+        }
+    }
 }
 
 /// One end of a pixel's path on one surface: where the pixel's ray met it (a key frame, or a

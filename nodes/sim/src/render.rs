@@ -397,6 +397,31 @@ fn clear_of<const N: usize>(n: &[[f32; N]; 3], x: f32, y: f32, du: [f32; 2], dv:
     ok
 }
 
+/// The value of an edge pixel ([`FrameGeom::edge_sample`]) and what its sub-samples saw.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EdgeValue {
+    /// Log intensity of the pixel (its sub-samples averaged in linear intensity).
+    pub l: f32,
+    /// True when the value mixes surfaces (a sub-sample on another surface than the centre's).
+    pub mixed: bool,
+    /// The nearest moving object (id > 0) a sub-sample on another surface than the centre's
+    /// met, with its depth there (m): the object covers part of the pixel, so a change of the
+    /// pixel's value may be its edge even where the centre sees something else.
+    pub object: Option<Located>,
+}
+
+impl EdgeValue {
+    /// The centre's value `l` where every sub-sample sees the centre's surface.
+    #[inline]
+    pub fn unmixed(l: f32) -> Self {
+        Self {
+            l,
+            mixed: false,
+            object: None,
+        }
+    }
+}
+
 /// Everything needed to cast rays at one instant, in the camera frame.
 #[derive(Debug, Clone)]
 pub struct FrameGeom {
@@ -1083,10 +1108,10 @@ impl FrameGeom {
         px: i32,
         py: i32,
         centre: (f32, u16),
-    ) -> (f32, bool) {
+    ) -> EdgeValue {
         if self.edge_free(x, y, du, dv, px, py, centre.1) {
             // What locating the sub-rays would conclude (see `edge_mix`), without locating them.
-            return (centre.0, false);
+            return EdgeValue::unmixed(centre.0);
         }
         self.edge_mix(scene, x, y, du, dv, px, py, centre)
     }
@@ -1106,7 +1131,7 @@ impl FrameGeom {
         px: i32,
         py: i32,
         centre: (f32, u16),
-    ) -> (f32, bool) {
+    ) -> EdgeValue {
         #[cfg(target_arch = "x86_64")]
         if std::is_x86_feature_detected!("avx2") {
             // SAFETY: AVX2 is available (checked just above).
@@ -1129,7 +1154,7 @@ impl FrameGeom {
         px: i32,
         py: i32,
         centre: (f32, u16),
-    ) -> (f32, bool) {
+    ) -> EdgeValue {
         self.edge_mix_with(scene, x, y, du, dv, px, py, centre)
     }
 
@@ -1146,7 +1171,7 @@ impl FrameGeom {
         px: i32,
         py: i32,
         centre: (f32, u16),
-    ) -> (f32, bool) {
+    ) -> EdgeValue {
         let (mut rx, mut ry) = ([0.0f32; 4], [0.0f32; 4]);
         for (k, (ou, ov)) in SUBSAMPLES.into_iter().enumerate() {
             (rx[k], ry[k]) = (x + ou * du[0] + ov * dv[0], y + ou * du[1] + ov * dv[1]);
@@ -1161,19 +1186,28 @@ impl FrameGeom {
         let found = self.search_lanes(&x8, &y8, &[px; LANES], &[py; LANES]);
         let keys = [0, 1, 2, 3].map(|l| found.key(self, l));
         if keys.iter().all(|&k| k == centre.1) {
-            return (centre.0, false);
+            return EdgeValue::unmixed(centre.0);
         }
         // Sub-rays on the centre's surface take its value (as above); the others are textured.
         let centre_lin = centre.0.exp();
         let mut acc = 0.0f32;
+        let mut object: Option<Located> = None;
         for (l, (sx, sy)) in rays.iter().enumerate() {
             acc += if keys[l] == centre.1 {
                 centre_lin
             } else {
-                self.shade(scene, *sx, *sy, &found.located_lane(self, l)).l.exp()
+                let hit = found.located_lane(self, l);
+                if hit.id != 0 && object.is_none_or(|o| hit.z < o.z) {
+                    object = Some(hit);
+                }
+                self.shade(scene, *sx, *sy, &hit).l.exp()
             };
         }
-        ((0.25 * acc).ln(), true)
+        EdgeValue {
+            l: (0.25 * acc).ln(),
+            mixed: true,
+            object,
+        }
     }
 
     /// True optical flow (px/s) at pixel `(px, py)` with normalized ray `(x, y)` of the surface of

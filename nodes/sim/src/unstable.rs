@@ -20,6 +20,13 @@ const LANES: usize = crate::texture::LANES;
 /// Marks "no unstable neighbour" in [`UnstableList::neighbours`].
 pub const NONE: u32 = u32::MAX;
 
+/// Marks "no moving object at an edge sub-sample" in [`UnstableList::edge_object`].
+const NO_EDGE_OBJECT: Seen = Seen {
+    id: 0,
+    key: u16::MAX,
+    z: f32::INFINITY,
+};
+
 /// Per-pixel state of the unstable pixels of one interval (structure of arrays, in pixel
 /// order).
 #[derive(Debug, Clone, Default)]
@@ -57,6 +64,9 @@ pub struct UnstableList {
     pub id: Vec<u16>,
     /// Depth of the current render step's centre surface, m.
     pub z: Vec<f32>,
+    /// The moving object an edge sub-sample met at the current render step where the centre
+    /// sees the background (id 0: none; see [`UnstableList::seen`]).
+    pub(crate) edge_object: Vec<Seen>,
     /// Render schedule: index into `local_speed::Schedules::lists`.
     pub schedule: Vec<u32>,
     /// Position of the pixel's next render in its schedule.
@@ -155,6 +165,8 @@ impl UnstableList {
         self.id.resize(m, 0);
         self.z.clear();
         self.z.resize(m, 0.0);
+        self.edge_object.clear();
+        self.edge_object.resize(m, NO_EDGE_OBJECT);
         // Neighbours by walking the list (in pixel order): the left and right ones are the
         // adjacent entries, the lower and upper ones found by two cursors that only move on.
         self.neighbours.clear();
@@ -253,6 +265,7 @@ impl UnstableList {
         let mut count = 0;
         for &a in &self.active {
             let j = a as usize;
+            self.edge_object[j] = NO_EDGE_OBJECT;
             let k = self.key[j];
             let edge = self.neighbours[j]
                 .iter()
@@ -267,18 +280,22 @@ impl UnstableList {
                 if geom.edge_free(self.x[j], self.y[j], self.d_du[j], self.d_dv[j], px, py, k) {
                     continue;
                 }
-                self.l[j] = geom
-                    .edge_mix(
-                        scene,
-                        self.x[j],
-                        self.y[j],
-                        self.d_du[j],
-                        self.d_dv[j],
-                        px,
-                        py,
-                        (self.l[j], k),
-                    )
-                    .0;
+                let value = geom.edge_mix(
+                    scene,
+                    self.x[j],
+                    self.y[j],
+                    self.d_du[j],
+                    self.d_dv[j],
+                    px,
+                    py,
+                    (self.l[j], k),
+                );
+                self.l[j] = value.l;
+                if let Some(o) = value.object
+                    && self.id[j] == 0
+                {
+                    self.edge_object[j] = Seen::from(o);
+                }
             }
         }
         count
@@ -305,9 +322,13 @@ impl UnstableList {
         }
     }
 
-    /// What pixel `j`'s centre saw at its latest render.
+    /// What pixel `j` saw at its latest render for the truth: its centre's surface, or the
+    /// moving object that covers part of it where the centre sees the background.
     #[inline]
     pub(crate) fn seen(&self, j: usize) -> Seen {
+        if self.edge_object[j].id != 0 {
+            return self.edge_object[j];
+        }
         Seen {
             id: self.id[j],
             key: self.key[j],
