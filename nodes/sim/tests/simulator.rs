@@ -206,7 +206,12 @@ fn objects_covering_part_of_a_pixel_own_its_events() {
     // sub-samples these were 5 to 6 % of the object's events.
     let mut cfg = preset("one-object", 4).unwrap().with_resolution_scale(0.5);
     cfg.duration_s = 0.3;
-    let scene = Scene::new(&cfg.scene, cfg.camera_trajectory.clone(), cfg.seed, cfg.esim.log_eps);
+    let scene = Scene::new(
+        &cfg.scene,
+        cfg.camera_trajectory.clone(),
+        cfg.seed,
+        cfg.esim.log_eps,
+    );
     let rays = Rays::new(&cfg.camera);
     let cam = cfg.camera.clone();
     let mut sim = Simulator::new(cfg).unwrap();
@@ -239,7 +244,10 @@ fn objects_covering_part_of_a_pixel_own_its_events() {
     let share = covered as f64 / object as f64;
     eprintln!("background events on partly covered pixels: {covered} of {object} object events");
     assert!(object > 10_000, "{object} object events");
-    assert!(share < 0.005, "{covered} background events on pixels the object covers in part");
+    assert!(
+        share < 0.005,
+        "{covered} background events on pixels the object covers in part"
+    );
 }
 
 #[test]
