@@ -344,11 +344,6 @@ fn run_displacements(
     if len < 2 || x == 0 || x + RUN_PIXELS + 1 > w || y == 0 || first + RUN_PIXELS + w > n {
         return None;
     }
-    let win = |a: &[f32], at: usize| -> [f32; RUN_PIXELS] {
-        let mut o = [0.0; RUN_PIXELS];
-        o.copy_from_slice(&a[at..at + RUN_PIXELS]);
-        o
-    };
     let (u0, u1, v0, v1) = (
         win(&kf0.u, first),
         win(&kf1.u, first),
@@ -365,52 +360,70 @@ fn run_displacements(
         let size = (z0[l] * f0).min(z1[l] * f1).max(1e-9);
         out[l] = (du[l] * du[l] + dv[l] * dv[l]).sqrt() / size;
     }
-    let jacobian = |kf: &KeyFrame| -> [f32; RUN_PIXELS] {
-        let key = |at: usize| -> [u16; RUN_PIXELS] {
-            let mut o = [0; RUN_PIXELS];
-            o.copy_from_slice(&kf.key[at..at + RUN_PIXELS]);
-            o
-        };
-        let (k, kr, kl, kd, ku) = (
-            key(first),
-            key(first + 1),
-            key(first - 1),
-            key(first + w),
-            key(first - w),
-        );
-        let (ur, ul, ud, uu) = (
-            win(&kf.u, first + 1),
-            win(&kf.u, first - 1),
-            win(&kf.u, first + w),
-            win(&kf.u, first - w),
-        );
-        let (vr, vl, vd, vu) = (
-            win(&kf.v, first + 1),
-            win(&kf.v, first - 1),
-            win(&kf.v, first + w),
-            win(&kf.v, first - w),
-        );
-        let mut d = [0.0f32; RUN_PIXELS];
-        for l in 0..RUN_PIXELS {
-            let edge = (kr[l] != k[l]) | (kl[l] != k[l]) | (kd[l] != k[l]) | (ku[l] != k[l]);
-            let (a, b) = (0.5 * (ur[l] - ul[l]), 0.5 * (ud[l] - uu[l]));
-            let (c, e) = (0.5 * (vr[l] - vl[l]), 0.5 * (vd[l] - vu[l]));
-            let det = a * e - b * c;
-            let (px, py) = ((e * du[l] - b * dv[l]) / det, (a * dv[l] - c * du[l]) / det);
-            let r = (px * px + py * py).sqrt();
-            d[l] = if edge | det.is_nan() | (det.abs() <= 1e-12) {
-                f32::INFINITY
-            } else {
-                r
-            };
-        }
-        d
-    };
-    let (d0, d1) = (jacobian(kf0), jacobian(kf1));
+    let (d0, d1) = (
+        run_jacobian(kf0, first, w, &du, &dv),
+        run_jacobian(kf1, first, w, &du, &dv),
+    );
     for l in 0..RUN_PIXELS {
         out[l] = (d0[l].max(d1[l]) * DISPLACEMENT_SAFETY).min(out[l]);
     }
     Some(out)
+}
+
+/// The pixel-to-texture Jacobian displacements ([`jacobian_displacement`]) of the window of
+/// `RUN_PIXELS` pixels from `first` on in key frame `kf` (texture-coordinate changes `du`,
+/// `dv`), lane by lane; the window and its 4-neighbours lie inside the image (see
+/// [`run_displacements`]).
+#[inline(always)]
+fn run_jacobian(
+    kf: &KeyFrame,
+    first: usize,
+    w: usize,
+    du: &[f32; RUN_PIXELS],
+    dv: &[f32; RUN_PIXELS],
+) -> [f32; RUN_PIXELS] {
+    let (k, kr, kl, kd, ku) = (
+        win(&kf.key, first),
+        win(&kf.key, first + 1),
+        win(&kf.key, first - 1),
+        win(&kf.key, first + w),
+        win(&kf.key, first - w),
+    );
+    let (ur, ul, ud, uu) = (
+        win(&kf.u, first + 1),
+        win(&kf.u, first - 1),
+        win(&kf.u, first + w),
+        win(&kf.u, first - w),
+    );
+    let (vr, vl, vd, vu) = (
+        win(&kf.v, first + 1),
+        win(&kf.v, first - 1),
+        win(&kf.v, first + w),
+        win(&kf.v, first - w),
+    );
+    let mut d = [0.0f32; RUN_PIXELS];
+    for l in 0..RUN_PIXELS {
+        let edge = (kr[l] != k[l]) | (kl[l] != k[l]) | (kd[l] != k[l]) | (ku[l] != k[l]);
+        let (a, b) = (0.5 * (ur[l] - ul[l]), 0.5 * (ud[l] - uu[l]));
+        let (c, e) = (0.5 * (vr[l] - vl[l]), 0.5 * (vd[l] - vu[l]));
+        let det = a * e - b * c;
+        let (px, py) = ((e * du[l] - b * dv[l]) / det, (a * dv[l] - c * du[l]) / det);
+        let r = (px * px + py * py).sqrt();
+        d[l] = if edge | det.is_nan() | (det.abs() <= 1e-12) {
+            f32::INFINITY
+        } else {
+            r
+        };
+    }
+    d
+}
+
+/// The `RUN_PIXELS` values of `a` from `at` on.
+#[inline(always)]
+fn win<T: Copy + Default>(a: &[T], at: usize) -> [T; RUN_PIXELS] {
+    let mut o = [T::default(); RUN_PIXELS];
+    o.copy_from_slice(&a[at..at + RUN_PIXELS]);
+    o
 }
 
 /// The image displacement (px) of texture-coordinate change `(du, dv)` at pixel `i` of key
