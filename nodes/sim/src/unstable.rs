@@ -65,7 +65,7 @@ pub struct UnstableList {
     /// Depth of the current render step's centre surface, m.
     pub z: Vec<f32>,
     /// The moving object an edge sub-sample met at the current render step where the centre
-    /// sees the background (id 0: none; see [`UnstableList::seen`]).
+    /// sees the background (id 0: none; see [`seen_at`]).
     pub(crate) edge_object: Vec<Seen>,
     /// Render schedule: index into `local_speed::Schedules::lists`.
     pub schedule: Vec<u32>,
@@ -81,6 +81,21 @@ pub struct UnstableList {
     by_key: Vec<u32>,
     /// Counts and offsets of the key groups of `by_key`.
     key_counts: Vec<u32>,
+}
+
+/// What list pixel `j` saw at its latest render for the truth (from the list's `edge_object`,
+/// `id`, `key` and `z` columns): its centre's surface, or the moving object that covers part
+/// of it where the centre sees the background.
+#[inline(always)]
+pub(crate) fn seen_at(edge_object: &[Seen], id: &[u16], key: &[u16], z: &[f32], j: usize) -> Seen {
+    if edge_object[j].id != 0 {
+        return edge_object[j];
+    }
+    Seen {
+        id: id[j],
+        key: key[j],
+        z: z[j],
+    }
 }
 
 /// The per-pixel image arrays an [`UnstableList`] is gathered from.
@@ -319,20 +334,6 @@ impl UnstableList {
             let c = &mut self.key_counts[slot(self.key[a as usize])];
             self.by_key[*c as usize] = a;
             *c += 1;
-        }
-    }
-
-    /// What pixel `j` saw at its latest render for the truth: its centre's surface, or the
-    /// moving object that covers part of it where the centre sees the background.
-    #[inline]
-    pub(crate) fn seen(&self, j: usize) -> Seen {
-        if self.edge_object[j].id != 0 {
-            return self.edge_object[j];
-        }
-        Seen {
-            id: self.id[j],
-            key: self.key[j],
-            z: self.z[j],
         }
     }
 
