@@ -246,6 +246,15 @@ impl UnstableList {
         // of their previous render: it rarely changes between renders, so most groups hit one
         // plane or box face and are shaded in vector form. Each pixel's value is its own, so
         // the order does not matter.
+        // The columns as slices of the list's length: one index test per pixel.
+        let n = self.pixel.len();
+        let (pixel, xs, ys) = (&self.pixel[..n], &self.x[..n], &self.y[..n]);
+        let (ls, keys, ids, zs) = (
+            &mut self.l[..n],
+            &mut self.key[..n],
+            &mut self.id[..n],
+            &mut self.z[..n],
+        );
         let mut groups = self.by_key.chunks_exact(LANES);
         for g in &mut groups {
             // Plain loops: `array::from_fn` and `array::map` closures were left out of line.
@@ -254,62 +263,51 @@ impl UnstableList {
             let (mut x, mut y) = ([0.0f32; LANES], [0.0f32; LANES]);
             for l in 0..LANES {
                 let j = g[l] as usize;
-                let p = self.pixel[j] as usize;
-                (js[l], px[l], py[l], x[l], y[l]) = (j, (p % w) as i32, (p / w) as i32, self.x[j], self.y[j]);
+                let p = pixel[j] as usize;
+                (js[l], px[l], py[l], x[l], y[l]) = (j, (p % w) as i32, (p / w) as i32, xs[j], ys[j]);
             }
             let hits = geom.cast_lanes(scene, &x, &y, &px, &py);
             for (l, &j) in js.iter().enumerate() {
-                self.l[j] = hits.l[l];
-                self.key[j] = hits.key[l];
-                self.id[j] = hits.id[l];
-                self.z[j] = hits.z[l];
+                if j < n {
+                    (ls[j], keys[j], ids[j], zs[j]) = (hits.l[l], hits.key[l], hits.id[l], hits.z[l]);
+                }
             }
         }
         for &a in groups.remainder() {
             let j = a as usize;
-            let i = self.pixel[j] as usize;
-            let hit = geom.cast(scene, self.x[j], self.y[j], (i % w) as i32, (i / w) as i32, None);
-            self.l[j] = hit.l;
-            self.key[j] = hit.key;
-            self.id[j] = hit.id;
-            self.z[j] = hit.z;
+            let i = pixel[j] as usize;
+            let hit = geom.cast(scene, xs[j], ys[j], (i % w) as i32, (i / w) as i32, None);
+            (ls[j], keys[j], ids[j], zs[j]) = (hit.l, hit.key, hit.id, hit.z);
         }
         if !supersample {
             return 0;
         }
         let mut count = 0;
+        let (neighbours, d_du, d_dv) = (&self.neighbours[..n], &self.d_du[..n], &self.d_dv[..n]);
+        let edge_object = &mut self.edge_object[..n];
         for &a in &self.active {
             let j = a as usize;
-            self.edge_object[j] = NO_EDGE_OBJECT;
-            let k = self.key[j];
-            let edge = self.neighbours[j]
+            edge_object[j] = NO_EDGE_OBJECT;
+            let k = keys[j];
+            let edge = neighbours[j]
                 .iter()
-                .any(|&nb| nb != NONE && self.key[nb as usize] != k);
+                .any(|&nb| nb != NONE && keys.get(nb as usize).is_some_and(|&kn| kn != k));
             if edge {
-                let i = self.pixel[j] as usize;
+                let i = pixel[j] as usize;
                 let (px, py) = ((i % w) as i32, (i / w) as i32);
                 count += 1;
                 // `edge_sample` in two parts: its shortcut inlined here (AVX2; the centre's
                 // value stands when the sub-samples certainly see its surface), the rest out
                 // of line.
-                if geom.edge_free(self.x[j], self.y[j], self.d_du[j], self.d_dv[j], px, py, k) {
+                if geom.edge_free(xs[j], ys[j], d_du[j], d_dv[j], px, py, k) {
                     continue;
                 }
-                let value = geom.edge_mix(
-                    scene,
-                    self.x[j],
-                    self.y[j],
-                    self.d_du[j],
-                    self.d_dv[j],
-                    px,
-                    py,
-                    (self.l[j], k),
-                );
-                self.l[j] = value.l;
+                let value = geom.edge_mix(scene, xs[j], ys[j], d_du[j], d_dv[j], px, py, (ls[j], k));
+                ls[j] = value.l;
                 if let Some(o) = value.object
-                    && self.id[j] == 0
+                    && ids[j] == 0
                 {
-                    self.edge_object[j] = Seen::from(o);
+                    edge_object[j] = Seen::from(o);
                 }
             }
         }
