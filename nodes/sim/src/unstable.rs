@@ -289,9 +289,10 @@ impl UnstableList {
             let j = a as usize;
             edge_object[j] = NO_EDGE_OBJECT;
             let k = keys[j];
-            let edge = neighbours[j]
-                .iter()
-                .any(|&nb| nb != NONE && keys.get(nb as usize).is_some_and(|&kn| kn != k));
+            // Without early exits (`NONE` is past the list's end: no key).
+            let edge = neighbours[j].iter().fold(false, |e, &nb| {
+                e | keys.get(nb as usize).is_some_and(|&kn| kn != k)
+            });
             if edge {
                 let i = pixel[j] as usize;
                 let (px, py) = ((i % w) as i32, (i / w) as i32);
