@@ -667,7 +667,7 @@ impl Engine {
             let count = if q < key_slot { u.active.len() } else { u.len() };
             let tq = local_speed::slot_time(&times, q);
             // The list's columns as slices of one length, so that one test of `j` covers
-            // every access below.
+            // every access below (`active` holds list indices: the test never skips).
             let n = u.len();
             let UnstableList {
                 pixel,
