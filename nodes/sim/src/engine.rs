@@ -36,7 +36,7 @@ use crate::radix;
 use crate::render::FrameGeom;
 use crate::scene::{self, Scene};
 use crate::stable::ListedPixels;
-use crate::unstable::{PixelState, UnstableList};
+use crate::unstable::{self, PixelState, UnstableList};
 use crate::{SimStats, math};
 
 /// One event with its truth, before it is split into columns.
@@ -666,38 +666,78 @@ impl Engine {
             };
             let count = if q < key_slot { u.active.len() } else { u.len() };
             let tq = local_speed::slot_time(&times, q);
+            // The list's columns as slices of one length, so that one test of `j` covers
+            // every access below (`active` holds list indices: the test never skips).
+            let n = u.len();
+            let UnstableList {
+                pixel,
+                reference,
+                last_event,
+                c_on,
+                c_off,
+                l_prev,
+                seen_prev,
+                l,
+                key,
+                id,
+                z,
+                edge_object,
+                schedule,
+                next,
+                s_prev,
+                active,
+                ..
+            } = &mut *u;
+            let (pixel, c_on, c_off, l, key, id, z) = (
+                &pixel[..n],
+                &c_on[..n],
+                &c_off[..n],
+                &l[..n],
+                &key[..n],
+                &id[..n],
+                &z[..n],
+            );
+            let (edge_object, schedule) = (&edge_object[..n], &schedule[..n]);
+            let (reference, last_event, l_prev) =
+                (&mut reference[..n], &mut last_event[..n], &mut l_prev[..n]);
+            let (seen_prev, next, s_prev) = (&mut seen_prev[..n], &mut next[..n], &mut s_prev[..n]);
+            // Slot renders in bucket order, the closing key frame in list order.
+            let order = if q < key_slot { &active[..count] } else { &[][..] };
             for a in 0..count {
-                let j = if q < key_slot { u.active[a] as usize } else { a };
-                let i = u.pixel[j] as usize;
+                let j = order.get(a).map_or(a, |&j| j as usize);
+                if j >= n {
+                    continue;
+                }
+                let i = pixel[j] as usize;
                 let (l1, seen1) = if q < key_slot {
-                    (u.l[j], u.seen(j))
+                    (l[j], unstable::seen_at(edge_object, id, key, z, j))
                 } else {
                     (self.kf1.l[i], self.kf1.seen(i))
                 };
-                let sp = u.s_prev[j] as usize;
-                if esim::may_cross(u.reference[j], l1, u.c_on[j], u.c_off[j]) {
+                let sp = s_prev[j] as usize;
+                if esim::may_cross(reference[j], l1, c_on[j], c_off[j]) {
                     let before = batch.len();
                     fire(
                         &ctx,
-                        &mut u.reference[j],
-                        &mut u.last_event[j],
+                        &mut reference[j],
+                        &mut last_event[j],
                         i,
-                        u.l_prev[j],
+                        l_prev[j],
                         l1,
                         (local_speed::slot_time(&times, sp), tq),
                         (geom_at(sp), geom_at(q)),
-                        (u.seen_prev[j], seen1),
-                        (u.c_on[j], u.c_off[j]),
+                        (seen_prev[j], seen1),
+                        (c_on[j], c_off[j]),
                         &mut batch,
                     );
                     fired += (batch.len() - before) as u64;
                 }
-                u.l_prev[j] = l1;
-                u.seen_prev[j] = seen1;
-                u.s_prev[j] = q as u32;
+                l_prev[j] = l1;
+                seen_prev[j] = seen1;
+                s_prev[j] = q as u32;
                 if q < key_slot {
-                    u.next[j] += 1;
-                    let nq = schedules.lists[u.schedule[j] as usize][u.next[j] as usize] as usize;
+                    next[j] += 1;
+                    let nq = schedules.lists[schedule[j] as usize][next[j] as usize] as usize;
                     if nq < key_slot {
                         buckets[nq].push(j as u32);
                     }

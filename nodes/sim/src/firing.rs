@@ -113,14 +113,18 @@ pub(crate) fn fire_path(
         return (samples, 0);
     }
     let before = batch.len();
-    let (mut l_prev, mut t_prev) = (l_start, t0);
-    for (j, &l) in path.iter().enumerate() {
-        let next = j + 1;
-        let t = if next == m {
+    // Time of grid point `k` of the path (computed only for the segments that may cross).
+    let time = |k: usize| {
+        if k == 0 {
+            t0
+        } else if k == m {
             t1
         } else {
-            t0 + (t1 - t0) * (next as f32 / mf) as f64
-        };
+            t0 + (t1 - t0) * (k as f32 / mf) as f64
+        }
+    };
+    let mut l_prev = l_start;
+    for (j, &l) in path.iter().enumerate() {
         if esim::may_cross(*reference, l, c_on, c_off) {
             fire_segment(
                 ctx,
@@ -129,7 +133,7 @@ pub(crate) fn fire_path(
                 i,
                 l_prev,
                 l,
-                (t_prev, t),
+                (time(j), time(j + 1)),
                 ends,
                 id,
                 (c_on, c_off),
@@ -137,7 +141,6 @@ pub(crate) fn fire_path(
             );
         }
         l_prev = l;
-        t_prev = t;
     }
     (samples, (batch.len() - before) as u64)
 }

@@ -787,14 +787,17 @@ impl FrameGeom {
         py: &[i32; LANES],
     ) -> HitLanes {
         let found = self.search_lanes(x, y, px, py);
-        let first = found.best_plane[0];
-        let one_plane = found.best_box.iter().all(|&b| b == u32::MAX)
-            & found.best_plane.iter().all(|&p| p == first)
-            & (first != u32::MAX);
-        let first_box = found.best_box[0];
-        let one_face = found.best_box.iter().all(|&b| b == first_box)
-            & found.box_face.iter().all(|&f| f == found.box_face[0])
-            & (first_box != u32::MAX);
+        let (first, first_box, first_face) = (found.best_plane[0], found.best_box[0], found.box_face[0]);
+        // Lane comparisons without early exits (folded with `&`, vector compares).
+        let (mut no_box, mut same_plane, mut same_box, mut same_face) = (true, true, true, true);
+        for l in 0..LANES {
+            no_box &= found.best_box[l] == u32::MAX;
+            same_plane &= found.best_plane[l] == first;
+            same_box &= found.best_box[l] == first_box;
+            same_face &= found.box_face[l] == first_face;
+        }
+        let one_plane = no_box & same_plane & (first != u32::MAX);
+        let one_face = same_box & same_face & (first_box != u32::MAX);
         if one_face {
             return self.shade_face_lanes(scene, x, y, &found);
         }

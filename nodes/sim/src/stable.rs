@@ -133,14 +133,37 @@ impl ListedPixels<'_> {
                     // earlier members first decides the same.
                     let (end, bound) = run_range(kf0, kf1, self.scene, work, wi, self.class);
                     let (lo, hi) = bound.unwrap_or((f32::NEG_INFINITY, f32::INFINITY));
+                    // The members' image displacements, for the whole run at once when one
+                    // needs them (see `run_displacements`).
+                    let mut disps: Option<[f32; RUN_PIXELS]> = None;
+                    let first = work[wi] as usize;
                     for &p in &work[wi..end] {
                         let i = p as usize;
                         let r = reference[i];
                         if (hi < r + on[i]) & (lo > r - off[i]) {
                             continue;
                         }
-                        let (n, f) =
-                            self.fire_stable(ctx, i, (&mut reference[i], &mut last_event[i]), batch, path);
+                        let disp = match disps {
+                            Some(d) => d[i - first],
+                            None => match run_displacements(kf0, kf1, first, end - wi, self.width) {
+                                Some(d) => {
+                                    disps = Some(d);
+                                    d[i - first]
+                                }
+                                None => {
+                                    let (du, dv) = (kf1.u[i] - kf0.u[i], kf1.v[i] - kf0.v[i]);
+                                    stable_displacement(kf0, kf1, i, self.width, du, dv)
+                                }
+                            },
+                        };
+                        let (n, f) = self.fire_stable(
+                            ctx,
+                            i,
+                            disp,
+                            (&mut reference[i], &mut last_event[i]),
+                            batch,
+                            path,
+                        );
                         counts.samples += n;
                         counts.fired += f;
                     }
@@ -153,13 +176,15 @@ impl ListedPixels<'_> {
     }
 
     /// Threshold crossings of stable pixel `i` (state `reference`, `last_event`) along its
-    /// texture path between the key frames (see [`ListedPixels::fire`]): the numbers of
-    /// interpolated samples and events.
+    /// texture path between the key frames (see [`ListedPixels::fire`]), sampled every
+    /// `max_px` of its image displacement `disp` (px, [`stable_displacement`]): the numbers
+    /// of interpolated samples and events.
     #[inline(always)]
     fn fire_stable(
         &self,
         ctx: &FireCtx,
         i: usize,
+        disp: f32,
         state: (&mut f32, &mut f64),
         batch: &mut Vec<RawEvent>,
         path: &mut Vec<f32>,
@@ -168,8 +193,6 @@ impl ListedPixels<'_> {
         let (t0, t1) = self.span;
         let key = kf0.key[i] as usize;
         let tex = &self.scene.textures[self.scene.key_texture[key]];
-        let (du, dv) = (kf1.u[i] - kf0.u[i], kf1.v[i] - kf0.v[i]);
-        let disp = stable_displacement(kf0, kf1, i, self.width, du, dv);
         let m = ((disp / self.max_px).ceil() as usize).clamp(1, 4096);
         fire_path(
             ctx,
@@ -303,6 +326,106 @@ fn stable_displacement(kf0: &KeyFrame, kf1: &KeyFrame, i: usize, w: usize, du: f
     (d0.max(d1) * DISPLACEMENT_SAFETY).min(any_direction)
 }
 
+/// [`stable_displacement`] of the `len` (`2..=RUN_PIXELS`) pixels from `first` on (one row)
+/// in lanes: a window of `RUN_PIXELS` pixels whose every pixel and its 4-neighbours lie inside
+/// the image (else `None`), lanes past `len` unused. The same operations in the same order as
+/// one pixel at a time (no fused multiply-adds), so the same values; loops the compiler
+/// vectorises in the AVX2 pass, where the window's neighbours are contiguous loads.
+#[inline(always)]
+fn run_displacements(
+    kf0: &KeyFrame,
+    kf1: &KeyFrame,
+    first: usize,
+    len: usize,
+    w: usize,
+) -> Option<[f32; RUN_PIXELS]> {
+    let n = kf0.u.len();
+    let (x, y) = (first % w, first / w);
+    if len < 2 || x == 0 || x + RUN_PIXELS + 1 > w || y == 0 || first + RUN_PIXELS + w > n {
+        return None;
+    }
+    let (u0, u1, v0, v1) = (
+        win(&kf0.u, first),
+        win(&kf1.u, first),
+        win(&kf0.v, first),
+        win(&kf1.v, first),
+    );
+    let (z0, z1) = (win(&kf0.z, first), win(&kf1.z, first));
+    let (f0, f1) = (kf0.geom.inv_f(), kf1.geom.inv_f());
+    let mut out = [0.0f32; RUN_PIXELS];
+    let mut du = [0.0f32; RUN_PIXELS];
+    let mut dv = [0.0f32; RUN_PIXELS];
+    for l in 0..RUN_PIXELS {
+        (du[l], dv[l]) = (u1[l] - u0[l], v1[l] - v0[l]);
+        let size = (z0[l] * f0).min(z1[l] * f1).max(1e-9);
+        out[l] = (du[l] * du[l] + dv[l] * dv[l]).sqrt() / size;
+    }
+    let (d0, d1) = (
+        run_jacobian(kf0, first, w, &du, &dv),
+        run_jacobian(kf1, first, w, &du, &dv),
+    );
+    for l in 0..RUN_PIXELS {
+        out[l] = (d0[l].max(d1[l]) * DISPLACEMENT_SAFETY).min(out[l]);
+    }
+    Some(out)
+}
+
+/// The pixel-to-texture Jacobian displacements ([`jacobian_displacement`]) of the window of
+/// `RUN_PIXELS` pixels from `first` on in key frame `kf` (texture-coordinate changes `du`,
+/// `dv`), lane by lane; the window and its 4-neighbours lie inside the image (see
+/// [`run_displacements`]).
+#[inline(always)]
+fn run_jacobian(
+    kf: &KeyFrame,
+    first: usize,
+    w: usize,
+    du: &[f32; RUN_PIXELS],
+    dv: &[f32; RUN_PIXELS],
+) -> [f32; RUN_PIXELS] {
+    let (k, kr, kl, kd, ku) = (
+        win(&kf.key, first),
+        win(&kf.key, first + 1),
+        win(&kf.key, first - 1),
+        win(&kf.key, first + w),
+        win(&kf.key, first - w),
+    );
+    let (ur, ul, ud, uu) = (
+        win(&kf.u, first + 1),
+        win(&kf.u, first - 1),
+        win(&kf.u, first + w),
+        win(&kf.u, first - w),
+    );
+    let (vr, vl, vd, vu) = (
+        win(&kf.v, first + 1),
+        win(&kf.v, first - 1),
+        win(&kf.v, first + w),
+        win(&kf.v, first - w),
+    );
+    let mut d = [0.0f32; RUN_PIXELS];
+    for l in 0..RUN_PIXELS {
+        let edge = (kr[l] != k[l]) | (kl[l] != k[l]) | (kd[l] != k[l]) | (ku[l] != k[l]);
+        let (a, b) = (0.5 * (ur[l] - ul[l]), 0.5 * (ud[l] - uu[l]));
+        let (c, e) = (0.5 * (vr[l] - vl[l]), 0.5 * (vd[l] - vu[l]));
+        let det = a * e - b * c;
+        let (px, py) = ((e * du[l] - b * dv[l]) / det, (a * dv[l] - c * du[l]) / det);
+        let r = (px * px + py * py).sqrt();
+        d[l] = if edge | det.is_nan() | (det.abs() <= 1e-12) {
+            f32::INFINITY
+        } else {
+            r
+        };
+    }
+    d
+}
+
+/// The `RUN_PIXELS` values of `a` from `at` on.
+#[inline(always)]
+fn win<T: Copy + Default>(a: &[T], at: usize) -> [T; RUN_PIXELS] {
+    let mut o = [T::default(); RUN_PIXELS];
+    o.copy_from_slice(&a[at..at + RUN_PIXELS]);
+    o
+}
+
 /// The image displacement (px) of texture-coordinate change `(du, dv)` at pixel `i` of key
 /// frame `kf` through its pixel-to-texture Jacobian from central differences (infinite when a
 /// 4-neighbour sees another surface or the Jacobian is degenerate); see
@@ -345,6 +468,50 @@ mod tests {
             kf.u[i] = j[0] * x + j[1] * y + shift.0;
             kf.v[i] = j[2] * x + j[3] * y + shift.1;
             kf.z[i] = z;
+        }
+    }
+
+    #[test]
+    fn run_displacements_equal_stable_displacements_bit_for_bit() {
+        let cfg = preset("camera-only", 1).unwrap().with_resolution_scale(0.05);
+        let scene = Scene::new(&cfg.scene, cfg.camera_trajectory.clone(), 1, 0.01);
+        let geom = FrameGeom::new(&scene, &cfg.camera, 0.0);
+        let (w, h) = (16, 6);
+        let (mut kf0, mut kf1) = (KeyFrame::new(geom.clone(), w * h), KeyFrame::new(geom, w * h));
+        let mut rng = crate::rng::Rng::new(9, 2);
+        for trial in 0..200 {
+            for kf in [&mut kf0, &mut kf1] {
+                let j = [
+                    0.004 * rng.uniform(),
+                    0.002 * rng.uniform() - 0.001,
+                    0.001 * rng.uniform(),
+                    0.003,
+                ];
+                for i in 0..w * h {
+                    let (x, y) = ((i % w) as f64, (i / w) as f64);
+                    // Degenerate Jacobians now and then; noise on the coordinates.
+                    let s = if trial % 7 == 0 { 0.0 } else { 1.0 };
+                    kf.u[i] = (s * (j[0] * x + j[1] * y) + 1e-4 * rng.uniform()) as f32;
+                    kf.v[i] = (s * (j[2] * x + j[3] * y) + 1e-4 * rng.uniform()) as f32;
+                    kf.z[i] = (0.5 + 3.0 * rng.uniform()) as f32;
+                    kf.key[i] = u16::from(rng.uniform() < 0.1);
+                }
+            }
+            for first in [w + 1, w + 5, 2 * w + 3, 4 * w + 7] {
+                let len = 2 + rng.below(7) as usize;
+                let lanes = run_displacements(&kf0, &kf1, first, len, w).unwrap();
+                for (l, lane) in lanes.iter().enumerate().take(len) {
+                    let i = first + l;
+                    let (du, dv) = (kf1.u[i] - kf0.u[i], kf1.v[i] - kf0.v[i]);
+                    let one = stable_displacement(&kf0, &kf1, i, w, du, dv);
+                    assert_eq!(lane.to_bits(), one.to_bits(), "trial {trial} pixel {i}");
+                }
+            }
+            // Windows that reach the image border are left to the one-pixel path.
+            assert!(run_displacements(&kf0, &kf1, w, 3, w).is_none());
+            assert!(run_displacements(&kf0, &kf1, 2 * w - 8, 3, w).is_none());
+            assert!(run_displacements(&kf0, &kf1, 1, 3, w).is_none());
+            assert!(run_displacements(&kf0, &kf1, (h - 1) * w + 1, 3, w).is_none());
         }
     }
 

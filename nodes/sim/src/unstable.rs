@@ -65,7 +65,7 @@ pub struct UnstableList {
     /// Depth of the current render step's centre surface, m.
     pub z: Vec<f32>,
     /// The moving object an edge sub-sample met at the current render step where the centre
-    /// sees the background (id 0: none; see [`UnstableList::seen`]).
+    /// sees the background (id 0: none; see [`seen_at`]).
     pub(crate) edge_object: Vec<Seen>,
     /// Render schedule: index into `local_speed::Schedules::lists`.
     pub schedule: Vec<u32>,
@@ -81,6 +81,21 @@ pub struct UnstableList {
     by_key: Vec<u32>,
     /// Counts and offsets of the key groups of `by_key`.
     key_counts: Vec<u32>,
+}
+
+/// What list pixel `j` saw at its latest render for the truth (from the list's `edge_object`,
+/// `id`, `key` and `z` columns): its centre's surface, or the moving object that covers part
+/// of it where the centre sees the background.
+#[inline(always)]
+pub(crate) fn seen_at(edge_object: &[Seen], id: &[u16], key: &[u16], z: &[f32], j: usize) -> Seen {
+    if edge_object[j].id != 0 {
+        return edge_object[j];
+    }
+    Seen {
+        id: id[j],
+        key: key[j],
+        z: z[j],
+    }
 }
 
 /// The per-pixel image arrays an [`UnstableList`] is gathered from.
@@ -231,6 +246,15 @@ impl UnstableList {
         // of their previous render: it rarely changes between renders, so most groups hit one
         // plane or box face and are shaded in vector form. Each pixel's value is its own, so
         // the order does not matter.
+        // The columns as slices of the list's length: one index test per pixel.
+        let n = self.pixel.len();
+        let (pixel, xs, ys) = (&self.pixel[..n], &self.x[..n], &self.y[..n]);
+        let (ls, keys, ids, zs) = (
+            &mut self.l[..n],
+            &mut self.key[..n],
+            &mut self.id[..n],
+            &mut self.z[..n],
+        );
         let mut groups = self.by_key.chunks_exact(LANES);
         for g in &mut groups {
             // Plain loops: `array::from_fn` and `array::map` closures were left out of line.
@@ -239,62 +263,52 @@ impl UnstableList {
             let (mut x, mut y) = ([0.0f32; LANES], [0.0f32; LANES]);
             for l in 0..LANES {
                 let j = g[l] as usize;
-                let p = self.pixel[j] as usize;
-                (js[l], px[l], py[l], x[l], y[l]) = (j, (p % w) as i32, (p / w) as i32, self.x[j], self.y[j]);
+                let p = pixel[j] as usize;
+                (js[l], px[l], py[l], x[l], y[l]) = (j, (p % w) as i32, (p / w) as i32, xs[j], ys[j]);
             }
             let hits = geom.cast_lanes(scene, &x, &y, &px, &py);
             for (l, &j) in js.iter().enumerate() {
-                self.l[j] = hits.l[l];
-                self.key[j] = hits.key[l];
-                self.id[j] = hits.id[l];
-                self.z[j] = hits.z[l];
+                if j < n {
+                    (ls[j], keys[j], ids[j], zs[j]) = (hits.l[l], hits.key[l], hits.id[l], hits.z[l]);
+                }
             }
         }
         for &a in groups.remainder() {
             let j = a as usize;
-            let i = self.pixel[j] as usize;
-            let hit = geom.cast(scene, self.x[j], self.y[j], (i % w) as i32, (i / w) as i32, None);
-            self.l[j] = hit.l;
-            self.key[j] = hit.key;
-            self.id[j] = hit.id;
-            self.z[j] = hit.z;
+            let i = pixel[j] as usize;
+            let hit = geom.cast(scene, xs[j], ys[j], (i % w) as i32, (i / w) as i32, None);
+            (ls[j], keys[j], ids[j], zs[j]) = (hit.l, hit.key, hit.id, hit.z);
         }
         if !supersample {
             return 0;
         }
         let mut count = 0;
+        let (neighbours, d_du, d_dv) = (&self.neighbours[..n], &self.d_du[..n], &self.d_dv[..n]);
+        let edge_object = &mut self.edge_object[..n];
         for &a in &self.active {
             let j = a as usize;
-            self.edge_object[j] = NO_EDGE_OBJECT;
-            let k = self.key[j];
-            let edge = self.neighbours[j]
-                .iter()
-                .any(|&nb| nb != NONE && self.key[nb as usize] != k);
+            edge_object[j] = NO_EDGE_OBJECT;
+            let k = keys[j];
+            // Without early exits (`NONE` is past the list's end: no key).
+            let edge = neighbours[j].iter().fold(false, |e, &nb| {
+                e | keys.get(nb as usize).is_some_and(|&kn| kn != k)
+            });
             if edge {
-                let i = self.pixel[j] as usize;
+                let i = pixel[j] as usize;
                 let (px, py) = ((i % w) as i32, (i / w) as i32);
                 count += 1;
                 // `edge_sample` in two parts: its shortcut inlined here (AVX2; the centre's
                 // value stands when the sub-samples certainly see its surface), the rest out
                 // of line.
-                if geom.edge_free(self.x[j], self.y[j], self.d_du[j], self.d_dv[j], px, py, k) {
+                if geom.edge_free(xs[j], ys[j], d_du[j], d_dv[j], px, py, k) {
                     continue;
                 }
-                let value = geom.edge_mix(
-                    scene,
-                    self.x[j],
-                    self.y[j],
-                    self.d_du[j],
-                    self.d_dv[j],
-                    px,
-                    py,
-                    (self.l[j], k),
-                );
-                self.l[j] = value.l;
+                let value = geom.edge_mix(scene, xs[j], ys[j], d_du[j], d_dv[j], px, py, (ls[j], k));
+                ls[j] = value.l;
                 if let Some(o) = value.object
-                    && self.id[j] == 0
+                    && ids[j] == 0
                 {
-                    self.edge_object[j] = Seen::from(o);
+                    edge_object[j] = Seen::from(o);
                 }
             }
         }
@@ -319,20 +333,6 @@ impl UnstableList {
             let c = &mut self.key_counts[slot(self.key[a as usize])];
             self.by_key[*c as usize] = a;
             *c += 1;
-        }
-    }
-
-    /// What pixel `j` saw at its latest render for the truth: its centre's surface, or the
-    /// moving object that covers part of it where the centre sees the background.
-    #[inline]
-    pub(crate) fn seen(&self, j: usize) -> Seen {
-        if self.edge_object[j].id != 0 {
-            return self.edge_object[j];
-        }
-        Seen {
-            id: self.id[j],
-            key: self.key[j],
-            z: self.z[j],
         }
     }
 
