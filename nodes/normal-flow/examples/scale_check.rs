@@ -104,12 +104,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     for name in &presets {
         for (label, params) in [("no check", unchecked), ("check", checked)] {
             let cfg = preset(name, seed)?;
-            let scene = Scene::new(
-                &cfg.scene,
-                cfg.camera_trajectory.clone(),
-                cfg.seed,
-                cfg.esim.log_eps,
-            );
+            let scene = Scene::of_config(&cfg);
             let rays = Rays::new(&cfg.camera);
             let mut sim = Simulator::new(cfg.clone())?;
             let mut est = PlaneFitEstimator::new(&sim.camera_info(), params)?;

@@ -22,12 +22,7 @@ use evseg_sim::scene::Scene;
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let name = std::env::args().nth(1).unwrap_or_else(|| "one-object".into());
     let cfg = evseg_sim::preset(&name, 1)?;
-    let scene = Scene::new(
-        &cfg.scene,
-        cfg.camera_trajectory.clone(),
-        cfg.seed,
-        cfg.esim.log_eps,
-    );
+    let scene = Scene::of_config(&cfg);
     let rays = Rays::new(&cfg.camera);
     let (w, h) = (rays.width, rays.height);
     let mut sum = 0.0f32;

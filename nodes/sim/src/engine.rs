@@ -207,12 +207,7 @@ pub struct Engine {
 impl Engine {
     /// Bakes the scene and renders the key frame at t = 0 (references start at its intensities).
     pub fn new(cfg: &SceneConfig) -> Self {
-        let scene = Scene::new(
-            &cfg.scene,
-            cfg.camera_trajectory.clone(),
-            cfg.seed,
-            cfg.esim.log_eps,
-        );
+        let scene = Scene::of_config(cfg);
         let rays = Rays::new(&cfg.camera);
         let n = rays.width * rays.height;
         let mut rng = crate::rng::Rng::new(cfg.seed, 0x7e5);
@@ -532,9 +527,7 @@ impl Engine {
                         (kf.l[i], kf.key[i]),
                     );
                     (kf.l[i], kf.mixed[i]) = (value.l, value.mixed);
-                    if let Some(o) = value.object
-                        && kf.id[i] == 0
-                    {
+                    if let Some(o) = value.truth_object(kf.id[i]) {
                         kf.edge_objects.push((i as u32, Seen::from(o)));
                     }
                     self.stats.supersampled += 1;

@@ -29,6 +29,14 @@ const FACE_OFFSET: [[f32; 2]; 6] = [
 ];
 /// Offsets (px, along the row and down the column) of the 2x2 edge sub-samples.
 const SUBSAMPLES: [(f32, f32); 4] = [(-0.25, -0.25), (0.25, -0.25), (-0.25, 0.25), (0.25, 0.25)];
+
+/// The normalized rays of the 2x2 sub-samples of a pixel whose centre ray is `(x, y)` and whose
+/// ray changes by `du` per pixel along the row and `dv` down the column (the points the edge
+/// anti-aliasing averages: [`FrameGeom::supersample`], [`FrameGeom::edge_sample`]).
+#[inline(always)]
+pub fn sub_sample_rays(x: f32, y: f32, du: [f32; 2], dv: [f32; 2]) -> [(f32, f32); 4] {
+    SUBSAMPLES.map(|(ou, ov)| (x + ou * du[0] + ov * dv[0], y + ou * du[1] + ov * dv[1]))
+}
 /// Smallest cosine of incidence used for the texture footprint (caps the blur at grazing view).
 const MIN_COS: f32 = 0.25;
 /// Fewest lanes of [`FrameGeom::shade_lanes`] on one texture sampled together (fewer are
@@ -419,6 +427,13 @@ impl EdgeValue {
             mixed: false,
             object: None,
         }
+    }
+
+    /// The moving object that owns the pixel for the event truth instead of what its centre
+    /// sees (object id `centre_id`): `object`, where the centre sees the background.
+    #[inline]
+    pub fn truth_object(&self, centre_id: u16) -> Option<Located> {
+        self.object.filter(|_| centre_id == 0)
     }
 }
 
@@ -1017,9 +1032,7 @@ impl FrameGeom {
         py: i32,
     ) -> f32 {
         let mut acc = 0.0f32;
-        for (ou, ov) in SUBSAMPLES {
-            let sx = x + ou * du[0] + ov * dv[0];
-            let sy = y + ou * du[1] + ov * dv[1];
+        for (sx, sy) in sub_sample_rays(x, y, du, dv) {
             acc += self.cast(scene, sx, sy, px, py, None).l.exp();
         }
         (0.25 * acc).ln()
@@ -1175,16 +1188,12 @@ impl FrameGeom {
         py: i32,
         centre: (f32, u16),
     ) -> EdgeValue {
-        let (mut rx, mut ry) = ([0.0f32; 4], [0.0f32; 4]);
-        for (k, (ou, ov)) in SUBSAMPLES.into_iter().enumerate() {
-            (rx[k], ry[k]) = (x + ou * du[0] + ov * dv[0], y + ou * du[1] + ov * dv[1]);
-        }
-        let rays: [(f32, f32); 4] = [(rx[0], ry[0]), (rx[1], ry[1]), (rx[2], ry[2]), (rx[3], ry[3])];
+        let rays = sub_sample_rays(x, y, du, dv);
         // Searched in `LANES` lanes (the four sub-rays twice: the vector search, see
         // `search_lanes`, costs no more than four lanes).
         let (mut x8, mut y8) = ([0.0f32; LANES], [0.0f32; LANES]);
         for l in 0..LANES {
-            (x8[l], y8[l]) = (rx[l % 4], ry[l % 4]);
+            (x8[l], y8[l]) = rays[l % 4];
         }
         let found = self.search_lanes(&x8, &y8, &[px; LANES], &[py; LANES]);
         let keys = [0, 1, 2, 3].map(|l| found.key(self, l));
@@ -1424,8 +1433,7 @@ mod tests {
                         let y = rays.y[i] + su * du[1] + sv * dv[1];
                         let centre = g.locate(x, y, u as i32, v as i32, None).key;
                         let mut all = true;
-                        for (ou, ov) in SUBSAMPLES {
-                            let (sx, sy) = (x + ou * du[0] + ov * dv[0], y + ou * du[1] + ov * dv[1]);
+                        for (sx, sy) in sub_sample_rays(x, y, du, dv) {
                             all &= g.locate(sx, sy, u as i32, v as i32, None).key == centre;
                         }
                         let f = g.edge_free(x, y, du, dv, u as i32, v as i32, centre);

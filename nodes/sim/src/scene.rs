@@ -164,6 +164,17 @@ pub struct Scene {
 }
 
 impl Scene {
+    /// The scene a [`crate::Simulator`] of `cfg` renders: its content, camera trajectory, seed
+    /// and log-intensity offset (for tools that re-render what the simulator saw).
+    pub fn of_config(cfg: &crate::SceneConfig) -> Self {
+        Self::new(
+            &cfg.scene,
+            cfg.camera_trajectory.clone(),
+            cfg.seed,
+            cfg.esim.log_eps,
+        )
+    }
+
     /// Bakes the textures of `content` for `seed`.
     pub fn new(content: &SceneContent, camera: RigidTrajectory, seed: u64, eps: f64) -> Self {
         let mut textures = Vec::new();

@@ -305,9 +305,7 @@ impl UnstableList {
                 }
                 let value = geom.edge_mix(scene, xs[j], ys[j], d_du[j], d_dv[j], px, py, (ls[j], k));
                 ls[j] = value.l;
-                if let Some(o) = value.object
-                    && ids[j] == 0
-                {
+                if let Some(o) = value.truth_object(ids[j]) {
                     edge_object[j] = Seen::from(o);
                 }
             }

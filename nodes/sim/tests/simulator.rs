@@ -4,7 +4,7 @@
 use evseg_schemas::Distortion;
 use evseg_sim::camera::Rays;
 use evseg_sim::presets::CAMERA_LOOKING_FORWARD;
-use evseg_sim::render::FrameGeom;
+use evseg_sim::render::{FrameGeom, sub_sample_rays};
 use evseg_sim::scene::Scene;
 use evseg_sim::{
     BoxConfig, CameraConfig, EsimConfig, Lighting, Pattern, PlaneConfig, RigidTrajectory, SceneConfig,
@@ -206,12 +206,7 @@ fn objects_covering_part_of_a_pixel_own_its_events() {
     // sub-samples these were 5 to 6 % of the object's events.
     let mut cfg = preset("one-object", 4).unwrap().with_resolution_scale(0.5);
     cfg.duration_s = 0.3;
-    let scene = Scene::new(
-        &cfg.scene,
-        cfg.camera_trajectory.clone(),
-        cfg.seed,
-        cfg.esim.log_eps,
-    );
+    let scene = Scene::of_config(&cfg);
     let rays = Rays::new(&cfg.camera);
     let cam = cfg.camera.clone();
     let mut sim = Simulator::new(cfg).unwrap();
@@ -234,11 +229,9 @@ fn objects_covering_part_of_a_pixel_own_its_events() {
         let (u, v) = (i32::from(ev.x[i]), i32::from(ev.y[i]));
         let k = v as usize * w + u as usize;
         let (x, y, du, dv) = (rays.x[k], rays.y[k], rays.d_du[k], rays.d_dv[k]);
-        let sub = [(-0.25f32, -0.25f32), (0.25, -0.25), (-0.25, 0.25), (0.25, 0.25)];
-        let touched = sub.iter().any(|&(ou, ov)| {
-            let (sx, sy) = (x + ou * du[0] + ov * dv[0], y + ou * du[1] + ov * dv[1]);
-            g.locate(sx, sy, u, v, None).id != 0
-        });
+        let touched = sub_sample_rays(x, y, du, dv)
+            .iter()
+            .any(|&(sx, sy)| g.locate(sx, sy, u, v, None).id != 0);
         covered += usize::from(touched);
     }
     let share = covered as f64 / object as f64;
