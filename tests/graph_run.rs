@@ -612,3 +612,35 @@ fn the_normal_flow_compare_graph_scores_both_estimators_on_the_same_slices() {
         run.stdout
     );
 }
+
+/// `evseg bench pipeline` listens on a free loopback port of its own, not the graph's: with the
+/// graph's port held by someone else (here the test's own listener, as another run would), the
+/// benchmark still runs and reports its figures.
+#[test]
+fn a_benchmark_runs_beside_another_graph_on_the_graphs_port() {
+    let dir = tempfile::tempdir().unwrap();
+    let taken = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let port = taken.local_addr().unwrap().port();
+    let (g, _) = graph_file(dir.path(), &repo_graph_on_loopback("graphs/evimo2.yaml", port));
+    let work = dir.path().join("work");
+    let run = Launcher::start(
+        dir.path(),
+        &[
+            "bench",
+            "pipeline",
+            "--graph",
+            g.to_str().unwrap(),
+            "--seconds",
+            "0.3",
+            "--work",
+            work.to_str().unwrap(),
+        ],
+        "a",
+    )
+    .wait(Duration::from_secs(300));
+    drop(taken);
+    assert!(run.status.success(), "bench failed:\n{}", run.stderr);
+    let row = read_json(&work.join("pipeline.json"));
+    assert!(row["events"].as_u64().unwrap() > 0, "{row}");
+    assert!(run.stdout.contains("M events/s"), "{}", run.stdout);
+}

@@ -104,12 +104,6 @@ fn graph_b(o: &AbOptions) -> anyhow::Result<PathBuf> {
     Ok(path)
 }
 
-/// `tcp/127.0.0.1:<port>` with a port that was free a moment ago.
-fn loopback_endpoint() -> anyhow::Result<String> {
-    let l = std::net::TcpListener::bind("127.0.0.1:0").context("cannot bind a loopback port")?;
-    Ok(format!("tcp/127.0.0.1:{}", l.local_addr()?.port()))
-}
-
 /// Runs both variants on every recording; returns the figures per sequence and overall (mean
 /// over sequences).
 pub fn ab(o: &AbOptions) -> anyhow::Result<Vec<AbFigure>> {
@@ -125,11 +119,11 @@ pub fn ab(o: &AbOptions) -> anyhow::Result<Vec<AbFigure>> {
             .file_stem()
             .map_or_else(|| rec.display().to_string(), |s| s.to_string_lossy().into_owned());
         let a_listen = if o.listen.is_empty() {
-            vec![loopback_endpoint()?]
+            vec![crate::run::free_loopback_endpoint()?]
         } else {
             o.listen.clone()
         };
-        let b_listen = vec![loopback_endpoint()?];
+        let b_listen = vec![crate::run::free_loopback_endpoint()?];
         let b_connect: Vec<String> = a_listen.iter().map(|e| crate::run::local_endpoint(e)).collect();
         let mut options = Vec::new();
         for (variant, graph, extra, listen, connect) in [

@@ -79,6 +79,8 @@ pub fn bench(o: &PipelineOptions) -> anyhow::Result<PipelineRow> {
             format!("{source}.path={}", seq.display()),
         ],
         quiet: true,
+        // A free port, not the graph's (as `evseg bench`): it runs beside other graphs.
+        listen: vec![crate::run::free_loopback_endpoint()?],
         ..RunOptions::default()
     })?;
     let digest_path = outcome.dir.join(format!("source-{source}.json"));

@@ -130,6 +130,9 @@ pub fn bench(graph_path: &Path, work: &Path, quiet: bool) -> anyhow::Result<Vec<
             out: Some(out.clone()),
             set,
             quiet,
+            // A free port, not the graph's: a benchmark must not collide with a graph running
+            // on this machine (or another benchmark) on the default 7447.
+            listen: vec![crate::run::free_loopback_endpoint()?],
             ..RunOptions::default()
         })?;
         let report_path = outcome.dir.join("report").join("report.json");

@@ -115,18 +115,13 @@ nodes:
     )
 }
 
-fn free_port() -> anyhow::Result<u16> {
-    let l = std::net::TcpListener::bind("127.0.0.1:0").context("bind a loopback port")?;
-    Ok(l.local_addr()?.port())
-}
-
 fn over_zenoh(
     slice_events: u64,
     seconds: f64,
     work: &Path,
     shared_memory: bool,
 ) -> anyhow::Result<(u64, f64, f64)> {
-    let port = free_port()?;
+    let port = crate::run::free_loopback_port()?;
     let link = if shared_memory { "shm" } else { "socket" };
     let graph = work.join(format!("transport-{slice_events}-{link}.yaml"));
     std::fs::write(&graph, graph_text(slice_events, seconds, port, shared_memory))?;

@@ -164,7 +164,8 @@ enum Command {
         graph: PathBuf,
     },
     /// Benchmarks (use --release binaries). Without a subcommand: the versioned simulator scene
-    /// set through a graph, scored by its evaluator, as a table with mean values.
+    /// set through a graph, scored by its evaluator, as a table with mean values. Every run's
+    /// router listens on a free loopback port, so benchmarks run beside other graphs.
     Bench {
         #[command(subcommand)]
         what: Option<BenchWhat>,

@@ -99,6 +99,20 @@ fn apply_overrides(graph: &mut Graph, sets: &[String]) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// A loopback TCP port that was free a moment ago (bound to `127.0.0.1:0` and released): what
+/// benchmarks and A/B runs listen on, so that they run beside another graph on its default port.
+pub fn free_loopback_port() -> anyhow::Result<u16> {
+    let l = std::net::TcpListener::bind("127.0.0.1:0").context("cannot bind a loopback port")?;
+    Ok(l.local_addr()
+        .context("cannot read the bound loopback port")?
+        .port())
+}
+
+/// `tcp/127.0.0.1:<port>` with [`free_loopback_port`].
+pub fn free_loopback_endpoint() -> anyhow::Result<String> {
+    Ok(format!("tcp/127.0.0.1:{}", free_loopback_port()?))
+}
+
 /// The endpoint a node on this machine uses to reach the router listening on `listen`.
 pub fn local_endpoint(listen: &str) -> String {
     listen
