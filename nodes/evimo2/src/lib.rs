@@ -30,6 +30,7 @@
 #![warn(missing_docs)]
 
 pub mod error;
+pub mod imu_check;
 pub mod meta;
 pub mod npy;
 pub mod npz;

@@ -4,6 +4,7 @@
 
 use std::path::Path;
 
+use evseg_evimo2::imu_check::{ImuCheckParams, ImuVerdict, check};
 use evseg_evimo2::{MaskReader, ReadOptions, Sequence};
 use evseg_schemas::{CameraInfo, CameraMotion, ImuSample, ObjectPose, Truth};
 
@@ -61,6 +62,85 @@ impl Evimo2Source {
             done: false,
             reordered: 0,
         })
+    }
+}
+
+/// What [`Evimo2Source::check_imu`] does when the IMU's mapping disagrees with the trajectory.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ImuCheckMode {
+    /// No check.
+    Off,
+    /// Log the disagreement and the mapping that agrees; keep the configured one.
+    Warn,
+    /// Log it and use the mapping that agrees, unless the mapping was set explicitly (node
+    /// parameters `imu_to_camera` / `imu_time_offset_s`), which is then kept with the warning.
+    Auto,
+}
+
+impl std::str::FromStr for ImuCheckMode {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "off" => Ok(Self::Off),
+            "warn" => Ok(Self::Warn),
+            "auto" => Ok(Self::Auto),
+            other => Err(format!("imu_check must be off, warn or auto, got `{other}`")),
+        }
+    }
+}
+
+impl Evimo2Source {
+    /// Checks the IMU's mapping into the camera frame (axes and time offset) against the rotation
+    /// rate of the folder's camera trajectory ([`evseg_evimo2::imu_check`]); with
+    /// [`ImuCheckMode::Auto`] and `explicit` false (the mapping came from the file or the EVIMO2
+    /// defaults, not from the user) a disagreeing mapping is replaced by the one that agrees.
+    /// Returns the verdict (on the configured mapping).
+    pub fn check_imu(&mut self, mode: ImuCheckMode, explicit: bool) -> ImuVerdict {
+        if mode == ImuCheckMode::Off {
+            return ImuVerdict::Inconclusive;
+        }
+        let verdict = check(
+            &self.poses,
+            &self.imu,
+            &self.camera.imu_to_camera,
+            self.camera.imu_time_offset_s,
+            &ImuCheckParams::default(),
+        );
+        match verdict {
+            ImuVerdict::Inconclusive => tracing::info!(
+                "IMU check: inconclusive (no IMU, no trajectory, or too little rotation); the IMU mapping is used as configured"
+            ),
+            ImuVerdict::Consistent(a) => tracing::info!(
+                "IMU check: the IMU agrees with the camera trajectory (rms error {:.3} rad/s against rms rate {:.3}, {} intervals)",
+                a.rms_error_rad_s,
+                a.rms_rate_rad_s,
+                a.intervals
+            ),
+            ImuVerdict::Mismatch { configured, better } => {
+                let adopt = mode == ImuCheckMode::Auto && !explicit;
+                tracing::warn!(
+                    "IMU check: the IMU mapped with imu_to_camera {:?}, offset {} s disagrees with the camera trajectory (rms error {:.3} rad/s against rms rate {:.3}); imu_to_camera {:?}, offset {} s agrees (rms error {:.3}); {}",
+                    configured.imu_to_camera,
+                    configured.time_offset_s,
+                    configured.rms_error_rad_s,
+                    configured.rms_rate_rad_s,
+                    better.imu_to_camera,
+                    better.time_offset_s,
+                    better.rms_error_rad_s,
+                    if adopt {
+                        "using it (imu_check: auto; set imu_to_camera / imu_time_offset_s to override)"
+                    } else {
+                        "keeping the configured mapping (set explicitly, or imu_check: warn)"
+                    }
+                );
+                if adopt {
+                    self.camera.imu_to_camera = better.imu_to_camera;
+                    self.camera.imu_time_offset_s = better.time_offset_s;
+                }
+            }
+        }
+        verdict
     }
 }
 

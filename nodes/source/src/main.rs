@@ -8,7 +8,7 @@ use evseg_runtime::describe::Describe;
 use evseg_runtime::{BoxError, Mode, NodeConfig, Outputs, Source, run_source};
 use evseg_schemas::digest::EventDigest;
 use evseg_schemas::{EventPacket, Truth};
-use evseg_source::evimo2::Evimo2Source;
+use evseg_source::evimo2::{Evimo2Source, ImuCheckMode};
 use evseg_source::file::FileSource;
 use evseg_source::pattern::{Pattern, PatternParams};
 use evseg_source::synthetic::SyntheticSource;
@@ -98,11 +98,11 @@ fn open(cfg: &NodeConfig) -> Result<Box<dyn EventSource>, BoxError> {
                 imu_time_offset_s: cfg.param_opt("imu_time_offset_s")?,
                 sensor: None,
             };
-            Ok(Box::new(Evimo2Source::open(
-                &path_param(cfg)?,
-                &options,
-                seconds,
-            )?))
+            let mut source = Evimo2Source::open(&path_param(cfg)?, &options, seconds)?;
+            let mode: String = cfg.param("imu_check")?;
+            let explicit = options.imu_to_camera.is_some() || options.imu_time_offset_s.is_some();
+            source.check_imu(mode.parse::<ImuCheckMode>()?, explicit);
+            Ok(Box::new(source))
         }
         "file" => {
             let camera_file: Option<String> = cfg.param_opt("camera_file")?;
@@ -146,6 +146,7 @@ fn main() -> ExitCode {
     .param("imu_topic", serde_json::Value::Null, "evimo2: IMU topic in meta (default: the first)")
     .param("imu_to_camera", serde_json::Value::Null, "evimo2: IMU-to-camera rotation, row-major 9 numbers (default: EVIMO2 convention)")
     .param("imu_time_offset_s", serde_json::Value::Null, "evimo2: IMU time offset, seconds (default: -0.02, EVIMO2 convention)")
+    .param("imu_check", "auto", "evimo2: check the IMU's axes and time offset against the camera trajectory (off, warn, auto = use the mapping that agrees when it was not set explicitly)")
     .param("batch_ms", 10.0, "sensor time per published packet, milliseconds")
     .param("speed", 0.0, "live mode: real-time factor (1 = sensor time), 0 = as fast as possible")
     .param("seconds", serde_json::Value::Null, "stop after this many seconds of sensor time (simulator: default the preset's length; pattern: default 3 s)")

@@ -100,3 +100,44 @@ fn simulated_sequence_round_trips_through_an_evimo2_folder() {
     );
     assert_eq!(from_folder.camera().width, direct.camera_info().width);
 }
+
+/// The IMU check on a simulated folder: the simulator's own mapping agrees with its camera
+/// trajectory; a wrong one (the IMU read as if in the camera frame) is found out, kept when set
+/// explicitly and replaced by the simulator's with `auto`.
+#[test]
+fn the_imu_check_finds_a_wrong_axis_convention() {
+    use evseg_evimo2::imu_check::ImuVerdict;
+    use evseg_source::evimo2::ImuCheckMode;
+    let dir = tempfile::tempdir().unwrap();
+    write_evimo2("fast-rotation", 5, Some(1.0), 0.25, dir.path()).unwrap();
+    let mut right = Evimo2Source::open(dir.path(), &Default::default(), None).unwrap();
+    let sim_map = right.camera().imu_to_camera;
+    let sim_offset = right.camera().imu_time_offset_s;
+    match right.check_imu(ImuCheckMode::Auto, false) {
+        ImuVerdict::Consistent(a) => assert!(a.relative_error() < 0.3, "{a:?}"),
+        other => panic!("the simulator's own mapping should agree: {other:?}"),
+    }
+    let identity = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0];
+    assert_ne!(
+        sim_map, identity,
+        "the test needs an IMU frame other than the camera's"
+    );
+    let wrong = evseg_evimo2::ReadOptions {
+        imu_to_camera: Some(identity),
+        ..Default::default()
+    };
+    let mut kept = Evimo2Source::open(dir.path(), &wrong, None).unwrap();
+    assert!(matches!(
+        kept.check_imu(ImuCheckMode::Auto, true),
+        ImuVerdict::Mismatch { .. }
+    ));
+    assert_eq!(
+        kept.camera().imu_to_camera,
+        identity,
+        "an explicit mapping is kept"
+    );
+    let mut fixed = Evimo2Source::open(dir.path(), &wrong, None).unwrap();
+    fixed.check_imu(ImuCheckMode::Auto, false);
+    assert_eq!(fixed.camera().imu_to_camera, sim_map);
+    assert!((fixed.camera().imu_time_offset_s - sim_offset).abs() < 0.0051);
+}
