@@ -2,6 +2,7 @@
 //! and one plane fit per event.
 
 use evseg_geometry::Camera;
+use evseg_geometry::cache::{PREFETCH_AHEAD, prefetch};
 use evseg_schemas::{CameraInfo, Events, NormalFlow};
 
 use crate::fit::{Neighbourhood, PlaneFit, fit_plane};
@@ -442,23 +443,6 @@ impl PlaneFitEstimator {
             confidence,
         })
     }
-}
-
-/// How many events ahead of the one being written or fitted the surface is prefetched.
-const PREFETCH_AHEAD: usize = 8;
-
-/// A hint to the CPU to bring the cache line holding `v` into the cache (no effect on results;
-/// nothing on targets without the instruction).
-#[inline(always)]
-fn prefetch<T>(v: &T) {
-    // SAFETY: SSE is part of every x86_64 target, and a prefetch only hints the cache: it
-    // neither reads nor writes memory for the program and cannot fault.
-    #[cfg(target_arch = "x86_64")]
-    unsafe {
-        std::arch::x86_64::_mm_prefetch::<{ std::arch::x86_64::_MM_HINT_T0 }>((v as *const T).cast::<i8>())
-    };
-    #[cfg(not(target_arch = "x86_64"))]
-    let _ = v;
 }
 
 /// An inclusive pixel window `[x0, x1] x [y0, y1]`.
