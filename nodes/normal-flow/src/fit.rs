@@ -27,6 +27,10 @@ pub struct Neighbourhood {
     len: usize,
     /// `[n, sx, sy, sxx, sxy, syy]` of the points, pixels (powers of).
     offset_sums: [i32; 6],
+    /// `[st, sxt, syt]` of the points, added in their order as they are pushed (seconds times
+    /// pixels): what the fit's first pass would add, so a neighbourhood that starts as a copy of
+    /// another continues its sums exactly.
+    time_sums: [f64; 3],
 }
 
 impl Default for Neighbourhood {
@@ -37,6 +41,7 @@ impl Default for Neighbourhood {
             dt: [0.0; MAX_POINTS + 1],
             len: 0,
             offset_sums: [0; 6],
+            time_sums: [0.0; 3],
         }
     }
 }
@@ -47,6 +52,7 @@ impl Neighbourhood {
     pub fn clear(&mut self) {
         self.len = 0;
         self.offset_sums = [0; 6];
+        self.time_sums = [0.0; 3];
     }
 
     /// Number of points.
@@ -70,6 +76,7 @@ impl Neighbourhood {
         self.dt[..n].copy_from_slice(&other.dt[..n]);
         self.len = n;
         self.offset_sums = other.offset_sums;
+        self.time_sums = other.time_sums;
     }
 
     /// Adds a point at pixel offset `(dx, dy)` with time `dt` seconds relative to the event;
@@ -101,6 +108,17 @@ impl Neighbourhood {
         s[3] += k * dx * dx;
         s[4] += k * dx * dy;
         s[5] += k * dy * dy;
+        // The sums start at +0 and so never become -0: adding +0 for a point not kept leaves
+        // them unchanged.
+        let (x, y, t) = if keep {
+            (f64::from(dx), f64::from(dy), dt)
+        } else {
+            (0.0, 0.0, 0.0)
+        };
+        let ts = &mut self.time_sums;
+        ts[0] += t;
+        ts[1] += x * t;
+        ts[2] += y * t;
     }
 }
 
@@ -233,9 +251,10 @@ pub fn fit_plane(
         return None;
     }
     let (dx, dy, dt) = (&nb.dx[..n], &nb.dy[..n], &nb.dt[..n]);
-    // The offset sums are exact integers; the time sums are added in the points' order, as
+    // The offset sums are exact integers; the time sums were added in the points' order, as
     // `Sums::add` would.
     let [s_n, s_x, s_y, s_xx, s_xy, s_yy] = nb.offset_sums.map(f64::from);
+    let [st, sxt, syt] = nb.time_sums;
     let mut sums = Sums {
         n: s_n,
         sx: s_x,
@@ -243,13 +262,10 @@ pub fn fit_plane(
         sxx: s_xx,
         sxy: s_xy,
         syy: s_yy,
-        ..Sums::default()
+        st,
+        sxt,
+        syt,
     };
-    for i in 0..n {
-        sums.st += dt[i];
-        sums.sxt += dx[i] * dt[i];
-        sums.syt += dy[i] * dt[i];
-    }
     let mut used = [true; MAX_POINTS];
     let used = &mut used[..n];
     // Time residuals of the points against `sol`.
@@ -472,9 +488,9 @@ mod tests {
 
     #[test]
     fn outlier_is_rejected() {
-        let mut nb = window(2, |x, _| 0.001 * x);
-        // An old timestamp from a previous edge, 50 ms before.
-        nb.dt[3] = -0.05;
+        // An old timestamp from a previous edge, 50 ms before, at the fourth point.
+        let nb = window(2, |x, y| if (x, y) == (1.0, -2.0) { -0.05 } else { 0.001 * x });
+        assert_eq!(nb.dt[3], -0.05);
         let fit = fit_plane(&nb, 0.005, 3, 5).expect("plane");
         assert_eq!(fit.inliers, 24);
         assert!((fit.gx - 0.001).abs() < 1e-12 && fit.gy.abs() < 1e-12);
