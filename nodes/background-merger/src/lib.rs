@@ -467,10 +467,7 @@ fn select_hypothesis(
     // from these, and reading the pixels from one array is much faster than through each
     // sample's event index (scattered over the slice).
     let flat: Vec<&FlowSample> = per_cluster.iter().flatten().copied().collect();
-    let pixels: Vec<(u32, u32)> = flat
-        .iter()
-        .map(|s| (u32::from(ev.x[s.index]), u32::from(ev.y[s.index])))
-        .collect();
+    let pixels: Vec<(u16, u16)> = flat.iter().map(|s| (ev.x[s.index], ev.y[s.index])).collect();
     let estimate = |keep: &dyn Fn(usize) -> bool| {
         let chosen: Vec<&FlowSample> = flat
             .iter()
@@ -506,25 +503,33 @@ fn select_hypothesis(
     ];
     for (x0, x1, y0, y1) in parts {
         let inside = |k: usize| {
-            let (u, v) = (2 * pixels[k].0, 2 * pixels[k].1);
+            let (u, v) = (2 * u32::from(pixels[k].0), 2 * u32::from(pixels[k].1));
             u >= x0 * w && u < x1 * w && v >= y0 * h && v < y1 * h
         };
         if let Some(t) = estimate(&inside) {
             hypotheses.push(t);
         }
     }
-    // Area of each cluster: distinct occupied cells.
+    // Area of each cluster: distinct occupied cells, counted by marking each cell with the
+    // last cluster that occupied it (a cluster's samples are one run of `pixels`).
     let grid = CellGrid::new(cam.width, cam.height, p.map_cell_px);
+    let mut marked = vec![usize::MAX; grid.values.len()];
+    let mut start = 0;
     let area: Vec<f64> = per_cluster
         .iter()
-        .map(|m| {
-            let mut cells: Vec<usize> = m
-                .iter()
-                .filter_map(|s| grid.cell(ev.x[s.index], ev.y[s.index]))
-                .collect();
-            cells.sort_unstable();
-            cells.dedup();
-            cells.len() as f64
+        .enumerate()
+        .map(|(c, m)| {
+            let mut cells = 0usize;
+            for &(x, y) in &pixels[start..start + m.len()] {
+                if let Some(cell) = grid.cell(x, y)
+                    && marked[cell] != c
+                {
+                    marked[cell] = c;
+                    cells += 1;
+                }
+            }
+            start += m.len();
+            cells as f64
         })
         .collect();
     let mut best: Option<(f64, [f64; 3], Vec<bool>)> = None;
