@@ -37,6 +37,7 @@ pub mod map;
 pub mod params;
 pub mod warp;
 
+use evseg_geometry::cache::{PREFETCH_AHEAD, prefetch};
 use evseg_geometry::{
     EgomotionParams, FlowSample, RotationRate, TableCache, estimate_background_translation,
     estimate_translation, flow_direction, flow_samples,
@@ -399,7 +400,10 @@ fn cluster_fit(
 ) -> (f64, f64) {
     let rho = t.map(|t| inverse_depth(members, t));
     let (mut sum_r, mut sum_n) = (0.0, 0.0);
-    for s in members {
+    for (k, s) in members.iter().enumerate() {
+        if let Some(&ahead) = members.get(k + PREFETCH_AHEAD) {
+            prefetch(ahead);
+        }
         let predicted = match (t, rho) {
             (Some(t), Some(rho)) => rho * dot(s.x_row(), t),
             _ => 0.0,
@@ -459,12 +463,17 @@ fn select_hypothesis(
         refine_iterations: p.egomotion.refine_iterations.min(p.hypothesis_refine_iterations),
         ..p.egomotion
     };
-    let estimate = |keep: &dyn Fn(&FlowSample) -> bool| {
-        let chosen: Vec<&FlowSample> = per_cluster
+    // Every sample once, in cluster order, with its pixel: the nine hypotheses below each pick
+    // from these, and reading the pixels from one array is much faster than through each
+    // sample's event index (scattered over the slice).
+    let flat: Vec<&FlowSample> = per_cluster.iter().flatten().copied().collect();
+    let pixels: Vec<(u16, u16)> = flat.iter().map(|s| (ev.x[s.index], ev.y[s.index])).collect();
+    let estimate = |keep: &dyn Fn(usize) -> bool| {
+        let chosen: Vec<&FlowSample> = flat
             .iter()
-            .flatten()
-            .copied()
-            .filter(|s| keep(s))
+            .enumerate()
+            .filter(|&(k, _)| keep(k))
+            .map(|(_, &s)| s)
             .collect();
         // A regular subsample: the hypotheses only need to be roughly right (the winner is
         // re-estimated from all its samples afterwards).
@@ -474,9 +483,11 @@ fn select_hypothesis(
     };
     let mut hypotheses: Vec<[f64; 3]> = previous.into_iter().collect();
     let candidate_set: Vec<bool> = priors.iter().map(|&q| q >= p.candidate_threshold).collect();
-    if let Some(t) =
-        estimate(&|s: &FlowSample| cluster_of(input.clusters, s.index).is_some_and(|c| candidate_set[c]))
-    {
+    let candidate: Vec<bool> = flat
+        .iter()
+        .map(|s| cluster_of(input.clusters, s.index).is_some_and(|c| candidate_set[c]))
+        .collect();
+    if let Some(t) = estimate(&|k: usize| candidate[k]) {
         hypotheses.push(t);
     }
     // Halves and quadrants: (column range, row range) in units of half the sensor.
@@ -491,26 +502,34 @@ fn select_hypothesis(
         (1, 2, 1, 2),
     ];
     for (x0, x1, y0, y1) in parts {
-        let inside = |s: &FlowSample| {
-            let (u, v) = (2 * u32::from(ev.x[s.index]), 2 * u32::from(ev.y[s.index]));
+        let inside = |k: usize| {
+            let (u, v) = (2 * u32::from(pixels[k].0), 2 * u32::from(pixels[k].1));
             u >= x0 * w && u < x1 * w && v >= y0 * h && v < y1 * h
         };
         if let Some(t) = estimate(&inside) {
             hypotheses.push(t);
         }
     }
-    // Area of each cluster: distinct occupied cells.
+    // Area of each cluster: distinct occupied cells, counted by marking each cell with the
+    // last cluster that occupied it (a cluster's samples are one run of `pixels`).
     let grid = CellGrid::new(cam.width, cam.height, p.map_cell_px);
+    let mut marked = vec![usize::MAX; grid.values.len()];
+    let mut start = 0;
     let area: Vec<f64> = per_cluster
         .iter()
-        .map(|m| {
-            let mut cells: Vec<usize> = m
-                .iter()
-                .filter_map(|s| grid.cell(ev.x[s.index], ev.y[s.index]))
-                .collect();
-            cells.sort_unstable();
-            cells.dedup();
-            cells.len() as f64
+        .enumerate()
+        .map(|(c, m)| {
+            let mut cells = 0usize;
+            for &(x, y) in &pixels[start..start + m.len()] {
+                if let Some(cell) = grid.cell(x, y)
+                    && marked[cell] != c
+                {
+                    marked[cell] = c;
+                    cells += 1;
+                }
+            }
+            start += m.len();
+            cells as f64
         })
         .collect();
     let mut best: Option<(f64, [f64; 3], Vec<bool>)> = None;
@@ -562,7 +581,10 @@ fn explain(
 /// Least-squares inverse depth of `members` under translation `t`, clamped at 0 (cheirality).
 fn inverse_depth(members: &[&FlowSample], t: [f64; 3]) -> f64 {
     let (mut num, mut den) = (0.0, 0.0);
-    for s in members {
+    for (k, s) in members.iter().enumerate() {
+        if let Some(&ahead) = members.get(k + PREFETCH_AHEAD) {
+            prefetch(ahead);
+        }
         let q = dot(s.x_row(), t);
         num += s.n_derot * q;
         den += q * q;

@@ -70,6 +70,7 @@ pub fn warp_previous(
     let mut background = CellGrid::new(w, h, cell_px);
     let mut foreground = CellGrid::new(w, h, cell_px);
     for (i, &label) in labels.iter().enumerate() {
+        table.prefetch_ahead(&prev.x, &prev.y, i);
         let Some([x, y]) = table.get(prev.x[i], prev.y[i]) else {
             continue;
         };

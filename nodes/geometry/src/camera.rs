@@ -129,6 +129,28 @@ impl UndistortTable {
             .copied()
     }
 
+    /// Asks the cache for the entry of pixel `(u, v)` (nothing outside the sensor), for a
+    /// lookup a few events later ([`crate::cache`]).
+    #[inline]
+    pub fn prefetch(&self, u: u16, v: u16) {
+        if u < self.width
+            && v < self.height
+            && let Some(e) = self.xy.get(v as usize * self.width as usize + u as usize)
+        {
+            crate::cache::prefetch(e);
+        }
+    }
+
+    /// Asks the cache for the entry of event `index + PREFETCH_AHEAD` of `events`' pixels `x`,
+    /// `y` (nothing past the end), for the lookup of that event a few events later.
+    #[inline]
+    pub fn prefetch_ahead(&self, x: &[u16], y: &[u16], index: usize) {
+        let ahead = index + crate::cache::PREFETCH_AHEAD;
+        if let (Some(&u), Some(&v)) = (x.get(ahead), y.get(ahead)) {
+            self.prefetch(u, v);
+        }
+    }
+
     /// Normalized coordinates of event `index` at pixel `(u, v)`; an event outside the sensor
     /// is an error naming it.
     pub fn event(&self, index: usize, u: u16, v: u16) -> Result<[f32; 2], AlignError> {

@@ -7,6 +7,7 @@
 //! - [`rotation`]: the camera's rotation rate over a slice as a line in time, from its gyro
 //!   samples;
 //! - [`lsq`]: small dense least squares (normal equations with Tikhonov regularization);
+//! - [`cache`]: prefetch hints for per-pixel table lookups in per-event loops;
 //! - [`assignment`]: optimal one-to-one assignment (Hungarian), for matching labels to objects
 //!   (evaluator) and segments to tracks (tracker).
 //!
@@ -15,6 +16,7 @@
 //! the caller chose (m/s with depth in m, or "per unit depth").
 
 pub mod assignment;
+pub mod cache;
 pub mod camera;
 pub mod cell_grid;
 pub mod density;

@@ -6,16 +6,18 @@ use nalgebra::{DMatrix, DVector, SMatrix, SVector};
 /// Accumulates the normal equations of an `N`-parameter linear least-squares problem.
 #[derive(Debug, Clone)]
 pub struct NormalEquations<const N: usize> {
-    ata: SMatrix<f64, N, N>,
-    atb: SVector<f64, N>,
+    /// Upper triangle of `A^T W A`, row by row (`ata[i][j]` for `j >= i`; the rest stays 0), in
+    /// plain arrays so that `add`'s inner loop runs over contiguous memory.
+    ata: [[f64; N]; N],
+    atb: [f64; N],
     count: usize,
 }
 
 impl<const N: usize> Default for NormalEquations<N> {
     fn default() -> Self {
         Self {
-            ata: SMatrix::zeros(),
-            atb: SVector::zeros(),
+            ata: [[0.0; N]; N],
+            atb: [0.0; N],
             count: 0,
         }
     }
@@ -23,12 +25,14 @@ impl<const N: usize> Default for NormalEquations<N> {
 
 impl<const N: usize> NormalEquations<N> {
     /// Adds the equation `g . p = b` with weight `w`.
+    #[inline]
     pub fn add(&mut self, g: &[f64; N], b: f64, w: f64) {
-        for (i, gi) in g.iter().enumerate() {
-            let wg = w * gi;
+        for i in 0..N {
+            let wg = w * g[i];
             self.atb[i] += wg * b;
-            for (j, gj) in g.iter().enumerate().skip(i) {
-                self.ata[(i, j)] += wg * gj;
+            let row = &mut self.ata[i];
+            for j in i..N {
+                row[j] += wg * g[j];
             }
         }
         self.count += 1;
@@ -41,23 +45,30 @@ impl<const N: usize> NormalEquations<N> {
 
     /// Adds another accumulator's equations.
     pub fn merge(&mut self, other: &Self) {
-        self.ata += other.ata;
-        self.atb += other.atb;
+        for (row, other) in self.ata.iter_mut().zip(&other.ata) {
+            for (a, b) in row.iter_mut().zip(other) {
+                *a += b;
+            }
+        }
+        for (a, b) in self.atb.iter_mut().zip(&other.atb) {
+            *a += b;
+        }
         self.count += other.count;
     }
 
     /// Solves with regularization `lambda` (>= 0); `None` when the system is singular.
     pub fn solve(&self, lambda: f64) -> Option<[f64; N]> {
-        let mut m = self.ata;
+        let mut m = SMatrix::<f64, N, N>::zeros();
         for i in 0..N {
-            for j in 0..i {
-                m[(i, j)] = m[(j, i)];
+            for j in i..N {
+                m[(i, j)] = self.ata[i][j];
+                m[(j, i)] = self.ata[i][j];
             }
             m[(i, i)] += lambda;
         }
         // Symmetric positive definite unless the equations do not determine every parameter
         // (then `None`; a positive `lambda` always makes it definite).
-        let sol = m.cholesky().map(|c| c.solve(&self.atb))?;
+        let sol = m.cholesky().map(|c| c.solve(&SVector::from(self.atb)))?;
         let out: [f64; N] = sol.into();
         out.iter().all(|v| v.is_finite()).then_some(out)
     }
@@ -71,6 +82,66 @@ pub fn solve_svd(m: &DMatrix<f64>, b: &DVector<f64>) -> Option<DVector<f64>> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The accumulation as written before the plain arrays (a nalgebra matrix, upper triangle
+    /// filled per equation): [`NormalEquations`] must give the same solution bit for bit.
+    fn solve_reference<const N: usize>(eqs: &[([f64; N], f64, f64)], lambda: f64) -> Option<[f64; N]> {
+        let (mut ata, mut atb) = (SMatrix::<f64, N, N>::zeros(), SVector::<f64, N>::zeros());
+        for (g, b, w) in eqs {
+            for (i, gi) in g.iter().enumerate() {
+                let wg = w * gi;
+                atb[i] += wg * b;
+                for (j, gj) in g.iter().enumerate().skip(i) {
+                    ata[(i, j)] += wg * gj;
+                }
+            }
+        }
+        for i in 0..N {
+            for j in 0..i {
+                ata[(i, j)] = ata[(j, i)];
+            }
+            ata[(i, i)] += lambda;
+        }
+        let out: [f64; N] = ata.cholesky().map(|c| c.solve(&atb))?.into();
+        out.iter().all(|v| v.is_finite()).then_some(out)
+    }
+
+    #[test]
+    fn solution_is_the_reference_bit_for_bit() {
+        let mut state = 3u64;
+        let mut next = move || {
+            state = state
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        for case in 0..50 {
+            let eqs: Vec<([f64; 8], f64, f64)> = (0..20 + case * 7)
+                .map(|_| (std::array::from_fn(|_| next() - 0.5), next(), 0.5 + next()))
+                .collect();
+            let (mut a, mut b) = (NormalEquations::<8>::default(), NormalEquations::<8>::default());
+            for (k, (g, rhs, w)) in eqs.iter().enumerate() {
+                // Half in a second accumulator, merged: as the stages that fit per cell do.
+                if k % 2 == 0 {
+                    a.add(g, *rhs, *w)
+                } else {
+                    b.add(g, *rhs, *w)
+                }
+            }
+            let mut all = NormalEquations::<8>::default();
+            for (g, rhs, w) in &eqs {
+                all.add(g, *rhs, *w);
+            }
+            let bits = |s: Option<[f64; 8]>| s.map(|s| s.map(f64::to_bits));
+            assert_eq!(
+                bits(all.solve(1e-9)),
+                bits(solve_reference(&eqs, 1e-9)),
+                "case {case}"
+            );
+            a.merge(&b);
+            assert_eq!(a.count(), eqs.len());
+        }
+    }
 
     #[test]
     fn recovers_exact_parameters_and_regularization_shrinks() {

@@ -68,6 +68,7 @@ pub fn flow_samples(
     check_flow(events, flow)?;
     let mut out = Vec::with_capacity(events.len());
     for i in 0..events.len() {
+        table.prefetch_ahead(&events.x, &events.y, i);
         let (u, v) = (events.x[i], events.y[i]);
         let [x, y] = table.event(i, u, v)?;
         let (fx, fy, c) = (f64::from(flow.nx[i]), f64::from(flow.ny[i]), flow.confidence[i]);

@@ -2,6 +2,7 @@
 //! and one plane fit per event.
 
 use evseg_geometry::Camera;
+use evseg_geometry::cache::{PREFETCH_AHEAD, prefetch};
 use evseg_schemas::{CameraInfo, Events, NormalFlow};
 
 use crate::fit::{Neighbourhood, PlaneFit, fit_plane};
@@ -183,6 +184,12 @@ impl PlaneFitEstimator {
         let width = self.width;
         let jacobian = std::mem::take(&mut self.jacobian);
         self.run(events, |i, est, _| {
+            let ahead = i + PREFETCH_AHEAD;
+            if let (Some(&x), Some(&y)) = (events.x.get(ahead), events.y.get(ahead))
+                && let Some(j) = jacobian.get(y as usize * width + x as usize)
+            {
+                prefetch(j);
+            }
             if est.confidence > 0.0 {
                 let idx = events.y[i] as usize * width + events.x[i] as usize;
                 let [j00, j01, j10, j11] = jacobian[idx];
@@ -238,18 +245,55 @@ impl PlaneFitEstimator {
         let mut next = 0;
         for j in 0..n {
             while next < j && (!written[next] || events.t[next] + la < events.t[j]) {
+                self.prefetch_window(events, next + PREFETCH_AHEAD);
                 let est = self.fit_written(written[next], events, next, la);
                 sink(next, est, self.last_fit);
                 next += 1;
             }
+            self.prefetch_pixel(events, j + PREFETCH_AHEAD);
             written[j] = self.write_event(events.t[j], events.x[j], events.y[j], events.p[j]);
         }
         while next < n {
+            self.prefetch_window(events, next + PREFETCH_AHEAD);
             let est = self.fit_written(written[next], events, next, la);
             sink(next, est, self.last_fit);
             next += 1;
         }
         self.written = written;
+    }
+
+    /// Asks the cache for the surface pixel of event `i` (if any), which its write will read.
+    #[inline]
+    fn prefetch_pixel(&self, events: &Events, i: usize) {
+        if let (Some(&x), Some(&y), Some(&p)) = (events.x.get(i), events.y.get(i), events.p.get(i)) {
+            let surface = &self.surface[usize::from(p != 0)];
+            if let Some(v) = surface.get(y as usize * self.width + x as usize) {
+                prefetch(v);
+            }
+        }
+    }
+
+    /// Asks the cache for the rows of event `i`'s fit window (the check window's when there is
+    /// one), so that the gather of a later event does not wait for memory: the surfaces (two
+    /// 640 x 480 `f64` planes, 4.9 MB) do not fit in the core's cache, and the look-ahead fit
+    /// reads them about 30 ms of events after they were written.
+    #[inline]
+    fn prefetch_window(&self, events: &Events, i: usize) {
+        let (Some(&x), Some(&y), Some(&p)) = (events.x.get(i), events.y.get(i), events.p.get(i)) else {
+            return;
+        };
+        let (xu, yu) = (x as usize, y as usize);
+        if xu >= self.width || yu >= self.height {
+            return;
+        }
+        let r = self.params.radius.max(self.params.check_radius);
+        let (x0, x1) = (xu.saturating_sub(r), (xu + r).min(self.width - 1));
+        let surface = &self.surface[usize::from(p != 0)];
+        for yy in yu.saturating_sub(r)..=(yu + r).min(self.height - 1) {
+            let row = yy * self.width;
+            prefetch(&surface[row + x0]);
+            prefetch(&surface[row + x1]);
+        }
     }
 
     fn fit_written(&mut self, written: bool, events: &Events, i: usize, lookahead: f64) -> PixelEstimate {
@@ -410,12 +454,6 @@ struct Window {
     y1: usize,
 }
 
-impl Window {
-    fn contains(&self, x: usize, y: usize) -> bool {
-        (self.x0..=self.x1).contains(&x) && (self.y0..=self.y1).contains(&y)
-    }
-}
-
 /// The event a neighbourhood is gathered for: time (s), pixel, and how far ahead neighbours may
 /// lie (s).
 struct Centre {
@@ -427,7 +465,8 @@ struct Centre {
 
 /// Adds to `nb` the pixels of `window` on `surface` (row-major, `width` wide) whose age relative
 /// to the centre event is within `[-lookahead, dt_max]` and at least `dt_min` in magnitude (the
-/// centre's own pixel always, at time 0), leaving out the pixels of `skip` (already added).
+/// centre's own pixel always, at time 0), leaving out the pixels of `skip` (already added), in
+/// row-major order.
 fn gather(
     nb: &mut Neighbourhood,
     surface: &[f64],
@@ -437,21 +476,56 @@ fn gather(
     window: Window,
     skip: Option<Window>,
 ) {
-    let (dt_min, dt_max) = (params.dt_min_s, params.dt_max_s);
+    let ages = Ages {
+        t: at.t,
+        dt_min: params.dt_min_s,
+        dt_max: params.dt_max_s,
+        lookahead: at.lookahead,
+    };
     for yy in window.y0..=window.y1 {
-        let row = &surface[yy * width + window.x0..=yy * width + window.x1];
-        let dy = yy as f64 - at.y as f64;
-        for (k, &ts) in row.iter().enumerate() {
-            let xx = window.x0 + k;
-            if skip.is_some_and(|s| s.contains(xx, yy)) {
-                continue;
+        let row = yy * width;
+        let dy = yy as i32 - at.y as i32;
+        // The own pixel is in the centre row (`dy` 0) only.
+        let own_x = if dy == 0 { at.x } else { usize::MAX };
+        match skip {
+            Some(s) if (s.y0..=s.y1).contains(&yy) => {
+                let left = &surface[row + window.x0..row + s.x0];
+                gather_run(nb, left, window.x0, at.x, own_x, dy, &ages);
+                let right = &surface[row + s.x1 + 1..=row + window.x1];
+                gather_run(nb, right, s.x1 + 1, at.x, own_x, dy, &ages);
             }
-            let age = at.t - ts;
-            let own_pixel = xx == at.x && yy == at.y;
-            if own_pixel || (age.abs() >= dt_min && age <= dt_max && age >= -at.lookahead) {
-                nb.push(xx as f64 - at.x as f64, dy, if own_pixel { 0.0 } else { -age });
+            _ => {
+                let all = &surface[row + window.x0..=row + window.x1];
+                gather_run(nb, all, window.x0, at.x, own_x, dy, &ages);
             }
         }
+    }
+}
+
+/// The centre event's time and the ages of neighbours a fit takes, seconds.
+struct Ages {
+    t: f64,
+    dt_min: f64,
+    dt_max: f64,
+    lookahead: f64,
+}
+
+/// [`gather`] along one run of a row: `row[k]` is pixel `x0 + k`, `dy` rows from the centre at
+/// column `cx`; the pixel at column `own_x` is the centre's own.
+#[inline(always)]
+fn gather_run(nb: &mut Neighbourhood, row: &[f64], x0: usize, cx: usize, own_x: usize, dy: i32, ages: &Ages) {
+    for (k, &ts) in row.iter().enumerate() {
+        let xx = x0 + k;
+        let age = ages.t - ts;
+        let own_pixel = xx == own_x;
+        let keep =
+            own_pixel || ((age.abs() >= ages.dt_min) & (age <= ages.dt_max) & (age >= -ages.lookahead));
+        nb.push_if(
+            keep,
+            xx as i32 - cx as i32,
+            dy,
+            if own_pixel { 0.0 } else { -age },
+        );
     }
 }
 

@@ -13,21 +13,35 @@ use crate::params::MAX_RADIUS;
 pub const MAX_POINTS: usize = (2 * MAX_RADIUS + 1) * (2 * MAX_RADIUS + 1);
 
 /// Points of one fit, fixed size so that no event allocates.
+///
+/// Offsets are whole pixels, so the sums of the normal equations that involve only offsets
+/// (`n`, `sx`, `sy`, `sxx`, `sxy`, `syy`) are kept here as integers while points are added: they
+/// equal the `f64` sums of the same points exactly, in any order, and the plane fit then adds
+/// only the time terms.
 #[derive(Debug, Clone)]
 pub struct Neighbourhood {
-    dx: [f64; MAX_POINTS],
-    dy: [f64; MAX_POINTS],
-    dt: [f64; MAX_POINTS],
+    /// One slot more than [`MAX_POINTS`]: a point is written before it is known to be kept.
+    dx: [f64; MAX_POINTS + 1],
+    dy: [f64; MAX_POINTS + 1],
+    dt: [f64; MAX_POINTS + 1],
     len: usize,
+    /// `[n, sx, sy, sxx, sxy, syy]` of the points, pixels (powers of).
+    offset_sums: [i32; 6],
+    /// `[st, sxt, syt]` of the points, added in their order as they are pushed (seconds times
+    /// pixels): what the fit's first pass would add, so a neighbourhood that starts as a copy of
+    /// another continues its sums exactly.
+    time_sums: [f64; 3],
 }
 
 impl Default for Neighbourhood {
     fn default() -> Self {
         Self {
-            dx: [0.0; MAX_POINTS],
-            dy: [0.0; MAX_POINTS],
-            dt: [0.0; MAX_POINTS],
+            dx: [0.0; MAX_POINTS + 1],
+            dy: [0.0; MAX_POINTS + 1],
+            dt: [0.0; MAX_POINTS + 1],
             len: 0,
+            offset_sums: [0; 6],
+            time_sums: [0.0; 3],
         }
     }
 }
@@ -37,6 +51,8 @@ impl Neighbourhood {
     #[inline]
     pub fn clear(&mut self) {
         self.len = 0;
+        self.offset_sums = [0; 6];
+        self.time_sums = [0.0; 3];
     }
 
     /// Number of points.
@@ -59,20 +75,50 @@ impl Neighbourhood {
         self.dy[..n].copy_from_slice(&other.dy[..n]);
         self.dt[..n].copy_from_slice(&other.dt[..n]);
         self.len = n;
+        self.offset_sums = other.offset_sums;
+        self.time_sums = other.time_sums;
     }
 
     /// Adds a point at pixel offset `(dx, dy)` with time `dt` seconds relative to the event;
     /// returns false (and ignores it) when the neighbourhood is full.
     #[inline]
-    pub fn push(&mut self, dx: f64, dy: f64, dt: f64) -> bool {
+    pub fn push(&mut self, dx: i32, dy: i32, dt: f64) -> bool {
         if self.len == MAX_POINTS {
             return false;
         }
-        self.dx[self.len] = dx;
-        self.dy[self.len] = dy;
-        self.dt[self.len] = dt;
-        self.len += 1;
+        self.push_if(true, dx, dy, dt);
         true
+    }
+
+    /// Adds the point when `keep` is true and the neighbourhood is not full, without a branch on
+    /// `keep` (the gather's test of a neighbour's age is not predictable).
+    #[inline(always)]
+    pub(crate) fn push_if(&mut self, keep: bool, dx: i32, dy: i32, dt: f64) {
+        let len = self.len.min(MAX_POINTS);
+        self.dx[len] = f64::from(dx);
+        self.dy[len] = f64::from(dy);
+        self.dt[len] = dt;
+        let keep = keep && len < MAX_POINTS;
+        self.len = len + usize::from(keep);
+        let k = i32::from(keep);
+        let s = &mut self.offset_sums;
+        s[0] += k;
+        s[1] += k * dx;
+        s[2] += k * dy;
+        s[3] += k * dx * dx;
+        s[4] += k * dx * dy;
+        s[5] += k * dy * dy;
+        // The sums start at +0 and so never become -0: adding +0 for a point not kept leaves
+        // them unchanged.
+        let (x, y, t) = if keep {
+            (f64::from(dx), f64::from(dy), dt)
+        } else {
+            (0.0, 0.0, 0.0)
+        };
+        let ts = &mut self.time_sums;
+        ts[0] += t;
+        ts[1] += x * t;
+        ts[2] += y * t;
     }
 }
 
@@ -204,23 +250,46 @@ pub fn fit_plane(
     if n < min_points {
         return None;
     }
+    let (dx, dy, dt) = (&nb.dx[..n], &nb.dy[..n], &nb.dt[..n]);
+    // The offset sums are exact integers; the time sums were added in the points' order, as
+    // `Sums::add` would.
+    let [s_n, s_x, s_y, s_xx, s_xy, s_yy] = nb.offset_sums.map(f64::from);
+    let [st, sxt, syt] = nb.time_sums;
+    let mut sums = Sums {
+        n: s_n,
+        sx: s_x,
+        sy: s_y,
+        sxx: s_xx,
+        sxy: s_xy,
+        syy: s_yy,
+        st,
+        sxt,
+        syt,
+    };
     let mut used = [true; MAX_POINTS];
-    let mut sums = Sums::default();
-    for i in 0..n {
-        sums.add(nb.dx[i], nb.dy[i], nb.dt[i], 1.0);
-    }
+    let used = &mut used[..n];
+    // Time residuals of the points against `sol`.
+    let mut res = [0.0; MAX_POINTS];
+    let res = &mut res[..n];
+    let residuals = |sol: &[f64; 3], res: &mut [f64]| {
+        for i in 0..n {
+            res[i] = sol[0] * dx[i] + sol[1] * dy[i] + sol[2] - dt[i];
+        }
+    };
     let mut kept = n;
     let mut sol = sums.solve()?;
+    // True when `res` holds the residuals of `sol`.
+    let mut fresh = false;
     for _ in 0..max_refits {
+        residuals(&sol, res);
         let mut changed = false;
-        for (i, used) in used.iter_mut().enumerate().take(n) {
-            let r = sol[0] * nb.dx[i] + sol[1] * nb.dy[i] + sol[2] - nb.dt[i];
-            let inlier = r.abs() <= outlier_s;
-            if inlier != *used {
-                *used = inlier;
+        for i in 0..n {
+            let inlier = res[i].abs() <= outlier_s;
+            if inlier != used[i] {
+                used[i] = inlier;
                 changed = true;
                 let sign = if inlier { 1.0 } else { -1.0 };
-                sums.add(nb.dx[i], nb.dy[i], nb.dt[i], sign);
+                sums.add(dx[i], dy[i], dt[i], sign);
                 if inlier {
                     kept += 1;
                 } else {
@@ -229,6 +298,7 @@ pub fn fit_plane(
             }
         }
         if !changed {
+            fresh = true;
             break;
         }
         if kept < min_points {
@@ -236,11 +306,13 @@ pub fn fit_plane(
         }
         sol = sums.solve()?;
     }
+    if !fresh {
+        residuals(&sol, res);
+    }
     let mut ss = 0.0;
-    for (i, &used) in used.iter().enumerate().take(n) {
-        if used {
-            let r = sol[0] * nb.dx[i] + sol[1] * nb.dy[i] + sol[2] - nb.dt[i];
-            ss += r * r;
+    for i in 0..n {
+        if used[i] {
+            ss += res[i] * res[i];
         }
     }
     let g = (sol[0] * sol[0] + sol[1] * sol[1]).sqrt();
@@ -271,10 +343,132 @@ mod tests {
         let mut nb = Neighbourhood::default();
         for dy in -r..=r {
             for dx in -r..=r {
-                assert!(nb.push(dx as f64, dy as f64, f(dx as f64, dy as f64)));
+                assert!(nb.push(dx, dy, f(dx as f64, dy as f64)));
             }
         }
         nb
+    }
+
+    /// The fit as written before the offset sums were kept as integers and the residuals
+    /// stored: [`fit_plane`] must reproduce it bit for bit.
+    fn fit_plane_reference(
+        nb: &Neighbourhood,
+        outlier_s: f64,
+        max_refits: usize,
+        min_points: usize,
+    ) -> Option<PlaneFit> {
+        let n = nb.len;
+        let min_points = min_points.max(3);
+        if n < min_points {
+            return None;
+        }
+        let mut used = [true; MAX_POINTS];
+        let mut sums = Sums::default();
+        for i in 0..n {
+            sums.add(nb.dx[i], nb.dy[i], nb.dt[i], 1.0);
+        }
+        let mut kept = n;
+        let mut sol = sums.solve()?;
+        for _ in 0..max_refits {
+            let mut changed = false;
+            for (i, used) in used.iter_mut().enumerate().take(n) {
+                let r = sol[0] * nb.dx[i] + sol[1] * nb.dy[i] + sol[2] - nb.dt[i];
+                let inlier = r.abs() <= outlier_s;
+                if inlier != *used {
+                    *used = inlier;
+                    changed = true;
+                    sums.add(nb.dx[i], nb.dy[i], nb.dt[i], if inlier { 1.0 } else { -1.0 });
+                    if inlier {
+                        kept += 1;
+                    } else {
+                        kept -= 1;
+                    }
+                }
+            }
+            if !changed {
+                break;
+            }
+            if kept < min_points {
+                return None;
+            }
+            sol = sums.solve()?;
+        }
+        let mut ss = 0.0;
+        for (i, &used) in used.iter().enumerate().take(n) {
+            if used {
+                let r = sol[0] * nb.dx[i] + sol[1] * nb.dy[i] + sol[2] - nb.dt[i];
+                ss += r * r;
+            }
+        }
+        let g = (sol[0] * sol[0] + sol[1] * sol[1]).sqrt();
+        let direction_sd_rad = match sums.gradient_covariance() {
+            Some([cxx, cxy, cyy]) if kept > 3 && g > 0.0 => {
+                let (qx, qy) = (-sol[1] / g, sol[0] / g);
+                let var = ss / (kept - 3) as f64 * (qx * qx * cxx + 2.0 * qx * qy * cxy + qy * qy * cyy);
+                var.max(0.0).sqrt() / g
+            }
+            _ => f64::INFINITY,
+        };
+        Some(PlaneFit {
+            gx: sol[0],
+            gy: sol[1],
+            c: sol[2],
+            inliers: kept,
+            points: n,
+            rms_s: (ss / kept as f64).sqrt(),
+            direction_sd_rad,
+        })
+    }
+
+    #[test]
+    fn fit_reproduces_the_reference_bit_for_bit() {
+        // Noisy planes in windows of radius 1 to 4 with missing pixels and old outliers; a
+        // fixed linear congruential generator, so the cases are the same on every run.
+        let mut state = 0x2545_f491_4f6c_dd1du64;
+        let mut next = move || {
+            state = state
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let mut fits = 0;
+        for case in 0..4000 {
+            let r = 1 + case % MAX_RADIUS as i32;
+            let (gx, gy) = (0.004 * (next() - 0.5), 0.004 * (next() - 0.5));
+            let mut nb = Neighbourhood::default();
+            for dy in -r..=r {
+                for dx in -r..=r {
+                    let u = next();
+                    if u < 0.2 && (dx, dy) != (0, 0) {
+                        continue;
+                    }
+                    let t = if u > 0.9 {
+                        -0.05 * next()
+                    } else {
+                        gx * f64::from(dx) + gy * f64::from(dy) + 0.002 * (next() - 0.5)
+                    };
+                    assert!(nb.push(dx, dy, t));
+                }
+            }
+            for refits in [0, 1, 3] {
+                let (a, b) = (
+                    fit_plane(&nb, 0.002, refits, 5),
+                    fit_plane_reference(&nb, 0.002, refits, 5),
+                );
+                let bits = |f: Option<PlaneFit>| {
+                    f.map(|f| {
+                        (
+                            [f.gx, f.gy, f.c, f.rms_s, f.direction_sd_rad].map(f64::to_bits),
+                            f.inliers,
+                            f.points,
+                        )
+                    })
+                };
+                assert_eq!(bits(a), bits(b), "case {case}, {refits} refits");
+                fits += usize::from(a.is_some());
+            }
+        }
+        assert!(fits > 5_000, "only {fits} fits succeeded");
     }
 
     #[test]
@@ -294,9 +488,9 @@ mod tests {
 
     #[test]
     fn outlier_is_rejected() {
-        let mut nb = window(2, |x, _| 0.001 * x);
-        // An old timestamp from a previous edge, 50 ms before.
-        nb.dt[3] = -0.05;
+        // An old timestamp from a previous edge, 50 ms before, at the fourth point.
+        let nb = window(2, |x, y| if (x, y) == (1.0, -2.0) { -0.05 } else { 0.001 * x });
+        assert_eq!(nb.dt[3], -0.05);
         let fit = fit_plane(&nb, 0.005, 3, 5).expect("plane");
         assert_eq!(fit.inliers, 24);
         assert!((fit.gx - 0.001).abs() < 1e-12 && fit.gy.abs() < 1e-12);
@@ -306,15 +500,15 @@ mod tests {
     fn too_few_or_collinear_points_give_no_plane() {
         let mut nb = Neighbourhood::default();
         for i in 0..4 {
-            nb.push(i as f64, 0.0, 0.001 * i as f64);
+            nb.push(i, 0, 0.001 * i as f64);
         }
         assert!(fit_plane(&nb, 0.005, 3, 5).is_none(), "4 points < min_points 5");
-        nb.push(4.0, 0.0, 0.004);
+        nb.push(4, 0, 0.004);
         assert!(
             fit_plane(&nb, 0.005, 3, 5).is_none(),
             "collinear points span no plane"
         );
-        nb.push(0.0, 1.0, 0.0);
+        nb.push(0, 1, 0.0);
         assert!(fit_plane(&nb, 0.005, 3, 5).is_some());
     }
 
@@ -330,7 +524,7 @@ mod tests {
     fn full_neighbourhood_refuses_more_points() {
         let mut nb = window(MAX_RADIUS as i32, |_, _| 0.0);
         assert_eq!(nb.len(), MAX_POINTS);
-        assert!(!nb.push(0.0, 0.0, 0.0));
+        assert!(!nb.push(0, 0, 0.0));
         nb.clear();
         assert!(nb.is_empty());
     }

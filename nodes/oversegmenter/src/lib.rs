@@ -135,6 +135,7 @@ impl Oversegmenter {
         let mut feats = Vec::with_capacity(events.len());
         let mut index = Vec::with_capacity(events.len());
         for i in 0..events.len() {
+            table.prefetch_ahead(&events.x, &events.y, i);
             let (u, v) = (events.x[i], events.y[i]);
             let [x, y] = table.event(i, u, v)?;
             let (nx, ny, c) = (flow.nx[i], flow.ny[i], flow.confidence[i]);
