@@ -33,11 +33,17 @@ pub fn fill_unlabelled(events: &Events, width: u16, height: u16, cell_px: u16, l
         }
     }
     let mut tally: Vec<(u32, u32)> = Vec::new();
+    // The majority depends only on the cell: computed once per cell with unlabelled events.
+    let mut majority: Vec<Option<u32>> = vec![None; cols * rows];
     for (i, l) in label.iter_mut().enumerate() {
         if *l != UNLABELLED {
             continue;
         }
         let (cx, cy) = cell(i);
+        if let Some(m) = majority[cy * cols + cx] {
+            *l = m;
+            continue;
+        }
         tally.clear();
         for ny in cy.saturating_sub(1)..=(cy + 1).min(rows - 1) {
             for nx in cx.saturating_sub(1)..=(cx + 1).min(cols - 1) {
@@ -53,6 +59,7 @@ pub fn fill_unlabelled(events: &Events, width: u16, height: u16, cell_px: u16, l
             .iter()
             .max_by(|a, b| a.1.cmp(&b.1).then(b.0.cmp(&a.0)))
             .map_or(0, |&(l, _)| l);
+        majority[cy * cols + cx] = Some(*l);
     }
 }
 
