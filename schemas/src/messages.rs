@@ -165,7 +165,13 @@ impl CameraInfo {
     /// A vector of the IMU frame (a gyro rate, rad/s) in the camera frame:
     /// `imu_to_camera * v`.
     pub fn imu_vector_to_camera(&self, v: [f64; 3]) -> [f64; 3] {
-        let r = &self.imu_to_camera;
+        Self::rotate(&self.imu_to_camera, v)
+    }
+
+    /// `r * v` for a row-major 3x3 rotation `r` (as [`CameraInfo::imu_to_camera`]): what
+    /// [`CameraInfo::imu_vector_to_camera`] does with the camera's own rotation, for a candidate
+    /// one.
+    pub fn rotate(r: &[f64; 9], v: [f64; 3]) -> [f64; 3] {
         [
             r[0] * v[0] + r[1] * v[1] + r[2] * v[2],
             r[3] * v[0] + r[4] * v[1] + r[5] * v[2],

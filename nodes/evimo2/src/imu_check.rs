@@ -10,7 +10,7 @@
 //! convention and one offset) is taken from the trajectory; no per-frame ground truth reaches
 //! the method.
 
-use evseg_schemas::{CameraMotion, ImuSample};
+use evseg_schemas::{CameraInfo, CameraMotion, ImuSample};
 use nalgebra::{Quaternion, UnitQuaternion};
 
 /// Shortest interval over which the trajectory is differentiated, seconds: at the Vicon's
@@ -95,14 +95,14 @@ pub fn trajectory_rates(poses: &[CameraMotion]) -> Vec<TrajectoryRate> {
 
 /// The agreement of the IMU samples `imu` (time-sorted, IMU frame and clock), mapped with
 /// `imu_to_camera` and shifted by `time_offset_s`, with the trajectory `rates`: each interval's
-/// rate against the mean of the IMU samples inside it. `None` when no interval holds a sample.
+/// rate against the mean of the IMU samples inside it (samples with a non-finite reading left
+/// out). `None` when no interval holds a usable sample.
 pub fn agreement(
     rates: &[TrajectoryRate],
     imu: &[ImuSample],
     imu_to_camera: &[f64; 9],
     time_offset_s: f64,
 ) -> Option<ImuAgreement> {
-    let m = imu_to_camera;
     let (mut err2, mut rate2, mut n) = (0.0, 0.0, 0usize);
     for r in rates {
         let start = imu.partition_point(|s| s.t + time_offset_s < r.t0);
@@ -110,13 +110,22 @@ pub fn agreement(
         if end <= start {
             continue;
         }
-        let mut mean = [0.0; 3];
-        for s in &imu[start..end] {
-            for (k, slot) in mean.iter_mut().enumerate() {
-                *slot += m[3 * k] * s.gyro[0] + m[3 * k + 1] * s.gyro[1] + m[3 * k + 2] * s.gyro[2];
+        // Non-finite gyro readings (a corrupt sample) are left out of the mean rather than
+        // making the whole interval unusable.
+        let (mut mean, mut count) = ([0.0; 3], 0.0);
+        for s in imu[start..end]
+            .iter()
+            .filter(|s| s.gyro.iter().all(|v| v.is_finite()))
+        {
+            let w = CameraInfo::rotate(imu_to_camera, s.gyro);
+            for (slot, wk) in mean.iter_mut().zip(w) {
+                *slot += wk;
             }
+            count += 1.0;
         }
-        let count = (end - start) as f64;
+        if count == 0.0 {
+            continue;
+        }
         let d: f64 = (0..3).map(|k| (r.rate[k] - mean[k] / count).powi(2)).sum();
         if !d.is_finite() {
             continue;
@@ -260,9 +269,9 @@ pub fn check(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::EVIMO2_IMU_TO_CAMERA as EVIMO2;
 
-    const EVIMO2: [f64; 9] = [0.0, 1.0, 0.0, -1.0, 0.0, 0.0, 0.0, 0.0, 1.0];
-    const IDENTITY: [f64; 9] = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0];
+    const IDENTITY: [f64; 9] = CameraInfo::IDENTITY;
 
     /// The camera's rate at time `t`, rad/s, camera frame: turning about every axis, varying.
     fn rate(t: f64) -> [f64; 3] {
@@ -358,6 +367,46 @@ mod tests {
             .collect();
         assert_eq!(
             check(&still_poses, &still, &EVIMO2, 0.0, &p),
+            ImuVerdict::Inconclusive
+        );
+    }
+
+    #[test]
+    fn malformed_poses_and_samples_are_skipped_without_a_panic() {
+        let (mut poses, mut imu) = sequence(&EVIMO2, -0.02, 4.0);
+        // Zero and non-finite quaternions, non-finite gyro readings, a pose out of order.
+        for (k, p) in poses.iter_mut().enumerate() {
+            match k % 17 {
+                3 => p.orientation = [0.0; 4],
+                7 => p.orientation = [f64::NAN, 0.0, 0.0, 1.0],
+                11 => p.t = -1.0,
+                _ => {}
+            }
+        }
+        for (k, s) in imu.iter_mut().enumerate() {
+            if k % 13 == 5 {
+                s.gyro = [f64::NAN, f64::INFINITY, 0.0];
+            }
+        }
+        let rates = trajectory_rates(&poses);
+        assert!(rates.iter().all(|r| r.rate.iter().all(|v| v.is_finite())));
+        // Intervals holding a bad gyro reading are left out; the rest still agree.
+        match check(&poses, &imu, &EVIMO2, -0.02, &ImuCheckParams::default()) {
+            ImuVerdict::Consistent(a) => {
+                assert!(a.rms_error_rad_s.is_finite() && a.relative_error() < 0.1, "{a:?}")
+            }
+            other => panic!("expected consistent, got {other:?}"),
+        }
+        // Every sample unusable: nothing to conclude.
+        let bad: Vec<ImuSample> = imu
+            .iter()
+            .map(|s| ImuSample {
+                gyro: [f64::NAN; 3],
+                ..*s
+            })
+            .collect();
+        assert_eq!(
+            check(&poses, &bad, &EVIMO2, -0.02, &ImuCheckParams::default()),
             ImuVerdict::Inconclusive
         );
     }

@@ -205,3 +205,20 @@ impl EventSource for Evimo2Source {
         true
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::ImuCheckMode;
+
+    #[test]
+    fn an_unknown_imu_check_mode_is_an_error_naming_the_choices() {
+        assert_eq!("auto".parse::<ImuCheckMode>(), Ok(ImuCheckMode::Auto));
+        assert_eq!("warn".parse::<ImuCheckMode>(), Ok(ImuCheckMode::Warn));
+        assert_eq!("off".parse::<ImuCheckMode>(), Ok(ImuCheckMode::Off));
+        let err = "Auto!".parse::<ImuCheckMode>().unwrap_err();
+        assert!(
+            err.contains("off, warn or auto") && err.contains("Auto!"),
+            "{err}"
+        );
+    }
+}

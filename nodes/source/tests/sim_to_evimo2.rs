@@ -117,7 +117,7 @@ fn the_imu_check_finds_a_wrong_axis_convention() {
         ImuVerdict::Consistent(a) => assert!(a.relative_error() < 0.3, "{a:?}"),
         other => panic!("the simulator's own mapping should agree: {other:?}"),
     }
-    let identity = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0];
+    let identity = evseg_schemas::CameraInfo::IDENTITY;
     assert_ne!(
         sim_map, identity,
         "the test needs an IMU frame other than the camera's"
