@@ -37,7 +37,7 @@ pub mod map;
 pub mod params;
 pub mod warp;
 
-use evseg_geometry::cache::{PREFETCH_AHEAD, prefetch};
+use evseg_geometry::cache::prefetch_referent_ahead;
 use evseg_geometry::{
     EgomotionParams, FlowSample, RotationRate, TableCache, estimate_background_translation,
     estimate_translation, flow_direction, flow_samples,
@@ -401,9 +401,7 @@ fn cluster_fit(
     let rho = t.map(|t| inverse_depth(members, t));
     let (mut sum_r, mut sum_n) = (0.0, 0.0);
     for (k, s) in members.iter().enumerate() {
-        if let Some(&ahead) = members.get(k + PREFETCH_AHEAD) {
-            prefetch(ahead);
-        }
+        prefetch_referent_ahead(members, k);
         let predicted = match (t, rho) {
             (Some(t), Some(rho)) => rho * dot(s.x_row(), t),
             _ => 0.0,
@@ -582,9 +580,7 @@ fn explain(
 fn inverse_depth(members: &[&FlowSample], t: [f64; 3]) -> f64 {
     let (mut num, mut den) = (0.0, 0.0);
     for (k, s) in members.iter().enumerate() {
-        if let Some(&ahead) = members.get(k + PREFETCH_AHEAD) {
-            prefetch(ahead);
-        }
+        prefetch_referent_ahead(members, k);
         let q = dot(s.x_row(), t);
         num += s.n_derot * q;
         den += q * q;

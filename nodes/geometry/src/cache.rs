@@ -20,3 +20,12 @@ pub fn prefetch<T>(v: &T) {
     #[cfg(not(target_arch = "x86_64"))]
     let _ = v;
 }
+
+/// Prefetches what `items[index + PREFETCH_AHEAD]` refers to (nothing past the end): for a loop
+/// over references to samples scattered in memory, called with the index being processed.
+#[inline(always)]
+pub fn prefetch_referent_ahead<T>(items: &[&T], index: usize) {
+    if let Some(&ahead) = items.get(index + PREFETCH_AHEAD) {
+        prefetch(ahead);
+    }
+}
