@@ -463,11 +463,26 @@ impl Outputs {
     /// bench`: the planar segmenter, the feedback consumer of the background merger's last
     /// slice (which it never needs), exited after its final progress was dropped, and the
     /// merger failed the run with "consumer gone".
+    ///
+    /// A feedback consumer is not kept waiting for (a consumer that may be restarted gets
+    /// [`CONSUMER_GRACE`] to come back): it does not linger for its feedback producers (they are
+    /// downstream of it and wait here for it, see `Running::linger_until_producers_left`), so
+    /// leaving right after its one final progress is its normal way to end, and feedback frame
+    /// `k` serves its slice `k + 1`, so the last frame is one it never consumes. Such a consumer
+    /// whose token is gone with at most that last frame unconsumed counts as finished at once.
+    /// Seen in `evseg bench pipeline` about once in 30 runs: the planar segmenter's single
+    /// final progress was lost as it closed its session, and the background merger waited out
+    /// the grace time, 3.6 s of work taking 14.7 s.
     fn wait_consumers_done(&self, repeat_own_done: impl Fn()) -> Result<(), RuntimeError> {
-        let mut list: Vec<(String, String)> = self
+        // (consumer node, consumer port, feedback, frames published on the port)
+        let mut list: Vec<(String, String, bool, u64)> = self
             .ports
             .iter()
-            .flat_map(|(_, p)| p.consumers.iter().map(|(c, cp, _)| (c.clone(), cp.clone())))
+            .flat_map(|(_, p)| {
+                p.consumers
+                    .iter()
+                    .map(|(c, cp, fb)| (c.clone(), cp.clone(), *fb, p.sent))
+            })
             .collect();
         let mut exited: Vec<String> = Vec::new();
         let start = Instant::now();
@@ -475,16 +490,41 @@ impl Outputs {
         while start.elapsed() < DRAIN_TIMEOUT {
             // No watch list: a consumer that left is handled below, whether or not some of its
             // final progress arrived (the book's own "gone" test skips consumers with any).
-            ok = self
-                .book
-                .wait_until(&self.node, &[], Some(RESEND_AFTER), |consumed, _| {
-                    list.iter().all(|k| consumed.get(k).copied() == Some(DONE))
+            // Whether it came true is checked again below, outside the book's lock.
+            self.book
+                .wait_until(&self.node, &[], Some(RESEND_AFTER), |consumed, alive| {
+                    list.iter().all(|(c, cp, feedback, sent)| {
+                        let n = consumed.get(&(c.clone(), cp.clone())).copied().unwrap_or(0);
+                        n == DONE || (*feedback && feedback_consumer_done(n, *sent, alive.contains(c)))
+                    })
                 })?;
+            let mut i = 0;
+            while let Some((c, cp, feedback, sent)) = list.get(i) {
+                let n = self.book.consumed(c, cp);
+                if n != DONE && *feedback && feedback_consumer_done(n, *sent, self.book.is_alive(c)) {
+                    tracing::info!(
+                        node = %self.node,
+                        consumer = %c,
+                        port = %cp,
+                        "feedback consumer left with only the last frame unconsumed (one it never \
+                         needs) and its final progress not arrived: counted as finished"
+                    );
+                    let consumer = c.clone();
+                    list.remove(i);
+                    if !list.iter().any(|(c, ..)| *c == consumer) {
+                        exited.push(consumer);
+                    }
+                } else {
+                    i += 1;
+                }
+            }
+            // Again outside the lock: a consumer that came back in between is waited for.
+            ok = list.iter().all(|(c, cp, ..)| self.book.consumed(c, cp) == DONE);
             if ok {
                 break;
             }
             let mut left: Vec<String> = Vec::new();
-            for (c, cp) in &list {
+            for (c, cp, ..) in &list {
                 if self.book.consumed(c, cp) != DONE && self.book.has_left(c) && !left.contains(c) {
                     left.push(c.clone());
                 }
@@ -496,7 +536,7 @@ impl Outputs {
                     "consumer exited before its final progress arrived; counted as finished \
                      (its exit status tells whether it ended well)"
                 );
-                list.retain(|(c, _)| *c != consumer);
+                list.retain(|(c, ..)| *c != consumer);
                 exited.push(consumer);
             }
             repeat_own_done();
@@ -534,6 +574,14 @@ impl OutPort {
             .wait()
             .map_err(|e| RuntimeError::Zenoh(e.to_string()))
     }
+}
+
+/// True when a feedback consumer that has consumed `consumed` of the `sent` frames of a
+/// finished producer's port can be counted as finished without its final progress: it has
+/// left (`alive` false) and the only frame it may not have consumed is the last, which a
+/// feedback consumer never needs (feedback frame `k` serves its slice `k + 1`).
+fn feedback_consumer_done(consumed: u64, sent: u64, alive: bool) -> bool {
+    !alive && consumed.saturating_add(1) >= sent
 }
 
 /// A heap copy of a frame to publish again. Never the same buffer: a frame in shared memory

@@ -322,6 +322,12 @@ impl CreditBook {
         lock(&self.state).has_left(node)
     }
 
+    /// True when `node`'s liveliness token is present now (false before it first appeared, and
+    /// at once, with no [`CONSUMER_GRACE`], after it closed its session or lost its link).
+    pub fn is_alive(&self, node: &str) -> bool {
+        lock(&self.state).alive.contains(node)
+    }
+
     /// Messages consumed by `node`'s `port` so far (0 when unknown, [`DONE`] when finished).
     pub fn consumed(&self, node: &str, port: &str) -> u64 {
         lock(&self.state)
