@@ -467,9 +467,16 @@ impl FrameArrayReader {
 
 /// Lazily reads the masks of `dataset_mask.npz` as [`Mask`]s (ids = stored value / 1000, integer
 /// division; 0 = background).
+///
+/// A mask most of whose non-zero pixels are not multiples of 1000 was written with the object
+/// ids themselves (a tool that left out EVIMO2's factor): dividing would turn every object of it
+/// into background and the run would silently have no moving object to score. Such a mask is
+/// read with its values as ids, and counted ([`MaskReader::raw_id_masks`]) so the caller can say
+/// so.
 #[derive(Debug)]
 pub struct MaskReader {
     inner: FrameArrayReader,
+    raw_id_masks: usize,
 }
 
 impl MaskReader {
@@ -483,6 +490,12 @@ impl MaskReader {
         self.inner.len()
     }
 
+    /// Masks read so far whose values were taken as object ids because most of their non-zero
+    /// values were not multiples of [`MASK_ID_SCALE`] (see the type's documentation).
+    pub fn raw_id_masks(&self) -> usize {
+        self.raw_id_masks
+    }
+
     /// True when there are no masks.
     pub fn is_empty(&self) -> bool {
         self.inner.is_empty()
@@ -491,8 +504,23 @@ impl MaskReader {
     /// Reads mask `index` (position in [`Self::entries`]).
     pub fn read(&mut self, index: usize) -> Result<Mask> {
         let (entry, mut values) = self.inner.read_raw(index)?;
-        for v in &mut values {
-            *v /= MASK_ID_SCALE;
+        // Most non-zero pixels decide, so a few stray values do not turn an EVIMO2 mask around.
+        let (scaled, raw) = values
+            .iter()
+            .filter(|&&v| v != 0)
+            .fold((0usize, 0usize), |(s, r), v| {
+                if v % MASK_ID_SCALE == 0 {
+                    (s + 1, r)
+                } else {
+                    (s, r + 1)
+                }
+            });
+        if raw <= scaled {
+            for v in &mut values {
+                *v /= MASK_ID_SCALE;
+            }
+        } else {
+            self.raw_id_masks += 1;
         }
         Ok(Mask {
             t: entry.t,
@@ -612,7 +640,10 @@ impl Sequence {
             self.camera.width,
             self.camera.height,
         )?;
-        Ok(MaskReader { inner })
+        Ok(MaskReader {
+            inner,
+            raw_id_masks: 0,
+        })
     }
 
     /// Opens `dataset_depth.npz`, or `None` when the folder has none.

@@ -409,3 +409,68 @@ fn we_read_what_numpy_writes() {
         (&b.camera, &b.imu, &b.camera_poses, &b.frames)
     );
 }
+
+/// A folder whose masks hold the object ids themselves (a tool that left out EVIMO2's factor of
+/// 1000, written here with numpy) is read with the same ids, and the masks so read are counted:
+/// dividing by 1000 would have made every object background, and the run would have had no
+/// moving object to score without saying why.
+#[test]
+fn masks_written_with_raw_object_ids_keep_their_objects() {
+    let Some(py) = python() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let folder = dir.path().to_str().unwrap();
+    run(&py, WRITE_SCRIPT, &[folder, "pickle"]);
+    run(
+        &py,
+        r#"
+import sys, numpy as np
+d = sys.argv[1]
+z = dict(np.load(d + '/dataset_mask.npz'))
+np.savez(d + '/dataset_mask.npz', **{k: (v // 1000).astype(np.uint16) for k, v in z.items()})
+"#,
+        &[folder],
+    );
+    let seq = Sequence::open(dir.path(), &ReadOptions::default()).unwrap();
+    let mut masks = seq.masks().unwrap();
+    assert_eq!(masks.raw_id_masks(), 0);
+    for k in 0..masks.len() {
+        let mask = masks.read(k).unwrap();
+        assert_eq!(mask.ids.iter().filter(|&&v| v == 5).count(), 200, "mask {k}");
+        assert_eq!(
+            mask.ids.iter().filter(|&&v| v == 23).count(),
+            if k == 1 { 0 } else { 3000 },
+            "mask {k}"
+        );
+    }
+    assert_eq!(masks.raw_id_masks(), 3);
+}
+
+/// A few stray values that are not multiples of 1000 do not turn an EVIMO2 mask into one read
+/// with raw ids: most non-zero pixels decide.
+#[test]
+fn stray_mask_values_do_not_change_the_id_scale() {
+    let Some(py) = python() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let folder = dir.path().to_str().unwrap();
+    run(&py, WRITE_SCRIPT, &[folder, "pickle"]);
+    run(
+        &py,
+        r#"
+import sys, numpy as np
+d = sys.argv[1]
+z = dict(np.load(d + '/dataset_mask.npz'))
+for v in z.values():
+    v[0, :3] = 7
+np.savez(d + '/dataset_mask.npz', **z)
+"#,
+        &[folder],
+    );
+    let seq = Sequence::open(dir.path(), &ReadOptions::default()).unwrap();
+    let mut masks = seq.masks().unwrap();
+    for k in 0..masks.len() {
+        let mask = masks.read(k).unwrap();
+        assert_eq!(mask.ids.iter().filter(|&&v| v == 5).count(), 200, "mask {k}");
+        assert_eq!(mask.ids[..3], [0, 0, 0], "mask {k}: 7 / 1000");
+    }
+    assert_eq!(masks.raw_id_masks(), 0);
+}

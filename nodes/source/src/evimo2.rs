@@ -177,16 +177,33 @@ impl EventSource for Evimo2Source {
         let mut masks = Vec::new();
         if let Some(reader) = self.masks.as_mut() {
             while self.next_mask < reader.len() && reader.entries()[self.next_mask].t < t_end_eff {
+                let raw_before = reader.raw_id_masks();
                 masks.push(
                     reader
                         .read(self.next_mask)
                         .map_err(|e| SourceError::Read(e.to_string()))?,
                 );
+                if raw_before == 0 && reader.raw_id_masks() == 1 {
+                    tracing::warn!(
+                        mask = self.next_mask,
+                        "dataset_mask.npz: most values of a mask are not multiples of 1000 (EVIMO2 \
+                         stores object id * 1000); its values are taken as the object ids themselves, \
+                         as are those of every such mask (their count is logged at the end)"
+                    );
+                }
                 self.next_mask += 1;
             }
         }
         if exhausted {
             self.done = true;
+            if let Some(raw) = self.masks.as_ref().map(MaskReader::raw_id_masks)
+                && raw > 0
+            {
+                tracing::warn!(
+                    masks = raw,
+                    "dataset_mask.npz: masks read with their values as object ids (not id * 1000)"
+                );
+            }
         }
         let truth = Truth {
             masks,
