@@ -452,12 +452,33 @@ pub fn decode_u16(dtype: DType, big: bool, bytes: &[u8]) -> std::result::Result<
     decode_narrow(dtype, big, bytes)
 }
 
-/// Decodes `bytes` as u8 values. Fast path for `u1`/bool; other integer types are range-checked.
-pub fn decode_u8(dtype: DType, big: bool, bytes: &[u8]) -> std::result::Result<Vec<u8>, Option<usize>> {
+/// Decodes `bytes` as event polarities, 1 = ON (value > 0) and 0 = OFF (value <= 0), from a
+/// bool, integer or float dtype: EVIMO2 stores 0 / 1 as uint8, other tools write -1 / +1 as
+/// signed integers or floats. `Err(Some(i))` names the first NaN, `Err(None)` means a dtype that
+/// is not numeric.
+pub fn decode_polarity(dtype: DType, big: bool, bytes: &[u8]) -> std::result::Result<Vec<u8>, Option<usize>> {
     if matches!(dtype, DType::U1 | DType::Bool) {
-        return Ok(bytes.to_vec());
+        return Ok(bytes.iter().map(|&b| u8::from(b != 0)).collect());
     }
-    decode_narrow(dtype, big, bytes)
+    let mut wide = Vec::new();
+    if decode_int_into(dtype, big, bytes, &mut wide) {
+        return Ok(wide.into_iter().map(|v| u8::from(v > 0)).collect());
+    }
+    let mut floats = Vec::new();
+    if !matches!(dtype, DType::F4 | DType::F8) || !decode_f64_into(dtype, big, bytes, &mut floats) {
+        return Err(None);
+    }
+    floats
+        .into_iter()
+        .enumerate()
+        .map(|(i, v)| {
+            if v.is_nan() {
+                Err(Some(i))
+            } else {
+                Ok(u8::from(v > 0.0))
+            }
+        })
+        .collect()
 }
 
 fn decode_narrow<T: TryFrom<i128>>(
@@ -572,6 +593,21 @@ mod tests {
         let bytes: Vec<u8> = [5i64, 70000].iter().flat_map(|v| v.to_le_bytes()).collect();
         assert_eq!(decode_u16(DType::I8, false, &bytes), Err(Some(1)));
         assert_eq!(decode_u16(DType::I8, false, &bytes[..8]), Ok(vec![5]));
-        assert_eq!(decode_u8(DType::F8, false, &bytes), Err(None));
+    }
+
+    #[test]
+    fn polarities_of_any_numeric_type_become_on_off() {
+        assert_eq!(decode_polarity(DType::U1, false, &[0, 1, 2]), Ok(vec![0, 1, 1]));
+        let signed: Vec<u8> = [-1i8, 1, 0].iter().map(|v| *v as u8).collect();
+        assert_eq!(decode_polarity(DType::I1, false, &signed), Ok(vec![0, 1, 0]));
+        let big: Vec<u8> = [-1i32, 1].iter().flat_map(|v| v.to_be_bytes()).collect();
+        assert_eq!(decode_polarity(DType::I4, true, &big), Ok(vec![0, 1]));
+        let floats: Vec<u8> = [-1.0f64, 1.0, f64::NAN]
+            .iter()
+            .flat_map(|v| v.to_le_bytes())
+            .collect();
+        assert_eq!(decode_polarity(DType::F8, false, &floats[..16]), Ok(vec![0, 1]));
+        assert_eq!(decode_polarity(DType::F8, false, &floats), Err(Some(2)));
+        assert_eq!(decode_polarity(DType::Unicode(1), false, &[0; 4]), Err(None));
     }
 }

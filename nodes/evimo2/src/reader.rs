@@ -170,8 +170,8 @@ impl EventReader {
         let p = Column::open(
             &folder.join(EVENTS_P),
             1,
-            "an integer or bool type",
-            DType::is_integer,
+            "a bool, integer or float type",
+            |d| d.is_integer() || is_float(d),
         )?;
         if t.rows != xy.rows || t.rows != p.rows {
             return Err(Evimo2Error::invalid(
@@ -281,14 +281,23 @@ impl EventReader {
         events.x.extend(xy.iter().step_by(2));
         events.y.extend(xy.iter().skip(1).step_by(2));
         self.p.read_rows(self.pos, count, &mut buf)?;
-        let p = npy::decode_u8(self.p.header.dtype, self.p.header.big_endian, &buf).map_err(|bad| {
-            let row = self.pos + bad.map_or(0, |i| i as u64);
-            Evimo2Error::format(
-                &self.p.name,
-                self.p.header.data_offset + row * self.p.row_bytes as u64,
-                format!("event {row}: polarity outside 0..=255"),
-            )
-        })?;
+        let p =
+            npy::decode_polarity(self.p.header.dtype, self.p.header.big_endian, &buf).map_err(
+                |bad| match bad {
+                    Some(i) => {
+                        let row = self.pos + i as u64;
+                        Evimo2Error::format(
+                            &self.p.name,
+                            self.p.header.data_offset + row * self.p.row_bytes as u64,
+                            format!("event {row}: polarity is NaN"),
+                        )
+                    }
+                    None => Evimo2Error::invalid(
+                        &self.p.name,
+                        format!("dtype '{}' is not a numeric type", self.p.header.descr),
+                    ),
+                },
+            )?;
         events.p = p;
         self.buf = buf;
         self.t_head += count;
