@@ -167,12 +167,9 @@ impl EventReader {
     pub fn open(folder: &Path) -> Result<Self> {
         let t = Column::open(&folder.join(EVENTS_T), 1, "float64/float32", is_float)?;
         let xy = Column::open(&folder.join(EVENTS_XY), 2, "an integer type", DType::is_integer)?;
-        let p = Column::open(
-            &folder.join(EVENTS_P),
-            1,
-            "a bool, integer or float type",
-            |d| d.is_integer() || is_float(d),
-        )?;
+        let p = Column::open(&folder.join(EVENTS_P), 1, "a bool, integer or float type", |d| {
+            d.is_integer() || is_float(d)
+        })?;
         if t.rows != xy.rows || t.rows != p.rows {
             return Err(Evimo2Error::invalid(
                 format!("{}, {}, {}", t.name, xy.name, p.name),
