@@ -154,6 +154,17 @@ fn take_until<T: Clone>(items: &[T], next: &mut usize, t_end: f64, t: impl Fn(&T
 }
 
 impl EventSource for Evimo2Source {
+    fn counters(&self) -> Vec<(&'static str, u64)> {
+        vec![
+            ("events_reordered", self.reordered),
+            ("times_not_increasing", self.events.non_monotonic()),
+            (
+                "masks_read_with_raw_ids",
+                self.masks.as_ref().map_or(0, |m| m.raw_id_masks() as u64),
+            ),
+        ]
+    }
+
     fn camera(&self) -> CameraInfo {
         self.camera.clone()
     }
@@ -188,7 +199,7 @@ impl EventSource for Evimo2Source {
                         mask = self.next_mask,
                         "dataset_mask.npz: most values of a mask are not multiples of 1000 (EVIMO2 \
                          stores object id * 1000); its values are taken as the object ids themselves, \
-                         as are those of every such mask (their count is logged at the end)"
+                         as are those of every such mask (counted: masks_read_with_raw_ids)"
                     );
                 }
                 self.next_mask += 1;
@@ -196,14 +207,6 @@ impl EventSource for Evimo2Source {
         }
         if exhausted {
             self.done = true;
-            if let Some(raw) = self.masks.as_ref().map(MaskReader::raw_id_masks)
-                && raw > 0
-            {
-                tracing::warn!(
-                    masks = raw,
-                    "dataset_mask.npz: masks read with their values as object ids (not id * 1000)"
-                );
-            }
         }
         let truth = Truth {
             masks,

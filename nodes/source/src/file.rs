@@ -58,6 +58,19 @@ impl EventSource for FileSource {
         self.camera.clone()
     }
 
+    fn counters(&self) -> Vec<(&'static str, u64)> {
+        let s = self.decoder.stats();
+        vec![
+            ("events_reordered", self.reordered),
+            ("time_regressions_raised", s.time_regressions),
+            ("out_of_range_dropped", s.out_of_range),
+            ("words_before_time_base_skipped", s.words_before_time_base),
+            ("trigger_words_skipped", s.triggers),
+            ("exposure_events_skipped", s.exposure_events),
+            ("packets_skipped", s.skipped_packets),
+        ]
+    }
+
     fn next_batch(&mut self, t_end: f64) -> Result<Option<Batch>, SourceError> {
         let limit = self.seconds.unwrap_or(f64::INFINITY);
         let t_end = t_end.min(limit);

@@ -31,6 +31,14 @@ pub trait EventSource: Send {
 
     /// True when the source provides ground truth.
     fn has_truth(&self) -> bool;
+
+    /// What the source did to its input so far that a user should know of, as (name, count):
+    /// events sorted back into time order, samples skipped or repaired by a decoder, masks read
+    /// in another convention. The node logs the non-zero ones and writes all of them to its
+    /// summary file when the stream ends. Empty for sources that change nothing.
+    fn counters(&self) -> Vec<(&'static str, u64)> {
+        Vec::new()
+    }
 }
 
 /// Why a source cannot continue.

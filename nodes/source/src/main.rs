@@ -32,6 +32,8 @@ struct SourceSummary {
     digest: EventDigest,
     /// Wall clock of the first publication, ns since the Unix epoch (throughput figures).
     first_publish_ns: Option<u64>,
+    /// [`evseg_source::EventSource::counters`] at the end of the stream.
+    counters: std::collections::BTreeMap<&'static str, u64>,
 }
 
 impl Source for SourceNode {
@@ -39,6 +41,15 @@ impl Source for SourceNode {
         let t_start = self.seq as f64 * self.batch_s;
         let t_end = t_start + self.batch_s;
         let Some(batch) = self.source.next_batch(t_end)? else {
+            self.summary.counters = self.source.counters().into_iter().collect();
+            let changed: Vec<_> = self.summary.counters.iter().filter(|(_, n)| **n > 0).collect();
+            if !changed.is_empty() {
+                tracing::warn!(
+                    counters = ?changed,
+                    summary = %self.summary_path.display(),
+                    "the input was not used as it stands (counts also in the summary file)"
+                );
+            }
             let json = serde_json::to_string_pretty(&self.summary)?;
             std::fs::write(&self.summary_path, json)
                 .map_err(|e| format!("cannot write {}: {e}", self.summary_path.display()))?;
@@ -174,6 +185,7 @@ fn main() -> ExitCode {
             summary: SourceSummary {
                 digest: EventDigest::default(),
                 first_publish_ns: None,
+                counters: Default::default(),
             },
             summary_path: cfg.run_dir.join(format!("source-{}.json", cfg.node)),
         })

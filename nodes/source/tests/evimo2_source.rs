@@ -139,3 +139,40 @@ fn a_missing_folder_is_named() {
     .unwrap();
     assert!(err.to_string().contains("/nonexistent/seq"), "{err}");
 }
+
+/// A folder with a few events out of time order: the source sorts them back and says how many
+/// (its counters, which the node logs and writes to its summary), instead of changing the
+/// stream without a word; a clean folder counts nothing.
+#[test]
+fn events_sorted_back_into_order_are_counted() {
+    let clean = tempfile::tempdir().unwrap();
+    let mut data = small_sequence();
+    write_sequence(clean.path(), &data).unwrap();
+    let drain = |src: &mut Evimo2Source| {
+        let mut k = 0;
+        while src.next_batch((k + 1) as f64 * 0.01).unwrap().is_some() {
+            k += 1;
+            assert!(k < 1000, "source never ends");
+        }
+    };
+    let mut src = Evimo2Source::open(clean.path(), &Default::default(), None).unwrap();
+    drain(&mut src);
+    assert!(
+        src.counters().iter().all(|(_, n)| *n == 0),
+        "{:?}",
+        src.counters()
+    );
+
+    // Swap the times of three pairs of neighbouring events within one 10 ms batch.
+    for i in [1000usize, 2000, 3000] {
+        data.events.t.swap(i, i + 1);
+    }
+    let shuffled = tempfile::tempdir().unwrap();
+    write_sequence(shuffled.path(), &data).unwrap();
+    let mut src = Evimo2Source::open(shuffled.path(), &Default::default(), None).unwrap();
+    drain(&mut src);
+    let counters: std::collections::HashMap<_, _> = src.counters().into_iter().collect();
+    assert_eq!(counters["events_reordered"], 3, "{counters:?}");
+    assert_eq!(counters["times_not_increasing"], 3, "{counters:?}");
+    assert_eq!(counters["masks_read_with_raw_ids"], 0, "{counters:?}");
+}
