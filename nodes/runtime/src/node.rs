@@ -625,13 +625,40 @@ fn parse_cli() -> Result<Cli, RuntimeError> {
     }
 }
 
+/// The node's log filter (`RUST_LOG`, default `info`), reloadable so that the session's
+/// teardown can be quietened ([`quieten_zenoh_teardown`]).
+static LOG_FILTER: std::sync::OnceLock<(
+    String,
+    tracing_subscriber::reload::Handle<tracing_subscriber::EnvFilter, tracing_subscriber::Registry>,
+)> = std::sync::OnceLock::new();
+
 fn init_tracing() {
-    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+    use tracing_subscriber::layer::SubscriberExt;
+    use tracing_subscriber::util::SubscriberInitExt;
+    let directives = std::env::var("RUST_LOG").unwrap_or_else(|_| "info".into());
+    let filter = tracing_subscriber::EnvFilter::try_new(&directives)
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
-    let _ = tracing_subscriber::fmt()
-        .with_env_filter(filter)
-        .with_writer(std::io::stderr)
+    let (filter, handle) = tracing_subscriber::reload::Layer::new(filter);
+    let initialised = tracing_subscriber::registry()
+        .with(filter)
+        .with(tracing_subscriber::fmt::layer().with_writer(std::io::stderr))
         .try_init();
+    if initialised.is_ok() {
+        let _ = LOG_FILTER.set((directives, handle));
+    }
+}
+
+/// Turns off the log of Zenoh's session module before the node closes its session: messages
+/// that arrive while it closes (other nodes repeating their final progress until this one is
+/// gone) are logged there as errors ("Received Data for unknown expr_id"), which said nothing
+/// about the run and made finished runs' logs look failed.
+fn quieten_zenoh_teardown() {
+    if let Some((directives, handle)) = LOG_FILTER.get()
+        && let Ok(quiet) =
+            tracing_subscriber::EnvFilter::try_new(format!("{directives},zenoh::api::session=off"))
+    {
+        let _ = handle.reload(quiet);
+    }
 }
 
 /// How long a finishing node waits for the launcher's stats subscriber to be known before its
@@ -749,6 +776,7 @@ impl Running {
         })?;
         self.publish_final_stats();
         self.linger_until_producers_left(done);
+        quieten_zenoh_teardown();
         let _ = self.session.close().wait();
         Ok(())
     }
