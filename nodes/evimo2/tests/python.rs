@@ -410,6 +410,17 @@ fn we_read_what_numpy_writes() {
     );
 }
 
+/// The numpy-written folder of [`WRITE_SCRIPT`] (pickled meta) after `edit`, a Python
+/// script given the folder, rewrote its masks; the folder (kept alive) and its sequence.
+fn folder_with_edited_masks(py: &str, edit: &str) -> (tempfile::TempDir, Sequence) {
+    let dir = tempfile::tempdir().unwrap();
+    let folder = dir.path().to_str().unwrap();
+    run(py, WRITE_SCRIPT, &[folder, "pickle"]);
+    run(py, edit, &[folder]);
+    let seq = Sequence::open(dir.path(), &ReadOptions::default()).unwrap();
+    (dir, seq)
+}
+
 /// A folder whose masks hold the object ids themselves (a tool that left out EVIMO2's factor of
 /// 1000, written here with numpy) is read with the same ids, and the masks so read are counted:
 /// dividing by 1000 would have made every object background, and the run would have had no
@@ -417,10 +428,7 @@ fn we_read_what_numpy_writes() {
 #[test]
 fn masks_written_with_raw_object_ids_keep_their_objects() {
     let Some(py) = python() else { return };
-    let dir = tempfile::tempdir().unwrap();
-    let folder = dir.path().to_str().unwrap();
-    run(&py, WRITE_SCRIPT, &[folder, "pickle"]);
-    run(
+    let (_dir, seq) = folder_with_edited_masks(
         &py,
         r#"
 import sys, numpy as np
@@ -428,9 +436,7 @@ d = sys.argv[1]
 z = dict(np.load(d + '/dataset_mask.npz'))
 np.savez(d + '/dataset_mask.npz', **{k: (v // 1000).astype(np.uint16) for k, v in z.items()})
 "#,
-        &[folder],
     );
-    let seq = Sequence::open(dir.path(), &ReadOptions::default()).unwrap();
     let mut masks = seq.masks().unwrap();
     assert_eq!(masks.raw_id_masks(), 0);
     for k in 0..masks.len() {
@@ -450,10 +456,7 @@ np.savez(d + '/dataset_mask.npz', **{k: (v // 1000).astype(np.uint16) for k, v i
 #[test]
 fn stray_mask_values_do_not_change_the_id_scale() {
     let Some(py) = python() else { return };
-    let dir = tempfile::tempdir().unwrap();
-    let folder = dir.path().to_str().unwrap();
-    run(&py, WRITE_SCRIPT, &[folder, "pickle"]);
-    run(
+    let (_dir, seq) = folder_with_edited_masks(
         &py,
         r#"
 import sys, numpy as np
@@ -463,9 +466,7 @@ for v in z.values():
     v[0, :3] = 7
 np.savez(d + '/dataset_mask.npz', **z)
 "#,
-        &[folder],
     );
-    let seq = Sequence::open(dir.path(), &ReadOptions::default()).unwrap();
     let mut masks = seq.masks().unwrap();
     for k in 0..masks.len() {
         let mask = masks.read(k).unwrap();
