@@ -64,6 +64,11 @@ pub struct SceneRow {
     /// Id switches of the object with the most (issue 5's target: at most one per object per
     /// sequence); None without moving objects.
     pub max_id_switches: Option<u64>,
+    /// Windows whose ground truth has no moving object.
+    pub static_windows: u64,
+    /// Mean over those windows of the share of their events labelled moving (false alarms),
+    /// 0..1; None without such windows.
+    pub static_share_labelled_moving: Option<f64>,
     /// Run folder.
     pub run: PathBuf,
 }
@@ -91,6 +96,8 @@ fn row_from_report(scene: &str, seed: u64, run: &Path, report: &Value) -> SceneR
         max_id_switches: s["iou_per_object"]
             .as_array()
             .and_then(|objs| objs.iter().filter_map(|o| o["id_switches"].as_u64()).max()),
+        static_windows: s["static_share_labelled_moving"]["windows"].as_u64().unwrap_or(0),
+        static_share_labelled_moving: num(&s["static_share_labelled_moving"]["mean"]),
         run: run.to_path_buf(),
     }
 }
@@ -194,6 +201,23 @@ pub fn markdown(rows: &[SceneRow], graph: &Path) -> String {
         f(mean(rows.iter().map(|r| r.median_direction_error_deg)), 1),
         f(mean(rows.iter().map(|r| r.max_id_switches.map(|n| n as f64))), 1)
     ));
+    let static_rows: Vec<&SceneRow> = rows.iter().filter(|r| r.static_windows > 0).collect();
+    if !static_rows.is_empty() {
+        s.push_str(
+            "\nFalse alarms: in the windows whose ground truth has no moving object, the share of \
+             their events labelled moving (mean over the windows, %).\n\n\
+             | Scene | Seed | windows | labelled moving |\n|---|---:|---:|---:|\n",
+        );
+        for r in &static_rows {
+            s.push_str(&format!(
+                "| {} | {} | {} | {} |\n",
+                r.scene,
+                r.seed,
+                r.static_windows,
+                pct(r.static_share_labelled_moving)
+            ));
+        }
+    }
     s
 }
 
@@ -210,6 +234,7 @@ mod tests {
             "iou_per_object": [{"id_switches": 2}, {"id_switches": 5}]
         }});
         let r = row_from_report("a", 1, Path::new("x"), &report);
+        assert_eq!((r.static_windows, r.static_share_labelled_moving), (0, None));
         assert_eq!(
             (r.iou_mask, r.iou_events, r.iou_per_object),
             (Some(0.5), Some(0.25), Some(0.75))
@@ -217,8 +242,13 @@ mod tests {
         assert_eq!(r.rmse_mps, Some([0.1, 0.2, 0.3]));
         assert_eq!(r.max_id_switches, Some(5));
         let empty: Value = serde_json::json!({"sequence": {"windows_with_moving_object": 0,
-            "iou_mask": {"mean": 0.0}, "egomotion": {"rmse_mps": null, "direction_error": {"median_deg": null}}}});
+            "iou_mask": {"mean": 0.0}, "egomotion": {"rmse_mps": null, "direction_error": {"median_deg": null}},
+            "static_share_labelled_moving": {"mean": 0.0125, "windows": 100}}});
         let e = row_from_report("b", 2, Path::new("y"), &empty);
+        assert_eq!(
+            (e.static_windows, e.static_share_labelled_moving),
+            (100, Some(0.0125))
+        );
         assert_eq!(e.iou_mask, None, "a scene without moving objects has no IoU");
         let md = markdown(&[r, e], Path::new("g.yaml"));
         assert!(
@@ -226,5 +256,7 @@ mod tests {
             "{md}"
         );
         assert!(md.contains("| b | 2 | n/a |"), "{md}");
+        assert!(md.contains("| b | 2 | 100 | 1.25 |"), "{md}");
+        assert!(!md.contains("| a | 1 | 0 |"), "{md}");
     }
 }

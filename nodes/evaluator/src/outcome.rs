@@ -11,6 +11,9 @@ pub enum Skip {
     NoPerEventTruth,
     /// The ground truth of the window contains no moving-object event.
     NoMovingObject,
+    /// The ground truth of the window contains a moving-object event (for the figures of
+    /// windows without one).
+    MovingObjectPresent,
     /// No ground-truth mask has been received near the window.
     NoMask,
     /// No event of the window lies within half a mask period of the nearest mask.
@@ -52,6 +55,7 @@ impl Skip {
         match self {
             Skip::NoPerEventTruth => "no_per_event_truth",
             Skip::NoMovingObject => "no_moving_object",
+            Skip::MovingObjectPresent => "moving_object_present",
             Skip::NoMask => "no_mask",
             Skip::NoEventsNearMask { .. } => "no_events_near_mask",
             Skip::NoPrediction => "no_prediction",

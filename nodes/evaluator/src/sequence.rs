@@ -115,6 +115,9 @@ pub struct SequenceSummary {
     pub egomotion: EgomotionSummary,
     /// Object motion.
     pub object_motion: ObjectMotionSummary,
+    /// False alarms: the mean over windows whose ground truth has no moving object of the share
+    /// of their events labelled moving.
+    pub static_share_labelled_moving: MeanSummary,
 }
 
 #[derive(Debug, Default)]
@@ -206,6 +209,7 @@ pub struct SequenceAccumulator {
     obj_sq_flow: [f64; 2],
     obj_sq_img: [f64; 2],
     obj_skipped: BTreeMap<String, u64>,
+    static_scene: MeanAcc,
 }
 
 impl SequenceAccumulator {
@@ -215,6 +219,8 @@ impl SequenceAccumulator {
         self.moving += r.has_moving_object() as u64;
         self.iou_events.add(&r.iou_events, |s| s.iou);
         self.iou_mask.add(&r.iou_mask, |s| s.iou);
+        self.static_scene
+            .add(&r.static_scene, |s| s.share_labelled_moving);
         if let Outcome::Scored(o) = &r.objects {
             for m in &o.matches {
                 self.per_object.entry(m.object as u32).or_default().add(m);
@@ -316,6 +322,7 @@ impl SequenceAccumulator {
                 rmse_image_velocity_px: rmse(self.obj_sq_img, self.obj_pred),
                 skipped: self.obj_skipped.clone(),
             },
+            static_share_labelled_moving: self.static_scene.summary(),
         }
     }
 }

@@ -80,6 +80,21 @@ pub struct ObjectsScore {
     pub matches: Vec<ObjectMatch>,
 }
 
+/// False alarms of a window whose ground truth has no moving object: how much of the static
+/// scene the method calls moving.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct StaticScore {
+    /// Share of the evaluated events with a non-background label, 0..1.
+    pub share_labelled_moving: f64,
+    /// Events with ground truth in the window (all of them with per-event ids; those near the
+    /// mask with masks).
+    pub events_evaluated: u64,
+    /// Of those, events with a non-background label.
+    pub labelled_moving: u64,
+    /// Which ground truth said the window is static.
+    pub truth: ObjectTruth,
+}
+
 /// Every figure of one slice.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct SliceReport {
@@ -103,6 +118,8 @@ pub struct SliceReport {
     pub egomotion: Outcome<EgomotionScore>,
     /// (e) Object image-plane motion, one entry per matched-or-not ground-truth object.
     pub object_motion: Vec<Outcome<ObjectMotionScore>>,
+    /// (f) False alarms, in windows whose ground truth has no moving object.
+    pub static_scene: Outcome<StaticScore>,
 }
 
 /// Ground-truth id per event as used for the frame plot.
@@ -209,6 +226,11 @@ pub fn evaluate_slice(
         }
     }
 
+    let static_scene = match (&truth_ids, object_truth) {
+        (Some(ids), Some(kind)) => static_score(labels, ids, kind),
+        _ => Outcome::Skipped(lookup.as_ref().err().cloned().unwrap_or(Skip::NoPerEventTruth)),
+    };
+
     let moving = iou_events.scored().is_some()
         || iou_mask.scored().is_some()
         || truth_ids
@@ -225,8 +247,34 @@ pub fn evaluate_slice(
         camera_truth,
         egomotion,
         object_motion,
+        static_scene,
     };
     Ok((report, truth_ids.filter(|_| moving)))
+}
+
+/// [`StaticScore`] of a window from its labels and ground-truth ids ([`UNKNOWN_ID`] = no truth
+/// for that event): skipped when an event's truth is a moving object, or none has truth.
+fn static_score(labels: &[u32], ids: &[u16], truth: ObjectTruth) -> Outcome<StaticScore> {
+    let (mut evaluated, mut moving) = (0u64, 0u64);
+    for (&label, &id) in labels.iter().zip(ids) {
+        if id == UNKNOWN_ID {
+            continue;
+        }
+        if id != 0 {
+            return Outcome::Skipped(Skip::MovingObjectPresent);
+        }
+        evaluated += 1;
+        moving += u64::from(label != 0);
+    }
+    if evaluated == 0 {
+        return Outcome::Skipped(Skip::NoPerEventTruth);
+    }
+    Outcome::Scored(StaticScore {
+        share_labelled_moving: moving as f64 / evaluated as f64,
+        events_evaluated: evaluated,
+        labelled_moving: moving,
+        truth,
+    })
 }
 
 fn metric(name: &str, value: f64) -> Metric {
@@ -255,6 +303,12 @@ impl SliceReport {
             o.matches.iter().map(|m| m.iou).sum::<f64>() / n
         });
         v.push(metric("iou_per_object_mean", obj.unwrap_or(nan)));
+        v.push(metric(
+            "static_share_labelled_moving",
+            self.static_scene
+                .scored()
+                .map_or(nan, |s| s.share_labelled_moving),
+        ));
         let ego = self.egomotion.scored();
         v.push(metric(
             "direction_error_deg",

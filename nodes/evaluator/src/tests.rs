@@ -484,3 +484,52 @@ fn report_folder_has_every_file_and_figure() {
         assert!(info.width >= 300 && info.height >= 200, "{png_name}");
     }
 }
+
+/// Windows whose ground truth has no moving object (windows 0 and 1 of the constructed
+/// sequence) score the share of their events labelled moving: one column of eight labelled
+/// gives 1/8; the windows with the object are skipped for it; all background gives 0.
+#[test]
+fn static_windows_score_the_share_labelled_moving() {
+    let seq = sequence(6, true);
+    let ev = run(&seq, |k, t0, s, _| {
+        let mut r = perfect(k, t0, s, 0.0);
+        if k < 2 {
+            r.label = s.events.x.iter().map(|&x| u32::from(x == 7) * 3).collect();
+        }
+        r
+    });
+    let sum = ev.summary("static");
+    let st = &sum.static_share_labelled_moving;
+    assert_eq!(st.windows, 2);
+    assert_eq!(st.mean, Some(0.125));
+    assert_eq!(st.skipped.get("moving_object_present"), Some(&4));
+    let score = ev.reports()[1].static_scene.scored().unwrap();
+    assert_eq!((score.events_evaluated, score.labelled_moving), (48, 6));
+    assert_eq!(score.truth, slice_eval::ObjectTruth::PerEvent);
+    let m = ev.reports()[1].metrics();
+    let get = |n: &str| m.values.iter().find(|v| v.name == n).unwrap().value;
+    assert_eq!(get("static_share_labelled_moving"), 0.125);
+    // The IoU figures still skip these windows.
+    assert_eq!(sum.iou_events.windows, 4);
+
+    let ev = run(&seq, |_, _, s, _| Tracks {
+        label: vec![0; s.events.len()],
+        tracks: vec![],
+        egomotion: Egomotion::default(),
+    });
+    assert_eq!(ev.summary("bg").static_share_labelled_moving.mean, Some(0.0));
+
+    // With masks only, the events near the window's mask are the ones evaluated.
+    let masks = sequence(6, false);
+    let ev = run(&masks, |k, t0, s, _| {
+        let mut r = perfect(k, t0, s, 0.0);
+        if k < 2 {
+            r.label = vec![5; s.events.len()];
+        }
+        r
+    });
+    let score = ev.reports()[1].static_scene.scored().unwrap();
+    assert_eq!(score.truth, slice_eval::ObjectTruth::Mask);
+    assert!(score.events_evaluated > 0 && score.events_evaluated < 48);
+    assert_eq!(score.share_labelled_moving, 1.0);
+}

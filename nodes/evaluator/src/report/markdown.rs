@@ -63,6 +63,15 @@ pub fn report_markdown(s: &SequenceSummary, images: &[&str]) -> String {
         "\n{} slices evaluated, {} with a moving object in the ground truth.\n",
         s.windows, s.windows_with_moving_object
     );
+    let st = &s.static_share_labelled_moving;
+    if st.windows > 0 {
+        let _ = writeln!(
+            m,
+            "**False alarms.** In the {} windows whose ground truth has no moving object, {} % of the events were labelled moving (mean over the windows).\n",
+            st.windows,
+            num(st.mean.map(|v| 100.0 * v), 2)
+        );
+    }
     let _ = writeln!(m, "**Velocity scaling.** {VELOCITY_SCALING_NOTE}\n");
     m.push_str("**IoU.** *mask*: the paper's protocol (ground-truth mask nearest to the window's middle; events within half a mask period of it, looked up at their pixel). *events*: against per-event object ids (simulator only). Both count only windows whose ground truth has a moving-object event. Per-object IoU uses Hungarian matching of labels to objects.\n\n");
     let _ = writeln!(m, "## Skipped windows\n");
