@@ -52,6 +52,11 @@ const FIGURES: &[(&str, &str, f64)] = &[
         "/sequence/egomotion/direction_error/median_deg",
         1.0,
     ),
+    (
+        "false alarms, static windows (%)",
+        "/sequence/static_share_labelled_moving/mean",
+        100.0,
+    ),
 ];
 
 /// One figure of one sequence in both variants.
