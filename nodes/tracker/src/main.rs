@@ -98,7 +98,12 @@ fn description() -> NodeDescription {
     .param(
         "min_hits",
         d.min_hits,
-        "matches before a track is listed in `tracks` (its events carry its id from the start)",
+        "matches before a track is listed in `tracks` (its events carry its id from the start unless label_tentative is off)",
+    )
+    .param(
+        "label_tentative",
+        d.label_tentative,
+        "label the events of tracks with fewer than min_hits matches with their id (off: background until confirmed)",
     )
     .param(
         "absorb_overlap",
@@ -158,6 +163,7 @@ fn main() -> ExitCode {
             min_events: cfg.param("min_events")?,
             max_missing_s: cfg.param("max_missing_s")?,
             min_hits: cfg.param("min_hits")?,
+            label_tentative: cfg.param("label_tentative")?,
             absorb_overlap: cfg.param("absorb_overlap")?,
             merge_velocity_px_s: cfg.param("merge_velocity_px_s")?,
             merge_gap_px: cfg.param("merge_gap_px")?,
@@ -202,6 +208,7 @@ mod tests {
                 "min_events",
                 "max_missing_s",
                 "min_hits",
+                "label_tentative",
                 "absorb_overlap",
                 "merge_velocity_px_s",
                 "merge_gap_px",
@@ -215,5 +222,6 @@ mod tests {
         let default_of = |n: &str| d.params.iter().find(|p| p.name == n).map(|p| p.default.clone());
         assert_eq!(default_of("gate_chi2"), Some(13.82.into()));
         assert_eq!(default_of("min_hits"), Some(1.into()));
+        assert_eq!(default_of("label_tentative"), Some(true.into()));
     }
 }

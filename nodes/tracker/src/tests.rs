@@ -353,6 +353,39 @@ fn tentative_tracks_label_their_events_but_are_listed_only_when_confirmed() -> R
     Ok(())
 }
 
+/// With `label_tentative` off a track's events are background until it is confirmed, and a
+/// segment seen in one slice only (a phantom) never labels anything.
+#[test]
+fn tentative_tracks_can_leave_their_events_background_until_confirmed() -> Result<(), TrackerError> {
+    let params = TrackerParams {
+        min_hits: 2,
+        label_tentative: false,
+        ..TrackerParams::default()
+    };
+    let mut tracker = Tracker::new(params)?;
+    let obj = |k| Obj {
+        label: 1,
+        centroid: position([200.0, 100.0], [0.0, 150.0], k),
+        events: 60,
+    };
+    let phantom = Obj {
+        label: 2,
+        centroid: [50.0, 50.0],
+        events: 60,
+    };
+    let (n, seg) = frame(&[obj(0), phantom], 10);
+    let out = tracker.update(span(0), n, &seg)?;
+    assert_eq!((id_of(&seg, &out, 1), id_of(&seg, &out, 2)), (0, 0));
+    assert!(out.tracks.is_empty());
+    for k in 1..4 {
+        let (n, seg) = frame(&[obj(k)], 10);
+        let out = tracker.update(span(k), n, &seg)?;
+        assert_eq!(id_of(&seg, &out, 1), 1, "slice {k}");
+        assert_eq!(out.tracks.iter().map(|t| t.id).collect::<Vec<_>>(), vec![1]);
+    }
+    Ok(())
+}
+
 #[test]
 fn egomotion_is_passed_through_and_an_empty_slice_is_fine() -> Result<(), TrackerError> {
     let mut tracker = Tracker::new(TrackerParams::default())?;

@@ -127,7 +127,8 @@ fn bbox_f64(b: [f32; 4]) -> [f64; 4] {
 ///    small unmatched segments (no track) are background, 0.
 ///
 /// Events of a tentative track carry its id too, since the evaluator scores per-event labels and
-/// the id does not change on confirmation; only `Tracks::tracks` waits for `min_hits`.
+/// the id does not change on confirmation; only `Tracks::tracks` waits for `min_hits`. With
+/// `label_tentative` off they are labelled background until the track is confirmed.
 #[derive(Debug, Clone)]
 pub struct Tracker {
     params: TrackerParams,
@@ -344,9 +345,19 @@ impl Tracker {
         }
 
         // ---- outputs ----
+        let hide_tentative = !self.params.label_tentative;
         let id_of_segment: Vec<u32> = track_of_segment
             .iter()
-            .map(|m| m.map_or(0, |ti| self.tracks[ti].id))
+            .map(|m| {
+                m.map_or(0, |ti| {
+                    let tr = &self.tracks[ti];
+                    if hide_tentative && tr.hits < self.params.min_hits {
+                        0
+                    } else {
+                        tr.id
+                    }
+                })
+            })
             .collect();
         let label: Vec<u32> = segmentation
             .label
