@@ -57,7 +57,8 @@ fn ab_compares_two_variants_on_one_recording() {
     assert!(r.stdout.contains("| input | IoU mask (%) |"), "{}", r.stdout);
     let rows = read_json(&work.join("ab.json"));
     let rows = rows.as_array().unwrap();
-    assert_eq!(rows.len(), 7, "{rows:?}");
+    // IoU mask, events, per object, three RMSE axes, median direction error, false alarms.
+    assert_eq!(rows.len(), 8, "{rows:?}");
     for row in rows {
         assert_eq!(row["a"], row["b"], "{row}");
         if let Some(d) = row["difference"].as_f64() {
