@@ -188,6 +188,8 @@ pub fn evaluate_slice(
     } else {
         (None, None)
     };
+    // Why a figure that needs ground truth per event has none for this window.
+    let no_truth = || lookup.as_ref().err().cloned().unwrap_or(Skip::NoPerEventTruth);
     let objects = match (&truth_ids, object_truth) {
         (Some(ids), Some(kind)) => {
             let pairs = labels
@@ -202,7 +204,7 @@ pub fn evaluate_slice(
                 Outcome::Scored(ObjectsScore { truth: kind, matches })
             }
         }
-        _ => Outcome::Skipped(lookup.as_ref().err().cloned().unwrap_or(Skip::NoPerEventTruth)),
+        _ => Outcome::Skipped(no_truth()),
     };
 
     let truth_v = true_camera_velocity(history.camera(), p.t_start, p.t_end, params.max_gap_s);
@@ -228,7 +230,7 @@ pub fn evaluate_slice(
 
     let static_scene = match (&truth_ids, object_truth) {
         (Some(ids), Some(kind)) => static_score(labels, ids, kind),
-        _ => Outcome::Skipped(lookup.as_ref().err().cloned().unwrap_or(Skip::NoPerEventTruth)),
+        _ => Outcome::Skipped(no_truth()),
     };
 
     let moving = iou_events.scored().is_some()

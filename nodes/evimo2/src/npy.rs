@@ -464,8 +464,9 @@ pub fn decode_polarity(dtype: DType, big: bool, bytes: &[u8]) -> std::result::Re
     if decode_int_into(dtype, big, bytes, &mut wide) {
         return Ok(wide.into_iter().map(|v| u8::from(v > 0)).collect());
     }
+    // Only float dtypes are left: integer and bool ones returned above.
     let mut floats = Vec::new();
-    if !matches!(dtype, DType::F4 | DType::F8) || !decode_f64_into(dtype, big, bytes, &mut floats) {
+    if !decode_f64_into(dtype, big, bytes, &mut floats) {
         return Err(None);
     }
     floats
