@@ -102,6 +102,16 @@ fn position(start: [f64; 2], velocity: [f64; 2], k: usize) -> [f64; 2] {
     [start[0] + velocity[0] * t, start[1] + velocity[1] * t]
 }
 
+/// Label 1, 60 events, moving down at 150 px/s from (200, 100), as seen in slice `k`: the
+/// object of the tentative-track tests.
+fn obj(k: usize) -> Obj {
+    Obj {
+        label: 1,
+        centroid: position([200.0, 100.0], [0.0, 150.0], k),
+        events: 60,
+    }
+}
+
 #[test]
 fn two_objects_on_straight_lines_keep_their_ids() -> Result<(), TrackerError> {
     let mut tracker = Tracker::new(TrackerParams::default())?;
@@ -324,11 +334,6 @@ fn tentative_tracks_label_their_events_but_are_listed_only_when_confirmed() -> R
         ..TrackerParams::default()
     };
     let mut tracker = Tracker::new(params)?;
-    let obj = |k| Obj {
-        label: 1,
-        centroid: position([200.0, 100.0], [0.0, 150.0], k),
-        events: 60,
-    };
     for k in 0..4 {
         let (n, seg) = frame(&[obj(k)], 10);
         let out = tracker.update(span(k), n, &seg)?;
@@ -363,11 +368,6 @@ fn tentative_tracks_can_leave_their_events_background_until_confirmed() -> Resul
         ..TrackerParams::default()
     };
     let mut tracker = Tracker::new(params)?;
-    let obj = |k| Obj {
-        label: 1,
-        centroid: position([200.0, 100.0], [0.0, 150.0], k),
-        events: 60,
-    };
     let phantom = Obj {
         label: 2,
         centroid: [50.0, 50.0],
