@@ -124,6 +124,51 @@ fn wrong_dtype_and_shape() {
     );
 }
 
+/// Polarity columns of floats are read (value > 0 is ON), but a NaN is an error naming the file
+/// and the event, and a column of strings is refused at open naming the file.
+#[test]
+fn bad_polarity_columns() {
+    let n = common::N_EVENTS;
+    let dir = folder();
+    let p: Vec<u8> = (0..n)
+        .flat_map(|i| {
+            let v = if i == 1500 {
+                f32::NAN
+            } else if i % 2 == 0 {
+                -1.0
+            } else {
+                1.0
+            };
+            v.to_le_bytes()
+        })
+        .collect();
+    std::fs::write(
+        dir.path().join("dataset_events_p.npy"),
+        npy::encode_array("<f4", &[n], &p),
+    )
+    .unwrap();
+    let mut r = EventReader::open(dir.path()).unwrap();
+    let first = r.next_chunk(1000).unwrap().unwrap();
+    assert_eq!(first.p[..4], [0, 1, 0, 1]);
+    let e = r.next_chunk(1000).unwrap_err().to_string();
+    assert!(
+        e.contains("dataset_events_p.npy") && e.contains("event 1500") && e.contains("NaN"),
+        "{e}"
+    );
+
+    let dir = folder();
+    std::fs::write(
+        dir.path().join("dataset_events_p.npy"),
+        npy::encode_array("<U1", &[n], &vec![0u8; 4 * n]),
+    )
+    .unwrap();
+    let e = open_err(dir.path());
+    assert!(
+        e.contains("dataset_events_p.npy") && e.contains("bool, integer or float"),
+        "{e}"
+    );
+}
+
 #[test]
 fn mismatched_event_counts() {
     let dir = folder();
