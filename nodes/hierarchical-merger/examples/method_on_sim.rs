@@ -26,6 +26,10 @@
 //! (chessboard distance in cells of FP_CELL pixels, default 4), and quartiles of event time,
 //! planar and coarse residuals (absolute and relative to the normal-flow length) for true
 //! positives, false positives in an object's cell and the other false positives.
+//! SPLIT_STATS: per slice, the planar 2-means split's figures (object share, planar and final
+//! foreground share, centres and their ratio, between-class variance share, Ashman's D).
+//! Scenes with windows without a moving object also print the share of those windows' events
+//! labelled moving (final and planar), the evaluator's false-alarm figure.
 //! ORACLE_FIT: the plane fitted to the true background's events only (instead of leaving out
 //! the previous slice's foreground).
 //! Diagnostics that replace the final labels: ORACLE_CLUSTERS (each cluster labelled by its
@@ -254,6 +258,50 @@ fn angle_deg(a: [f64; 3], b: [f64; 3]) -> f64 {
     let na = (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
     let nb = (b[0] * b[0] + b[1] * b[1] + b[2] * b[2]).sqrt();
     (d / (na * nb)).clamp(-1.0, 1.0).acos().to_degrees()
+}
+
+/// SPLIT_STATS: per slice, the object share, the planar foreground share and separation
+/// figures of the 2-means on the square roots of the smoothed residuals.
+fn split_stats(r: &evseg_planar_segmenter::PlanarResult, truth: &Truth, label: &[u32], t: f64) {
+    let v: Vec<f64> = r
+        .smoothed
+        .iter()
+        .zip(&r.residuals.residual)
+        .filter(|(s, res)| s.is_finite() && res.is_finite())
+        .map(|(s, _)| f64::from(*s).max(1e-6).sqrt())
+        .collect();
+    let Some(sp) = r.split else { return };
+    let thr = sp.threshold.sqrt();
+    let (mut s, mut q, mut n) = ([0.0; 2], [0.0; 2], [0usize; 2]);
+    for &x in &v {
+        let k = usize::from(x > thr);
+        s[k] += x;
+        q[k] += x * x;
+        n[k] += 1;
+    }
+    let m = [s[0] / n[0].max(1) as f64, s[1] / n[1].max(1) as f64];
+    let var = [
+        q[0] / n[0].max(1) as f64 - m[0] * m[0],
+        q[1] / n[1].max(1) as f64 - m[1] * m[1],
+    ];
+    let all = v.len().max(1) as f64;
+    let mt = (s[0] + s[1]) / all;
+    let vt = (q[0] + q[1]) / all - mt * mt;
+    let w1 = n[1] as f64 / all;
+    let between = w1 * (1.0 - w1) * (m[1] - m[0]).powi(2);
+    let ashman = std::f64::consts::SQRT_2 * (m[1] - m[0]) / (var[0] + var[1]).max(1e-12).sqrt();
+    let obj = truth.event_object.iter().filter(|&&o| o != 0).count() as f64
+        / truth.event_object.len().max(1) as f64;
+    let fin = label.iter().filter(|&&l| l != 0).count() as f64 / label.len().max(1) as f64;
+    println!(
+        "  split t {t:.2} object {obj:.2} planar fg {w1:.2} final {fin:.2} centres {:.4} {:.4} ratio {:.2} eta {:.3} D {:.2} sd0/m0 {:.2}",
+        sp.centers[0],
+        sp.centers[1],
+        sp.centers[1] / sp.centers[0].max(1e-9),
+        between / vt.max(1e-12),
+        ashman,
+        var[0].max(0.0).sqrt() / m[0].max(1e-9)
+    );
 }
 
 fn main() -> anyhow::Result<()> {
@@ -496,6 +544,8 @@ fn main() -> anyhow::Result<()> {
             let (mut inter_all, mut union_all) = (0usize, 0usize);
             let (mut predicted_all, mut truth_all) = (0usize, 0usize);
             let (mut planar_pred_all, mut planar_inter_all) = (0usize, 0usize);
+            // Slices without a moving object: share of events labelled moving (final, planar).
+            let mut static_fa: Vec<(f64, f64)> = Vec::new();
             for (dump_k, (((s, truth, span), f), c)) in slices.iter().zip(&flows).zip(&clusters).enumerate() {
                 let clusters_k = c.clone();
                 let rate =
@@ -697,6 +747,16 @@ fn main() -> anyhow::Result<()> {
                         cl.join(" ")
                     );
                 }
+                if std::env::var("SPLIT_STATS").is_ok() {
+                    split_stats(&r, truth, label, span.0);
+                }
+                if !truth.event_object.iter().any(|&o| o != 0) && !label.is_empty() {
+                    let nl = label.len() as f64;
+                    static_fa.push((
+                        label.iter().filter(|&&l| l != 0).count() as f64 / nl,
+                        r.residuals.background.iter().filter(|&&b| !b).count() as f64 / nl,
+                    ));
+                }
                 if truth.event_object.iter().any(|&o| o != 0) {
                     // Diagnostic: the coarse stage alone (group != 0 is foreground).
                     let mut coarse_label: Vec<u32> = m
@@ -836,6 +896,15 @@ fn main() -> anyhow::Result<()> {
                     "{name:14} FP by distance to object (4 px cells 0,1,2-3,4-6,>6): {:?}  FN by distance to predicted: {:?}",
                     &fp_dist[..5],
                     &fp_dist[5..]
+                );
+            }
+            if !static_fa.is_empty() {
+                let n = static_fa.len() as f64;
+                println!(
+                    "{name:14} seed {seed} [{set}] static slices {} labelled moving {:.3} (planar {:.3})",
+                    static_fa.len(),
+                    static_fa.iter().map(|f| f.0).sum::<f64>() / n,
+                    static_fa.iter().map(|f| f.1).sum::<f64>() / n
                 );
             }
             println!(
