@@ -106,7 +106,9 @@ pub fn fit_planar(eqs: &[Equation], params: &FitParams) -> Option<[f64; 8]> {
 }
 
 /// [`fit_planar`] with a prior weight per equation (`base`, same length as `eqs`, >= 0; the
-/// robust weights multiply it).
+/// robust weights multiply it). The robust scale is measured on the equations in the fit
+/// (base weight > 0) only: equations weighted 0 (e.g. the planar segmenter's previous
+/// foreground) must not set how far the fitted ones may lie from the model.
 pub fn fit_planar_weighted(eqs: &[Equation], base: Option<&[f64]>, params: &FitParams) -> Option<[f64; 8]> {
     if eqs.len() < 8 || base.is_some_and(|b| b.len() != eqs.len()) {
         return None;
@@ -118,7 +120,18 @@ pub fn fit_planar_weighted(eqs: &[Equation], base: Option<&[f64]>, params: &FitP
     let mut weights = vec![1.0; eqs.len()];
     for _ in 0..params.iterations {
         let r: Vec<f64> = eqs.iter().map(|e| e.residual(&a)).collect();
-        let s = robust_scale(&r);
+        let s = match base {
+            Some(b) => {
+                let fitted: Vec<f64> = r
+                    .iter()
+                    .zip(b)
+                    .filter(|&(_, &b)| b > 0.0)
+                    .map(|(&r, _)| r)
+                    .collect();
+                robust_scale(&fitted)
+            }
+            None => robust_scale(&r),
+        };
         if s.is_nan() || s <= 0.0 {
             break; // exact fit of at least half the equations: nothing to reweight
         }

@@ -80,6 +80,20 @@ pub struct PlanarParams {
     /// from the first slice for a second, see `robust_needs_previous`); Huber with it 71.51 /
     /// 71.05, 9.8 deg (nine of twelve sequences gained, three lost under a point). Earlier, on
     /// ideal flow and without the mask, plain least squares had scored higher (crate docs).
+    ///
+    /// The Huber weights' scale is the median residual of the equations in the fit, not of
+    /// every equation (2026-11-28): the masked previous foreground, weighted 0, had set it, so
+    /// the larger the masked object the looser the weights, and where an object fires most of
+    /// the events (low-contrast) the fit followed the object's new territory outside the mask
+    /// and inverted the split for a dozen slices. `method_on_sim` (2 s, eight presets, seeds
+    /// 11-14 the bench does not use, mean IoU of the 28 object runs) 0.850 -> 0.860,
+    /// low-contrast 0.620 / 0.698 / 0.847 / 0.825 -> 0.801 / 0.719 / 0.877 / 0.827, no run
+    /// lower by more than 0.002; false alarms of static windows 0.130 -> 0.102. `evseg bench`
+    /// (evseg-bench-v3) IoU mask / events / per object 72.56 / 81.95 / 76.98 -> 73.18 / 82.74 /
+    /// 77.70 %, low-contrast 106 57.6 -> 63.5 % mask. Also starting the reweighting from the
+    /// previous slice's model was measured and not kept: on the bench a little higher (73.67 /
+    /// 83.28 / 78.49 %, low-contrast 106 72.2 %), on the unseen seeds lower (0.856; low-contrast
+    /// seed 11 0.669) - a start from the previous model also carries its mistakes forward.
     pub fit: FitParams,
     /// Side of a smoothing-grid cell, pixels. Default 4 (was 2): a third of the smoothing's
     /// sigma (12 px), so the grid still resolves it, at a quarter of the cells; `evseg bench`

@@ -523,3 +523,50 @@ fn the_robust_fit_is_used_only_with_the_previous_foreground() {
     assert_eq!(masked(d), masked(huber()));
     assert_ne!(masked(d), masked(ls()));
 }
+
+/// The robust scale comes from the equations in the fit: equations weighted 0 (the previous
+/// foreground) with large residuals must not loosen the Huber weights of the fitted ones. The
+/// fit with them weighted 0 is the fit without them; with the scale over every equation (the
+/// code before 2026-11-28) the zero-weight half raised the median residual tenfold, the Huber
+/// weights of the fitted outliers stayed near 1 and the fit followed them.
+#[test]
+fn equations_weighted_zero_do_not_set_the_robust_scale() {
+    let a_true = expected_a();
+    let mut rng = Rng(7);
+    let mut eq = |off: f64, rng: &mut Rng| {
+        let (x, y) = (rng.next() - 0.5, rng.next() - 0.5);
+        let th = rng.next() * std::f64::consts::TAU;
+        let e = Equation::new(x, y, [th.cos(), th.sin()], 0.0);
+        let b = e.g.iter().zip(&a_true).map(|(g, a)| g * a).sum::<f64>() + off + 0.002 * (rng.next() - 0.5);
+        Equation { b, ..e }
+    };
+    // 300 fitted equations, a fifth of them off by +0.3 (another motion), then 400 left out
+    // (weight 0) off by +1.
+    let mut eqs: Vec<Equation> = (0..300)
+        .map(|i| eq(if i % 5 == 0 { 0.3 } else { 0.0 }, &mut rng))
+        .collect();
+    let fitted = eqs.clone();
+    eqs.extend((0..400).map(|_| eq(1.0, &mut rng)));
+    let base: Vec<f64> = (0..eqs.len()).map(|i| if i < 300 { 1.0 } else { 0.0 }).collect();
+    let huber = FitParams {
+        robust: Robust::Huber { k: 1.345 },
+        ..FitParams::default()
+    };
+    let with_zeros = fit_planar_weighted(&eqs, Some(&base), &huber).unwrap();
+    assert_eq!(with_zeros, fit_planar(&fitted, &huber).unwrap());
+    // And the robust fit is closer to the model than plain least squares on the same equations.
+    let err = |a: &[f64; 8]| {
+        a.iter()
+            .zip(&a_true)
+            .map(|(a, t)| (a - t).powi(2))
+            .sum::<f64>()
+            .sqrt()
+    };
+    let plain = fit_planar(&fitted, &FitParams::default()).unwrap();
+    assert!(
+        err(&with_zeros) < 0.5 * err(&plain),
+        "{} vs {}",
+        err(&with_zeros),
+        err(&plain)
+    );
+}
