@@ -533,7 +533,7 @@ fn the_robust_fit_is_used_only_with_the_previous_foreground() {
 fn equations_weighted_zero_do_not_set_the_robust_scale() {
     let a_true = expected_a();
     let mut rng = Rng(7);
-    let mut eq = |off: f64, rng: &mut Rng| {
+    let eq = |off: f64, rng: &mut Rng| {
         let (x, y) = (rng.next() - 0.5, rng.next() - 0.5);
         let th = rng.next() * std::f64::consts::TAU;
         let e = Equation::new(x, y, [th.cos(), th.sin()], 0.0);
