@@ -191,6 +191,10 @@ enum Command {
         /// Length, seconds of sensor time (default: the preset's).
         #[arg(long)]
         seconds: Option<f64>,
+        /// Scale of the sensor (same field of view): 0.540625 gives a 346 x 260 sensor like a
+        /// DAVIS346, 2 a 1280 x 960 one; the presets are 640 x 480.
+        #[arg(long, default_value_t = 1.0)]
+        resolution_scale: f64,
     },
 }
 
@@ -289,7 +293,8 @@ fn main() -> ExitCode {
             out,
             seed,
             seconds,
-        } => evseg_source::synthetic::write_evimo2(&scene, seed, seconds, 1.0, &out)
+            resolution_scale,
+        } => evseg_source::synthetic::write_evimo2(&scene, seed, seconds, resolution_scale, &out)
             .map(|n| {
                 println!(
                     "{n} events of `{scene}` (seed {seed}) written to {} as an EVIMO2 v2 folder",

@@ -133,6 +133,11 @@ fn main() -> ExitCode {
         "Gaussian smoothing standard deviation, pixels",
     )
     .param(
+        "sigma_reference_focal_px",
+        d.sigma_reference_focal_px,
+        "focal length (px) at which sigma_px holds; other cameras smooth over the same angle (0 = sigma_px as is)",
+    )
+    .param(
         "min_center_gap",
         d.min_center_gap,
         "2-means centres closer than this (normalized units/s) = no foreground",
@@ -191,6 +196,7 @@ fn main() -> ExitCode {
             },
             cell_px: cfg.param("cell_px")?,
             sigma_px: cfg.param("sigma_px")?,
+            sigma_reference_focal_px: cfg.param("sigma_reference_focal_px")?,
             residual_length_k: cfg.param("residual_length_k")?,
             min_center_gap: cfg.param("min_center_gap")?,
             split_power: cfg.param("split_power")?,

@@ -104,14 +104,39 @@ fn huber() -> PlanarParams {
     }
 }
 
+/// Plain least squares, smoothing with `sigma_px` itself on the small test camera (these
+/// tests measure the split against the smoothing's ramp at the default 16 px).
 fn ls() -> PlanarParams {
     PlanarParams {
         fit: FitParams {
             robust: Robust::LeastSquares,
             ..Default::default()
         },
+        sigma_reference_focal_px: 0.0,
         ..Default::default()
     }
+}
+
+/// The smoothing keeps its angle: `sigma_px` at the reference focal length, scaled on others.
+#[test]
+fn the_smoothing_scales_with_the_focal_length() {
+    let p = PlanarParams::default();
+    let cam = |f: f64| CameraInfo::pinhole(640, 480, f, "test");
+    assert_eq!(p.sigma_on(&cam(550.0)), 16.0);
+    assert!((p.sigma_on(&cam(275.0)) - 8.0).abs() < 1e-12);
+    assert!((p.sigma_on(&cam(1100.0)) - 32.0).abs() < 1e-12);
+    let fixed = PlanarParams {
+        sigma_reference_focal_px: 0.0,
+        ..p
+    };
+    assert_eq!(fixed.sigma_on(&cam(275.0)), 16.0);
+    // A focal length that is not a positive number leaves sigma as given.
+    assert_eq!(p.sigma_on(&cam(f64::NAN)), 16.0);
+    let bad = PlanarParams {
+        sigma_reference_focal_px: -1.0,
+        ..p
+    };
+    assert!(PlanarSegmenter::new(bad).is_err());
 }
 
 #[test]

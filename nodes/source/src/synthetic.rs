@@ -50,7 +50,8 @@ impl EventSource for SyntheticSource {
 /// Simulates `scene` (seed, optional length) and writes it as an EVIMO2 v2 sequence folder at
 /// `out` (events, masks at the simulator's mask rate, camera and object poses per mask frame,
 /// full camera trajectory, IMU in the EVIMO2 axis convention, pickled `meta`). Returns the number
-/// of events written. `resolution_scale` < 1 shrinks the sensor (tests).
+/// of events written. `resolution_scale` scales the sensor's size and focal lengths (same field
+/// of view; in (0, 8]).
 pub fn write_evimo2(
     scene: &str,
     seed: u64,
@@ -62,6 +63,11 @@ pub fn write_evimo2(
     let mut config = preset(scene, seed).map_err(|e| SourceError::Param(e.to_string()))?;
     if let Some(s) = seconds {
         config.duration_s = s;
+    }
+    if !(resolution_scale.is_finite() && resolution_scale > 0.0 && resolution_scale <= 8.0) {
+        return Err(SourceError::Param(format!(
+            "resolution scale must be in (0, 8], got {resolution_scale}"
+        )));
     }
     if resolution_scale != 1.0 {
         config = config.with_resolution_scale(resolution_scale);
