@@ -150,7 +150,11 @@ impl NodeProcess {
     }
 }
 
-/// The last `n` lines of a text file (at most the last 64 KiB are read).
+/// The last `n` lines of a text file (at most the last 64 KiB are read), with every run of
+/// stack-backtrace frame lines (`  12: symbol`, `at file:line`) shortened to one line saying how
+/// many were left out: a library's error logged with its backtrace while a node stops (Zenoh
+/// does, e.g. when a shared-memory handoff fails) would otherwise fill the tail and hide the
+/// node's own error above it.
 pub fn tail(path: &Path, n: usize) -> String {
     let Ok(mut f) = File::open(path) else {
         return String::new();
@@ -163,8 +167,43 @@ pub fn tail(path: &Path, n: usize) -> String {
     let mut buf = Vec::new();
     let _ = f.read_to_end(&mut buf);
     let text = String::from_utf8_lossy(&buf);
-    let lines: Vec<&str> = text.lines().collect();
+    let lines = without_backtraces(text.lines());
     lines[lines.len().saturating_sub(n)..].join("\n")
+}
+
+/// True for a line of a printed Rust stack backtrace: a frame (`   4: path::to::fn`) or its
+/// location (`      at src/x.rs:10:5`).
+fn is_backtrace_frame(line: &str) -> bool {
+    let t = line.trim_start();
+    if t.len() == line.len() {
+        return false; // frames are indented
+    }
+    if t.starts_with("at ") {
+        return true;
+    }
+    let digits = t.bytes().take_while(u8::is_ascii_digit).count();
+    digits > 0 && t[digits..].starts_with(": ")
+}
+
+/// `lines` with each run of backtrace frame lines replaced by one line counting them.
+fn without_backtraces<'a>(lines: impl Iterator<Item = &'a str>) -> Vec<String> {
+    let mut out = Vec::new();
+    let mut run = 0usize;
+    for line in lines {
+        if is_backtrace_frame(line) {
+            run += 1;
+            continue;
+        }
+        if run > 0 {
+            out.push(format!("    ({run} backtrace lines left out)"));
+            run = 0;
+        }
+        out.push(line.to_string());
+    }
+    if run > 0 {
+        out.push(format!("    ({run} backtrace lines left out)"));
+    }
+    out
 }
 
 /// Stops every running process: SIGTERM, then SIGKILL after [`STOP_GRACE`].
@@ -197,5 +236,31 @@ impl Drop for Fleet {
         if self.0.iter_mut().any(|p| p.poll().is_none() && p.pid().is_some()) {
             stop_all(&mut self.0);
         }
+    }
+}
+
+#[cfg(test)]
+mod tail_tests {
+    use super::*;
+
+    #[test]
+    fn backtrace_frames_do_not_push_the_error_out_of_the_tail() {
+        let dir = tempfile::tempdir().unwrap();
+        let log = dir.path().join("node.log");
+        let mut text = String::from("started\nERROR window must be a positive number\nstack backtrace:\n");
+        for k in 0..30 {
+            text += &format!("  {k:2}: zenoh_transport::thing{k}\n             at src/x.rs:{k}:5\n");
+        }
+        text += "closed\n";
+        std::fs::write(&log, text).unwrap();
+        let t = tail(&log, 5);
+        assert!(t.contains("window must be a positive number"), "{t}");
+        assert!(t.contains("(60 backtrace lines left out)"), "{t}");
+        assert!(t.ends_with("closed"), "{t}");
+        // Ordinary indented lines and numbers stay.
+        assert!(!is_backtrace_frame("  value: 3"));
+        assert!(!is_backtrace_frame("12: not indented"));
+        assert!(is_backtrace_frame("   4: core::panicking::panic_fmt"));
+        assert!(is_backtrace_frame("             at /rustc/x/panicking.rs:80:14"));
     }
 }
