@@ -89,8 +89,8 @@ fn solve(eqs: &[Equation], weights: Option<&[f64]>, ridge: f64) -> Option<[f64; 
 }
 
 /// `1.4826 * median(|r|)`: the standard deviation of Gaussian residuals, robust to outliers.
-fn robust_scale(residuals: &[f64]) -> f64 {
-    let mut abs: Vec<f64> = residuals.iter().map(|r| r.abs()).collect();
+fn robust_scale(residuals: impl Iterator<Item = f64>) -> f64 {
+    let mut abs: Vec<f64> = residuals.map(f64::abs).collect();
     if abs.is_empty() {
         return 0.0;
     }
@@ -120,18 +120,8 @@ pub fn fit_planar_weighted(eqs: &[Equation], base: Option<&[f64]>, params: &FitP
     let mut weights = vec![1.0; eqs.len()];
     for _ in 0..params.iterations {
         let r: Vec<f64> = eqs.iter().map(|e| e.residual(&a)).collect();
-        let s = match base {
-            Some(b) => {
-                let fitted: Vec<f64> = r
-                    .iter()
-                    .zip(b)
-                    .filter(|&(_, &b)| b > 0.0)
-                    .map(|(&r, _)| r)
-                    .collect();
-                robust_scale(&fitted)
-            }
-            None => robust_scale(&r),
-        };
+        let in_fit = |i: usize| base.is_none_or(|b| b[i] > 0.0);
+        let s = robust_scale(r.iter().enumerate().filter(|&(i, _)| in_fit(i)).map(|(_, &r)| r));
         if s.is_nan() || s <= 0.0 {
             break; // exact fit of at least half the equations: nothing to reweight
         }
