@@ -301,24 +301,31 @@ fn run_default_graph(
     env: &[(&str, &str)],
     timeout: Duration,
 ) -> (Finished, PathBuf) {
+    run_default_graph_with(dir, seconds, env, &[], timeout)
+}
+
+/// [`run_default_graph`] with more arguments of `evseg run`.
+fn run_default_graph_with(
+    dir: &Path,
+    seconds: f64,
+    env: &[(&str, &str)],
+    more_args: &[&str],
+    timeout: Duration,
+) -> (Finished, PathBuf) {
     let graph = repo_graph_on_loopback("graph.yaml", free_port());
     let (g, out) = graph_file(dir, &graph);
     let seconds = format!("source.seconds={seconds}");
-    let run = Launcher::start_with_env(
-        dir,
-        &[
-            "run",
-            g.to_str().unwrap(),
-            "--set",
-            &seconds,
-            "--out",
-            out.to_str().unwrap(),
-            "-q",
-        ],
-        "a",
-        env,
-    )
-    .wait(timeout);
+    let mut args = vec![
+        "run",
+        g.to_str().unwrap(),
+        "--set",
+        &seconds,
+        "--out",
+        out.to_str().unwrap(),
+        "-q",
+    ];
+    args.extend_from_slice(more_args);
+    let run = Launcher::start_with_env(dir, &args, "a", env).wait(timeout);
     (run, out)
 }
 
@@ -375,6 +382,40 @@ fn a_lost_feedback_frame_is_published_again_and_the_run_completes() {
         "the frame was not dropped:\n{log}"
     );
     assert!(log.contains("published them again"), "{log}");
+    let report = read_json(&out.join("report").join("report.json"));
+    assert!(
+        report["sequence"]["windows"].as_u64().unwrap_or(0) >= 5,
+        "{report}"
+    );
+}
+
+/// A node whose input subscriptions never reach its producers (seen twice: the background
+/// merger "started" and never received a frame while every producer published its frames
+/// again each second, and the run waited forever) is restarted by the launcher's start-up
+/// watchdog, and the run completes with every slice.
+#[test]
+fn a_node_that_receives_nothing_at_start_up_is_restarted_and_the_run_completes() {
+    let dir = tempfile::tempdir().unwrap();
+    let marker = dir.path().join("deaf-once");
+    // evseg_runtime::node::DEAF_ONCE_ENV
+    let deaf = format!("background={}", marker.display());
+    let env = [("EVSEG_TEST_DEAF_ONCE", deaf.as_str())];
+    let (run, out) = run_default_graph_with(
+        dir.path(),
+        0.2,
+        &env,
+        &["--startup-timeout", "3"],
+        Duration::from_secs(180),
+    );
+    assert!(run.status.success(), "run failed:\n{}", run.stderr);
+    assert!(marker.exists(), "the hook did not fire");
+    assert!(
+        run.stderr.contains("node `background` received nothing") && run.stderr.contains("restarting it"),
+        "{}",
+        run.stderr
+    );
+    let log = std::fs::read_to_string(out.join("logs").join("background.log")).unwrap_or_default();
+    assert!(log.contains("input subscriptions not declared"), "{log}");
     let report = read_json(&out.join("report").join("report.json"));
     assert!(
         report["sequence"]["windows"].as_u64().unwrap_or(0) >= 5,

@@ -13,6 +13,7 @@ mod run;
 mod rundir;
 mod supervise;
 mod view;
+mod watchdog;
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -59,6 +60,14 @@ enum Command {
         /// file (relative to the working folder).
         #[arg(long)]
         record: Option<PathBuf>,
+        /// Restart a node of this machine that has received nothing this many seconds after
+        /// its producers began publishing (its subscriptions never reached them); 0 = never.
+        #[arg(long, default_value_t = watchdog::DEFAULT_STARTUP_S)]
+        startup_timeout: f64,
+        /// Stop a lock-step run in which no node made progress for this many seconds, naming
+        /// every node's counters; 0 = wait forever.
+        #[arg(long, default_value_t = watchdog::DEFAULT_STALL_S)]
+        stall_timeout: f64,
     },
     /// Replay a recording: the nodes downstream of `--from` run live, fed by the recorded
     /// outputs of `--from` and the nodes upstream of it (published on the same keys, with
@@ -274,6 +283,8 @@ fn main() -> ExitCode {
         set: vec![],
         quiet: false,
         record: None,
+        startup_timeout: watchdog::DEFAULT_STARTUP_S,
+        stall_timeout: watchdog::DEFAULT_STALL_S,
     });
     let result = match command {
         Command::Check { graph } => check(&graph),
@@ -358,7 +369,9 @@ fn main() -> ExitCode {
             set,
             quiet,
             record,
-        } => {
+            startup_timeout,
+            stall_timeout,
+        } => watchdog::WatchdogSettings::from_seconds(startup_timeout, stall_timeout).and_then(|watchdog| {
             let opts = run::RunOptions {
                 graph,
                 machine,
@@ -370,9 +383,10 @@ fn main() -> ExitCode {
                 quiet,
                 record,
                 replay: None,
+                watchdog,
             };
             run::run(&opts).map(|outcome| print_outcome(&outcome))
-        }
+        }),
         Command::Ab {
             graph,
             recordings,

@@ -49,6 +49,8 @@ pub struct RunOptions {
     /// Replay a recording into the nodes downstream of a replay point instead of running the
     /// replay point and its upstream (`evseg replay`).
     pub replay: Option<crate::replay::ReplaySpec>,
+    /// When the launcher restarts a starving node or stops a stalled run.
+    pub watchdog: crate::watchdog::WatchdogSettings,
 }
 
 /// How a run ended.
@@ -391,6 +393,8 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
     let start = Instant::now();
     let policies: BTreeMap<String, evseg_graph::RestartPolicy> =
         nodes.iter().map(|n| (n.id.clone(), n.restart)).collect();
+    let mut watchdog = crate::watchdog::Watchdog::new(opts.watchdog, start);
+    let lockstep = graph.mode == evseg_graph::Mode::Lockstep;
     loop {
         if signals::stop_requested() {
             display.clear();
@@ -442,6 +446,30 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
             display.update(start.elapsed().as_secs_f64(), &order, &snapshot, true);
             display.clear();
             break;
+        }
+        let running: Vec<String> = fleet
+            .0
+            .iter_mut()
+            .filter_map(|p| p.poll().is_none().then(|| p.id.clone()))
+            .collect();
+        let here = |id: &str| running.iter().any(|r| r == id);
+        for action in watchdog.check(Instant::now(), &graph.nodes, &here, &snapshot, lockstep) {
+            match action {
+                crate::watchdog::Action::Restart { node, why } => {
+                    display.clear();
+                    tracing::warn!(node = %node, "{why}");
+                    eprintln!("{why}");
+                    if let Some(p) = fleet.0.iter_mut().find(|p| p.id == node) {
+                        p.respawn()
+                            .with_context(|| format!("cannot restart node `{node}`"))?;
+                    }
+                }
+                crate::watchdog::Action::Stop(why) => {
+                    display.clear();
+                    stop_all(&mut fleet.0);
+                    bail!("{why}\nlogs in {}", dir.join("logs").display());
+                }
+            }
         }
         display.update(start.elapsed().as_secs_f64(), &order, &snapshot, false);
         std::thread::sleep(Duration::from_millis(50));

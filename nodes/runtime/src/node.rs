@@ -168,6 +168,28 @@ pub const DROP_FRAME_ENV: &str = "EVSEG_TEST_DROP_FRAME";
 /// lost in transit; for tests of the producer's drain when the consumer exits.
 pub const DROP_DONE_ENV: &str = "EVSEG_TEST_DROP_DONE";
 
+/// Environment variable that makes a node declare none of its input subscriptions once
+/// (`node=marker-file`: deaf while the marker file does not exist; the node creates it, so the
+/// node started again after it subscribes normally), as if its subscriptions had never reached
+/// its producers: for tests of the launcher's start-up watchdog.
+pub const DEAF_ONCE_ENV: &str = "EVSEG_TEST_DEAF_ONCE";
+
+/// True when [`DEAF_ONCE_ENV`] names this node and its marker did not exist yet (it is created).
+fn deaf_once_from_env(node: &str) -> bool {
+    let Ok(v) = std::env::var(DEAF_ONCE_ENV) else {
+        return false;
+    };
+    let Some((n, marker)) = v.split_once('=') else {
+        return false;
+    };
+    n == node
+        && std::fs::OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .open(marker)
+            .is_ok()
+}
+
 /// The input port of this node named by [`DROP_DONE_ENV`], if any.
 fn drop_done_from_env(node: &str) -> Option<String> {
     let v = std::env::var(DROP_DONE_ENV).ok()?;
@@ -922,8 +944,12 @@ pub(crate) fn start(
         Mode::Live => Some(cfg.queue),
     };
     let inbox = Inbox::new(cfg.inputs.len(), bound);
-    for s in subscribe_inputs(&session, &cfg, &inbox)? {
-        handles.push(Box::new(s));
+    if deaf_once_from_env(&cfg.node) {
+        tracing::warn!(node = %cfg.node, "input subscriptions not declared ({DEAF_ONCE_ENV})");
+    } else {
+        for s in subscribe_inputs(&session, &cfg, &inbox)? {
+            handles.push(Box::new(s));
+        }
     }
     let token = session
         .liveliness()

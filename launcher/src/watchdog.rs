@@ -1,0 +1,371 @@
+//! Keeping a run from waiting forever.
+//!
+//! Twice a lock-step run hung at start-up (once in `evseg run`, once in a CI test): one node
+//! (the background merger) logged "started" and never received a frame, while every producer
+//! published its unconsumed frames again each second; no process failed, so nothing ended the
+//! run. The node's subscriptions had most likely never reached its producers' sessions (Zenoh
+//! drops a put that matches no subscriber it knows of). Two rules, checked by the launcher from
+//! the nodes' stats:
+//!
+//! - **start-up**: a node of this machine that has received nothing while a producer of one of
+//!   its (non-feedback) inputs has published for [`WatchdogSettings::startup`] is restarted: its
+//!   new session declares its subscriptions afresh, and lock-step producers publish what it has
+//!   not consumed again. Nothing is lost: it had consumed nothing. After
+//!   [`WatchdogSettings::startup_restarts`] such restarts the run stops, naming the node.
+//! - **stall** (lock-step only): when no node's counters (received, published, processed,
+//!   finished) change for [`WatchdogSettings::stall`], the run stops with every node's counters,
+//!   instead of waiting forever.
+
+use std::collections::BTreeMap;
+use std::time::{Duration, Instant};
+
+use evseg_graph::NodeSpec;
+use evseg_runtime::progress::Stats;
+
+/// Default [`WatchdogSettings::startup`], seconds.
+pub const DEFAULT_STARTUP_S: f64 = 20.0;
+/// Default [`WatchdogSettings::stall`], seconds.
+pub const DEFAULT_STALL_S: f64 = 120.0;
+
+/// When the launcher intervenes. `None` turns a rule off.
+#[derive(Debug, Clone, Copy)]
+pub struct WatchdogSettings {
+    /// How long a node may go without any input while its producers publish (default 20 s:
+    /// a node receives its first frame within a second of its producer's first publication
+    /// when the transport works, even in debug builds on a loaded 2-core machine).
+    pub startup: Option<Duration>,
+    /// Start-up restarts per node before the run is stopped (default 2).
+    pub startup_restarts: u32,
+    /// How long a lock-step run may go with no counter of any node changing (default 120 s:
+    /// far above the slowest slice of any stage seen, a few seconds in debug builds).
+    pub stall: Option<Duration>,
+}
+
+impl Default for WatchdogSettings {
+    fn default() -> Self {
+        Self {
+            startup: Some(Duration::from_secs_f64(DEFAULT_STARTUP_S)),
+            startup_restarts: 2,
+            stall: Some(Duration::from_secs_f64(DEFAULT_STALL_S)),
+        }
+    }
+}
+
+impl WatchdogSettings {
+    /// Settings from command-line seconds (0 = rule off).
+    pub fn from_seconds(startup_s: f64, stall_s: f64) -> anyhow::Result<Self> {
+        let rule = |s: f64, what: &str| -> anyhow::Result<Option<Duration>> {
+            if !s.is_finite() || s < 0.0 {
+                anyhow::bail!("{what} must be a number of seconds >= 0 (0 = off), got {s}");
+            }
+            Ok((s > 0.0).then(|| Duration::from_secs_f64(s)))
+        };
+        Ok(Self {
+            startup: rule(startup_s, "--startup-timeout")?,
+            stall: rule(stall_s, "--stall-timeout")?,
+            ..Self::default()
+        })
+    }
+}
+
+/// What the launcher must do.
+#[derive(Debug, PartialEq)]
+pub enum Action {
+    /// Restart this node (of this machine); `why` is for the user.
+    Restart { node: String, why: String },
+    /// Stop the run with this message.
+    Stop(String),
+}
+
+/// The watchdog's memory between checks.
+pub struct Watchdog {
+    settings: WatchdogSettings,
+    /// Node -> since when its producers have published while it had received nothing.
+    fed_since: BTreeMap<String, Instant>,
+    /// Start-up restarts done per node.
+    restarts: BTreeMap<String, u32>,
+    /// The counters last seen, and when they last changed.
+    last_counters: Vec<(String, [u64; 4])>,
+    last_change: Instant,
+}
+
+impl Watchdog {
+    /// A watchdog whose clock starts at `now`.
+    pub fn new(settings: WatchdogSettings, now: Instant) -> Self {
+        Self {
+            settings,
+            fed_since: BTreeMap::new(),
+            restarts: BTreeMap::new(),
+            last_counters: Vec::new(),
+            last_change: now,
+        }
+    }
+
+    /// Checks the rules at `now`. `nodes`: every node of the graph; `running_here`: true for the
+    /// nodes this launcher started that still run; `stats`: the nodes' last stats;
+    /// `lockstep`: the graph's mode. A node without stats counts as having received nothing
+    /// in lock-step mode (a node built on evseg-runtime publishes stats every half second);
+    /// in live mode it is left alone (a foreign node may publish none).
+    pub fn check(
+        &mut self,
+        now: Instant,
+        nodes: &[NodeSpec],
+        running_here: &dyn Fn(&str) -> bool,
+        stats: &BTreeMap<String, Stats>,
+        lockstep: bool,
+    ) -> Vec<Action> {
+        let mut actions = Vec::new();
+        if let Some(limit) = self.settings.startup {
+            for node in nodes {
+                if let Some(a) = self.check_startup(now, limit, node, running_here, stats, lockstep) {
+                    actions.push(a);
+                }
+            }
+        }
+        if actions.iter().any(|a| matches!(a, Action::Restart { .. })) {
+            self.last_change = now;
+        }
+        let counters: Vec<(String, [u64; 4])> = stats
+            .iter()
+            .map(|(id, s)| {
+                (
+                    id.clone(),
+                    [s.received, s.published, s.processed, u64::from(s.finished)],
+                )
+            })
+            .collect();
+        if counters != self.last_counters {
+            self.last_counters = counters;
+            self.last_change = now;
+        }
+        if lockstep
+            && let Some(limit) = self.settings.stall
+            && now.duration_since(self.last_change) >= limit
+        {
+            actions.push(Action::Stop(stall_message(limit, nodes, stats)));
+        }
+        actions
+    }
+
+    fn check_startup(
+        &mut self,
+        now: Instant,
+        limit: Duration,
+        node: &NodeSpec,
+        running_here: &dyn Fn(&str) -> bool,
+        stats: &BTreeMap<String, Stats>,
+        lockstep: bool,
+    ) -> Option<Action> {
+        let id = node.id.as_str();
+        let producers: Vec<&str> = node
+            .inputs
+            .iter()
+            .filter(|i| !i.feedback)
+            .map(|i| i.from_node.as_str())
+            .collect();
+        let received = match stats.get(id) {
+            Some(s) => s.received,
+            None if lockstep => 0,
+            None => return None,
+        };
+        let fed: Vec<&str> = producers
+            .iter()
+            .copied()
+            .filter(|p| stats.get(*p).is_some_and(|s| s.published > 0))
+            .collect();
+        if !running_here(id) || producers.is_empty() || received > 0 || fed.is_empty() {
+            self.fed_since.remove(id);
+            return None;
+        }
+        let since = *self.fed_since.entry(id.to_string()).or_insert(now);
+        let waited = now.duration_since(since);
+        if waited < limit {
+            return None;
+        }
+        let done = self.restarts.entry(id.to_string()).or_insert(0);
+        let why = format!(
+            "node `{id}` received nothing in {:.0} s while {} published",
+            waited.as_secs_f64(),
+            fed.join(", ")
+        );
+        if *done >= self.settings.startup_restarts {
+            return Some(Action::Stop(format!(
+                "{why}, after {done} restart(s); its subscriptions never reached its producers \
+                 (see its log)"
+            )));
+        }
+        *done += 1;
+        self.fed_since.insert(id.to_string(), now);
+        Some(Action::Restart {
+            node: id.to_string(),
+            why: format!("{why}; restarting it (start-up restart {done})"),
+        })
+    }
+}
+
+/// The message of a stalled run: every node's counters.
+fn stall_message(limit: Duration, nodes: &[NodeSpec], stats: &BTreeMap<String, Stats>) -> String {
+    let mut text = format!(
+        "no node made progress for {:.0} s (lock-step run stalled); counters per node:",
+        limit.as_secs_f64()
+    );
+    for n in nodes {
+        let line = match stats.get(&n.id) {
+            Some(s) => format!(
+                "received {}, published {}, processed {}, last seq {}{}",
+                s.received,
+                s.published,
+                s.processed,
+                s.last_seq.map_or("-".into(), |q| q.to_string()),
+                if s.finished { ", finished" } else { "" }
+            ),
+            None => "no stats received".into(),
+        };
+        text += &format!("\n  {}: {line}", n.id);
+    }
+    text
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn node(id: &str, from: &[(&str, bool)]) -> NodeSpec {
+        serde_json::from_value(serde_json::json!({
+            "id": id, "binary": "x", "machine": "local", "params": {},
+            "inputs": from.iter().enumerate().map(|(k, (p, fb))| serde_json::json!({
+                "port": format!("in{k}"), "schema": "s", "from_node": p, "from_output": "o",
+                "feedback": fb})).collect::<Vec<_>>(),
+            "outputs": [], "restart": {"policy": "never", "max": 3},
+        }))
+        .unwrap()
+    }
+
+    fn stats(id: &str, received: u64, published: u64) -> (String, Stats) {
+        (
+            id.to_string(),
+            Stats {
+                node: id.to_string(),
+                received,
+                published,
+                ..Stats::default()
+            },
+        )
+    }
+
+    fn settings() -> WatchdogSettings {
+        WatchdogSettings {
+            startup: Some(Duration::from_secs(20)),
+            startup_restarts: 1,
+            stall: Some(Duration::from_secs(120)),
+        }
+    }
+
+    #[test]
+    fn a_node_fed_but_receiving_nothing_is_restarted_then_the_run_stopped() {
+        let nodes = [node("src", &[]), node("a", &[("src", false)])];
+        let t0 = Instant::now();
+        let mut w = Watchdog::new(settings(), t0);
+        let all = |_: &str| true;
+        let mut st: BTreeMap<String, Stats> = [stats("src", 0, 0), stats("a", 0, 0)].into();
+        // Nothing published yet: no waiting starts.
+        assert!(
+            w.check(t0 + Duration::from_secs(30), &nodes, &all, &st, true)
+                .is_empty()
+        );
+        st.insert("src".into(), stats("src", 0, 3).1);
+        let t1 = t0 + Duration::from_secs(31);
+        assert!(w.check(t1, &nodes, &all, &st, true).is_empty());
+        assert!(
+            w.check(t1 + Duration::from_secs(19), &nodes, &all, &st, true)
+                .is_empty()
+        );
+        let a = w.check(t1 + Duration::from_secs(20), &nodes, &all, &st, true);
+        assert!(
+            matches!(&a[..], [Action::Restart { node, why }] if node == "a" && why.contains("src published")),
+            "{a:?}"
+        );
+        // The restarted node gets its own 20 s again; then the run stops.
+        let t2 = t1 + Duration::from_secs(20);
+        assert!(
+            w.check(t2 + Duration::from_secs(10), &nodes, &all, &st, true)
+                .is_empty()
+        );
+        let a = w.check(t2 + Duration::from_secs(20), &nodes, &all, &st, true);
+        assert!(
+            matches!(&a[..], [Action::Stop(m)] if m.contains("`a`") && m.contains("1 restart")),
+            "{a:?}"
+        );
+    }
+
+    #[test]
+    fn receiving_feedback_only_other_machines_and_live_nodes_without_stats_are_left_alone() {
+        let nodes = [
+            node("src", &[]),
+            node("a", &[("src", false)]),
+            node("b", &[("src", true)]),
+        ];
+        let t0 = Instant::now();
+        let later = t0 + Duration::from_secs(100);
+        let all = |_: &str| true;
+        let fed: BTreeMap<String, Stats> = [stats("src", 0, 5), stats("a", 1, 0), stats("b", 0, 0)].into();
+        let mut w = Watchdog::new(settings(), t0);
+        w.check(t0, &nodes, &all, &fed, true);
+        assert!(
+            w.check(later, &nodes, &all, &fed, true).is_empty(),
+            "a received, b is feedback only"
+        );
+        let starving: BTreeMap<String, Stats> = [stats("src", 0, 5), stats("a", 0, 0)].into();
+        let not_here = |id: &str| id != "a";
+        let mut w = Watchdog::new(settings(), t0);
+        w.check(t0, &nodes, &not_here, &starving, true);
+        assert!(
+            w.check(later, &nodes, &not_here, &starving, true).is_empty(),
+            "a runs elsewhere"
+        );
+        let no_stats: BTreeMap<String, Stats> = [stats("src", 0, 5)].into();
+        let mut w = Watchdog::new(settings(), t0);
+        w.check(t0, &nodes, &all, &no_stats, false);
+        assert!(
+            w.check(later, &nodes, &all, &no_stats, false).is_empty(),
+            "live, no stats"
+        );
+    }
+
+    #[test]
+    fn a_lockstep_run_without_progress_is_stopped_naming_every_node() {
+        let nodes = [node("src", &[]), node("a", &[("src", false)])];
+        let t0 = Instant::now();
+        let mut w = Watchdog::new(settings(), t0);
+        let all = |_: &str| true;
+        let mut st: BTreeMap<String, Stats> = [stats("src", 0, 4), stats("a", 2, 1)].into();
+        assert!(w.check(t0, &nodes, &all, &st, true).is_empty());
+        assert!(
+            w.check(t0 + Duration::from_secs(100), &nodes, &all, &st, true)
+                .is_empty()
+        );
+        st.insert("a".into(), stats("a", 3, 1).1);
+        assert!(
+            w.check(t0 + Duration::from_secs(119), &nodes, &all, &st, true)
+                .is_empty(),
+            "progress"
+        );
+        assert!(
+            w.check(t0 + Duration::from_secs(200), &nodes, &all, &st, false)
+                .is_empty(),
+            "live"
+        );
+        let a = w.check(t0 + Duration::from_secs(239), &nodes, &all, &st, true);
+        assert!(
+            matches!(&a[..], [Action::Stop(m)] if m.contains("a: received 3, published 1") && m.contains("src:")),
+            "{a:?}"
+        );
+        let off = WatchdogSettings::from_seconds(0.0, 0.0).unwrap();
+        let mut w = Watchdog::new(off, t0);
+        assert!(
+            w.check(t0 + Duration::from_secs(9999), &nodes, &all, &st, true)
+                .is_empty()
+        );
+        assert!(WatchdogSettings::from_seconds(-1.0, 5.0).is_err());
+    }
+}
