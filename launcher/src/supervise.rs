@@ -118,17 +118,7 @@ impl NodeProcess {
     /// not counted in [`NodeProcess::restarts`] (which count failures against the node's
     /// restart policy): for the launcher's watchdog (`crate::watchdog`).
     pub fn respawn(&mut self) -> std::io::Result<()> {
-        self.signal(libc::SIGTERM);
-        let start = Instant::now();
-        while self.poll().is_none() && self.pid().is_some() && start.elapsed() < STOP_GRACE {
-            std::thread::sleep(Duration::from_millis(20));
-        }
-        if self.poll().is_none() {
-            self.signal(libc::SIGKILL);
-            if let Some(c) = self.child.as_mut() {
-                let _ = c.wait();
-            }
-        }
+        stop_all(std::slice::from_mut(self));
         self.start()
     }
 
