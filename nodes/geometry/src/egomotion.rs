@@ -25,7 +25,14 @@ pub struct EgomotionParams {
     /// 23-47 degrees off; 10-50 rounds bring most slices to 1-9 degrees.
     pub refine_iterations: usize,
     /// Columns of the grid of constant-depth cells (default 8: cells of 80 px on a 640 px
-    /// sensor, small enough for one depth, large enough for tens of samples).
+    /// sensor, small enough for one depth, large enough for tens of samples). Measured on
+    /// `evseg bench` (evseg-bench-v3, at 0559795; median direction error / mean RMSE x y z
+    /// m/s): 5 columns 8.7 deg / 0.047 0.050 0.096, 8 columns 8.4 / 0.050 0.051 0.099, 12
+    /// columns 9.2 / 0.054 0.054 0.106. A depth that varies linearly across each cell (exact
+    /// for planes such as a floor; tried in both mergers, not kept) was worse: 10.3 deg with
+    /// free slopes, 8.8 with a ridge on them. Every background sample instead of at most
+    /// `max_samples` gave 8.3 deg. So the direction is limited neither by the depth model nor by
+    /// the sample count, but by errors shared by many samples (the normal flow's length).
     pub grid_cols: usize,
     /// Cells with fewer samples are left out of the refinement (default 20).
     pub min_cell_samples: usize,
