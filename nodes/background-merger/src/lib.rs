@@ -9,7 +9,9 @@
 //!    warped previous background rather than warped previous foreground. The first slice, or a
 //!    cluster that lands on too few warped events, uses the planar vote alone ("Initialization");
 //!    a slice whose planar vote separated (almost) nothing uses the warp score alone
-//!    ([`BackgroundParams::planar_silent_share`]).
+//!    ([`BackgroundParams::planar_silent_share`]); a cluster that lands on previous foreground
+//!    which clearly moved gets the larger weight [`BackgroundParams::warp_weight_moving`] where
+//!    the warp says more foreground than the planar vote.
 //!    Clusters with a prior of at least [`BackgroundParams::candidate_threshold`] are background
 //!    candidates.
 //! 2. **Egomotion.** The linear SVM on the candidates' derotated normal flow gives the camera's
@@ -209,6 +211,9 @@ impl BackgroundMerger {
         let mut reports = vec![ClusterReport::default(); k];
         let mut planar_bg = vec![0usize; k];
         let mut hits = vec![(0.0f64, 0.0f64); k];
+        // The part of `hits.1` (foreground) on cells with warped events whose cluster clearly
+        // moved ([`PreviousSlice::moving`]).
+        let mut moving_hits = vec![0.0f64; k];
         for i in 0..n {
             let Some(c) = cluster_of(input.clusters, i) else {
                 continue;
@@ -219,13 +224,18 @@ impl BackgroundMerger {
                 && let Some(cell) = w.background.cell(events.x[i], events.y[i])
             {
                 let (b, f) = (w.background.values[cell] > 0.0, w.foreground.values[cell] > 0.0);
+                let moving = f64::from(u8::from(w.moving_foreground.values[cell] > 0.0));
                 // An event on both kinds of warped cells votes half for each.
                 match (b, f) {
                     (true, false) => hits[c].0 += 1.0,
-                    (false, true) => hits[c].1 += 1.0,
+                    (false, true) => {
+                        hits[c].1 += 1.0;
+                        moving_hits[c] += moving;
+                    }
                     (true, true) => {
                         hits[c].0 += 0.5;
                         hits[c].1 += 0.5;
+                        moving_hits[c] += 0.5 * moving;
                     }
                     (false, false) => {}
                 }
@@ -243,7 +253,17 @@ impl BackgroundMerger {
             }
             r.prior = match r.warp_score {
                 Some(s) if planar_silent => s,
-                Some(s) => (1.0 - p.warp_weight) * r.planar_background + p.warp_weight * s,
+                Some(s) => {
+                    // Mostly on previous foreground that clearly moved, and the warp says more
+                    // foreground than the planar vote: the warp gets the larger weight.
+                    let moved = hits[c].1 > 0.0 && moving_hits[c] >= 0.5 * hits[c].1;
+                    let w = if moved && s < r.planar_background {
+                        p.warp_weight_moving
+                    } else {
+                        p.warp_weight
+                    };
+                    (1.0 - w) * r.planar_background + w * s
+                }
                 None => r.planar_background,
             };
             r.candidate = r.prior >= p.candidate_threshold;
@@ -350,6 +370,12 @@ impl BackgroundMerger {
             .collect();
 
         let warped_in = warped.is_some();
+        // Per event: its cluster was clearly not explained by this slice's translation.
+        let moving: Vec<bool> = (0..n)
+            .map(|i| {
+                cluster_of(input.clusters, i).is_some_and(|c| reports[c].relative_residual >= p.moving_relres)
+            })
+            .collect();
         self.previous = Some(PreviousSlice {
             camera: input.camera.clone(),
             x: events.x.clone(),
@@ -358,6 +384,7 @@ impl BackgroundMerger {
             omega,
             t_mid,
             direction,
+            moving,
         });
         Ok(MergeResult {
             coarse: CoarseSegmentation {

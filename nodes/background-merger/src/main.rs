@@ -119,6 +119,16 @@ fn main() -> ExitCode {
         "weight of the warp score against the planar vote",
     )
     .param(
+        "warp_weight_moving",
+        d.warp_weight_moving,
+        "weight of the warp score where it lands on previous foreground that clearly moved and says more foreground than the planar vote",
+    )
+    .param(
+        "moving_relres",
+        d.moving_relres,
+        "relative residual at or above which a cluster counts as clearly moving for warp_weight_moving",
+    )
+    .param(
         "planar_silent_share",
         d.planar_silent_share,
         "planar foreground share of clustered events at or below which the warp score alone is the prior",
@@ -187,6 +197,8 @@ fn main() -> ExitCode {
             warp_cell_px: cfg.param("warp_cell_px")?,
             warp_min_hits: cfg.param("warp_min_hits")?,
             warp_weight: cfg.param("warp_weight")?,
+            warp_weight_moving: cfg.param("warp_weight_moving")?,
+            moving_relres: cfg.param("moving_relres")?,
             planar_silent_share: cfg.param("planar_silent_share")?,
             candidate_threshold: cfg.param("candidate_threshold")?,
             consistency_ratio: cfg.param("consistency_ratio")?,

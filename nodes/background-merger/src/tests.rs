@@ -198,6 +198,79 @@ fn when_the_planar_vote_separates_nothing_the_warp_alone_decides() {
 }
 
 #[test]
+fn previous_foreground_that_clearly_moved_weighs_the_warp_more_but_a_false_alarm_does_not() {
+    // First slice: the object (cluster 12) moves against the camera, so no depth explains it;
+    // the previous labels also call background cluster 4 foreground (a false alarm, which the
+    // camera's motion explains).
+    let t = [0.4, 0.0, 0.1];
+    let t_obj = Some([-0.5, 0.4, 0.0]);
+    let d = BackgroundParams::default();
+    let run_with = |moving_weight: f64| {
+        let p = BackgroundParams {
+            warp_weight_moving: moving_weight,
+            ..BackgroundParams::default()
+        };
+        let mut m = BackgroundMerger::new(p).unwrap();
+        let first = construct(t, t_obj, 0.0);
+        let r1 = run(&mut m, &first, (0.0, 0.03), None);
+        let labels: Vec<u32> = (0..first.object.len())
+            .map(|i| u32::from(first.object[i] || first.clusters.id[i] == 4))
+            .collect();
+        // Second slice: the planar vote calls the object and cluster 4 background and cluster
+        // 0 foreground (so that it is not silent).
+        let mut second = construct(t, t_obj, 0.03);
+        for (i, b) in second.residuals.background.iter_mut().enumerate() {
+            *b = second.clusters.id[i] != 0;
+        }
+        let r2 = run(&mut m, &second, (0.03, 0.06), Some(&labels));
+        (r1, r2)
+    };
+    let prior = |w: f64, r: &ClusterReport| {
+        let s = r.warp_score.unwrap();
+        (1.0 - w) * r.planar_background + w * s
+    };
+    let (r1, r2) = run_with(d.warp_weight_moving);
+    assert!(
+        r1.clusters[12].relative_residual >= d.moving_relres,
+        "{:?}",
+        r1.clusters[12]
+    );
+    assert!(
+        r1.clusters[4].relative_residual < d.moving_relres,
+        "{:?}",
+        r1.clusters[4]
+    );
+    assert!(r2.warped);
+    // The object: planar vote background, warp mostly foreground, weighed 0.6.
+    let object = r2.clusters[12];
+    assert!(object.warp_score.is_some_and(|w| w < 0.5), "{object:?}");
+    assert!(
+        (object.prior - prior(d.warp_weight_moving, &object)).abs() < 1e-9,
+        "{object:?}"
+    );
+    assert!(!object.background, "{object:?}");
+    // The false alarm keeps the ordinary weight and goes back to the background.
+    let phantom = r2.clusters[4];
+    assert!(phantom.warp_score.is_some_and(|w| w < 0.5), "{phantom:?}");
+    assert!(
+        (phantom.prior - prior(d.warp_weight, &phantom)).abs() < 1e-9,
+        "{phantom:?}"
+    );
+    assert!(phantom.candidate && phantom.background, "{phantom:?}");
+    // With the rule off the object's prior is the ordinary one, higher by the weights' gap.
+    let (_, off) = run_with(d.warp_weight);
+    let object_off = off.clusters[12];
+    assert!(
+        (object_off.prior - prior(d.warp_weight, &object_off)).abs() < 1e-9,
+        "{object_off:?}"
+    );
+    assert!(
+        object_off.prior > object.prior + 0.2,
+        "{object_off:?} vs {object:?}"
+    );
+}
+
+#[test]
 fn malformed_input_is_an_error() {
     let c = construct([0.1, 0.0, 0.0], None, 0.0);
     let mut m = BackgroundMerger::new(BackgroundParams::default()).unwrap();

@@ -31,6 +31,9 @@ pub struct PreviousSlice {
     pub t_mid: f64,
     /// Translation direction estimated for the slice (camera frame, unit), if any.
     pub direction: Option<[f64; 3]>,
+    /// Per event: its cluster was clearly not explained by the camera's motion (relative
+    /// residual at least [`crate::BackgroundParams::moving_relres`]).
+    pub moving: Vec<bool>,
 }
 
 /// The previous segmentation moved to the current time.
@@ -40,6 +43,9 @@ pub struct WarpedPrevious {
     pub background: CellGrid,
     /// Warped previous foreground events per cell, dilated by one cell.
     pub foreground: CellGrid,
+    /// Warped previous foreground events whose cluster clearly moved
+    /// ([`PreviousSlice::moving`]), per cell, dilated by one cell.
+    pub moving_foreground: CellGrid,
     /// The planar model used (`None`: too few background samples, rotation only).
     pub model: Option<[f64; 8]>,
 }
@@ -69,6 +75,7 @@ pub fn warp_previous(
     let (w, h) = (prev.camera.width, prev.camera.height);
     let mut background = CellGrid::new(w, h, cell_px);
     let mut foreground = CellGrid::new(w, h, cell_px);
+    let mut moving_foreground = CellGrid::new(w, h, cell_px);
     for (i, &label) in labels.iter().enumerate() {
         table.prefetch_ahead(&prev.x, &prev.y, i);
         let Some([x, y]) = table.get(prev.x[i], prev.y[i]) else {
@@ -88,11 +95,15 @@ pub fn warp_previous(
         };
         if let Some(c) = grid.cell_f(u + 0.5, v + 0.5) {
             grid.values[c] += 1.0;
+            if label != 0 && prev.moving.get(i).copied().unwrap_or(false) {
+                moving_foreground.values[c] += 1.0;
+            }
         }
     }
     Some(WarpedPrevious {
         background: background.dilated(),
         foreground: foreground.dilated(),
+        moving_foreground: moving_foreground.dilated(),
         model,
     })
 }

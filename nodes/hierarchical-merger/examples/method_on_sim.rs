@@ -68,6 +68,8 @@ fn apply(
         let f: f64 = v.trim().parse().with_context(|| kv.to_string())?;
         match k.trim() {
             "warp_weight" => bg.warp_weight = f,
+            "warp_weight_moving" => bg.warp_weight_moving = f,
+            "moving_relres" => bg.moving_relres = f,
             "candidate_threshold" => bg.candidate_threshold = f,
             "consistency_ratio" => bg.consistency_ratio = f,
             "consistency_floor" => bg.consistency_floor = f,
