@@ -95,7 +95,7 @@ pub fn warp_previous(
         };
         if let Some(c) = grid.cell_f(u + 0.5, v + 0.5) {
             grid.values[c] += 1.0;
-            if label != 0 && prev.moving.get(i).copied().unwrap_or(false) {
+            if label != 0 && prev.moving.get(i).is_some_and(|&m| m) {
                 moving_foreground.values[c] += 1.0;
             }
         }
