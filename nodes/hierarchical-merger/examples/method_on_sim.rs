@@ -30,6 +30,12 @@
 //! foreground share, centres and their ratio, between-class variance share, Ashman's D).
 //! Scenes with windows without a moving object also print the share of those windows' events
 //! labelled moving (final and planar), the evaluator's false-alarm figure.
+//! FILL_STATS: per scene, final and planar labels' true/false positives and misses split into
+//! events with a coarse group and events without (labelled by the hierarchical merger's fill),
+//! and the events without a group the fill called background by whether any grouped event lay
+//! in their 3x3 cells. FILL_PLANAR (diagnostic; replaces the final labels of events without a
+//! group): 1 = those with no grouped event in their 3x3 cells take the planar label, 2 = all of
+//! them do, 3 = as 1, and the others stay foreground only where the planar label agrees.
 //! ORACLE_FIT: the plane fitted to the true background's events only (instead of leaving out
 //! the previous slice's foreground).
 //! Diagnostics that replace the final labels: ORACLE_CLUSTERS (each cluster labelled by its
@@ -101,6 +107,8 @@ fn apply(
             "prior_floor" => bg.prior_floor = f,
             "alpha_max" => bg.alpha_max = f,
             "merge_threshold" => hier.merge_threshold = f,
+            "fill_cell_px" => hier.fill_cell_px = f as u16,
+            "fill_reach" => hier.fill_reach = f as u16,
             "background_penalty" => hier.background_penalty = f,
             "lambda_r" => hier.lambda_r = f,
             "lambda" => hier.lambda = f,
@@ -545,6 +553,10 @@ fn main() -> anyhow::Result<()> {
             let mut coarse_ious = Vec::new();
             let (mut inter_all, mut union_all) = (0usize, 0usize);
             let (mut predicted_all, mut truth_all) = (0usize, 0usize);
+            // FILL_STATS: [grouped, ungrouped] x [final, planar] x (tp, fp, fn).
+            let mut fill_stats = [[[0usize; 3]; 2]; 2];
+            // FILL_STATS: ungrouped events labelled background: [object, background] x [no labelled neighbour, labelled neighbours].
+            let mut fill_why = [[0usize; 2]; 2];
             let (mut planar_pred_all, mut planar_inter_all) = (0usize, 0usize);
             // Slices without a moving object: share of events labelled moving (final, planar).
             let mut static_fa: Vec<(f64, f64)> = Vec::new();
@@ -611,6 +623,39 @@ fn main() -> anyhow::Result<()> {
                 let h = hier.merge(&s.camera, &s.events, f, rate, &m.coarse)?;
                 let mut oracle_label;
                 let mut label = &h.segmentation.label;
+                // FILL_PLANAR=1: ungrouped events without a grouped event in the 3x3 cells of 4 px
+                // take the planar label; =2: every ungrouped event does; =3: as 1, and the other
+                // ungrouped events are foreground only where the fill and the planar label agree.
+                let fill_planar: u32 = env_or("FILL_PLANAR", 0)?;
+                let mut planar_filled;
+                let grouped_near = (fill_planar > 0 || std::env::var("FILL_STATS").is_ok())
+                    .then(|| grouped_neighbours(&s.events, &m.coarse.group, s.camera.width, s.camera.height));
+                if let (true, Some(near)) = (fill_planar > 0, &grouped_near) {
+                    let fg_id = h
+                        .segmentation
+                        .segments
+                        .iter()
+                        .map(|sg| sg.label)
+                        .find(|&i| i != 0)
+                        .unwrap_or(1);
+                    planar_filled = label.clone();
+                    for i in 0..s.events.len() {
+                        if m.coarse.group[i] != u32::MAX {
+                            continue;
+                        }
+                        let pf = !r.residuals.background[i];
+                        if !near[i] || fill_planar == 2 {
+                            planar_filled[i] = if pf {
+                                if label[i] != 0 { label[i] } else { fg_id }
+                            } else {
+                                0
+                            };
+                        } else if fill_planar == 3 && !pf {
+                            planar_filled[i] = 0;
+                        }
+                    }
+                    label = &planar_filled;
+                }
                 if std::env::var("ORACLE_CLUSTERS").is_ok() {
                     let k = usize::from(c.count);
                     let mut votes = vec![(0usize, 0usize); k];
@@ -636,6 +681,7 @@ fn main() -> anyhow::Result<()> {
                         s.camera.width,
                         s.camera.height,
                         4,
+                        1,
                         &mut oracle_label,
                     );
                     label = &oracle_label;
@@ -690,6 +736,7 @@ fn main() -> anyhow::Result<()> {
                         s.camera.width,
                         s.camera.height,
                         4,
+                        1,
                         &mut oracle_label,
                     );
                     label = &oracle_label;
@@ -778,6 +825,7 @@ fn main() -> anyhow::Result<()> {
                         s.camera.width,
                         s.camera.height,
                         4,
+                        1,
                         &mut coarse_label,
                     );
                     let (mut ci, mut cu) = (0usize, 0usize);
@@ -795,6 +843,16 @@ fn main() -> anyhow::Result<()> {
                         predicted_all += usize::from(p);
                         truth_all += usize::from(g);
                         let pp = !r.residuals.background[k];
+                        let kind = usize::from(m.coarse.group[k] == u32::MAX);
+                        if let (1, false, Some(near)) = (kind, p, &grouped_near) {
+                            fill_why[usize::from(!g)][usize::from(near[k])] += 1;
+                        }
+                        for (which, q) in [p, pp].into_iter().enumerate() {
+                            let cell = &mut fill_stats[kind][which];
+                            cell[0] += usize::from(q && g);
+                            cell[1] += usize::from(q && !g);
+                            cell[2] += usize::from(!q && g);
+                        }
                         pi += usize::from(pp && g);
                         planar_pred_all += usize::from(pp);
                         planar_inter_all += usize::from(pp && g);
@@ -834,9 +892,11 @@ fn main() -> anyhow::Result<()> {
                         let g = truth.event_object.iter().filter(|&&o| o != 0).count();
                         let p = label.iter().filter(|&&l| l != 0).count();
                         println!(
-                            "  slice t {:.2} iou {:.2} object share {:.2} prec {:.2} rec {:.2}",
+                            "  slice t {:.2} iou {:.2} planar {:.2} coarse {:.2} object share {:.2} prec {:.2} rec {:.2}",
                             span.0,
                             i as f64 / u.max(1) as f64,
+                            pi as f64 / pu.max(1) as f64,
+                            ci as f64 / cu.max(1) as f64,
                             g as f64 / label.len().max(1) as f64,
                             i as f64 / p.max(1) as f64,
                             i as f64 / g.max(1) as f64
@@ -930,7 +990,48 @@ fn main() -> anyhow::Result<()> {
                 dirs.get(dirs.len() / 2).copied().unwrap_or(f64::NAN),
                 dirs.len()
             );
+            if std::env::var("FILL_STATS").is_ok() {
+                for (kind, name) in ["grouped", "ungrouped"].iter().enumerate() {
+                    for (which, w) in ["final", "planar"].iter().enumerate() {
+                        let [tp, fp, fneg] = fill_stats[kind][which];
+                        println!("  {name:9} {w:6} tp {tp:8} fp {fp:8} fn {fneg:8}");
+                    }
+                }
+                println!(
+                    "  ungrouped labelled background: object events without labelled neighbours {} with {}; background events without {} with {}",
+                    fill_why[0][0], fill_why[0][1], fill_why[1][0], fill_why[1][1]
+                );
+            }
         }
     }
     Ok(())
+}
+
+/// Per event: some grouped event (`group != u32::MAX`) lies in the 3x3 cells of 4 px around it
+/// (the hierarchical merger's fill at reach 1 finds a label).
+fn grouped_neighbours(ev: &evseg_schemas::Events, group: &[u32], width: u16, height: u16) -> Vec<bool> {
+    let (w, h) = (
+        usize::from(width).div_ceil(4).max(1),
+        usize::from(height).div_ceil(4).max(1),
+    );
+    let cell = |i: usize| {
+        (
+            (usize::from(ev.x[i]) / 4).min(w - 1),
+            (usize::from(ev.y[i]) / 4).min(h - 1),
+        )
+    };
+    let mut occupied = vec![false; w * h];
+    for (i, &g) in group.iter().enumerate().take(ev.len()) {
+        if g != u32::MAX {
+            let (cx, cy) = cell(i);
+            occupied[cy * w + cx] = true;
+        }
+    }
+    (0..ev.len())
+        .map(|i| {
+            let (cx, cy) = cell(i);
+            (cy.saturating_sub(1)..=(cy + 1).min(h - 1))
+                .any(|ny| (cx.saturating_sub(1)..=(cx + 1).min(w - 1)).any(|nx| occupied[ny * w + nx]))
+        })
+        .collect()
 }

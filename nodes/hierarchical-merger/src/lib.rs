@@ -17,7 +17,8 @@
 //!    [`HierParams::min_segment_events`]) become background. The others get labels 1, 2, ... by
 //!    decreasing size.
 //! 4. Events without flow (no group) take the most common label among labelled events in the
-//!    3x3 cells around them ([`fill`]); background where there are none.
+//!    3x3 cells around them ([`fill`]); where those are empty, in the nearest ring of cells
+//!    out to [`HierParams::fill_reach`] that holds any; background where none does.
 //! 5. The final egomotion: the linear SVM on the final background's derotated normal flow, for
 //!    the next slice (section 3.5, last paragraph), refined with one inverse depth per image cell
 //!    (`evseg_geometry::egomotion`).
@@ -366,7 +367,14 @@ impl HierarchicalMerger {
             .collect();
 
         // 4. Events without a group.
-        fill::fill_unlabelled(events, camera.width, camera.height, p.fill_cell_px, &mut label);
+        fill::fill_unlabelled(
+            events,
+            camera.width,
+            camera.height,
+            p.fill_cell_px,
+            p.fill_reach,
+            &mut label,
+        );
 
         // Segment descriptions, measured on the final labels.
         let mut stats = vec![([f32::MAX, f32::MAX, f32::MIN, f32::MIN], [0.0f64; 2], 0u32); next as usize];

@@ -101,6 +101,11 @@ fn main() -> ExitCode {
         "fill_cell_px",
         d.fill_cell_px,
         "grid cell labelling events without flow, pixels",
+    )
+    .param(
+        "fill_reach",
+        d.fill_reach,
+        "cells the fill looks out to where the 3x3 cells around an event without flow hold no labelled event",
     );
     let description = describe_egomotion(description, &d.egomotion).build();
     run_stage(description, |cfg: &NodeConfig| {
@@ -116,6 +121,7 @@ fn main() -> ExitCode {
             min_segment_fraction: cfg.param("min_segment_fraction")?,
             min_segment_events: cfg.param("min_segment_events")?,
             fill_cell_px: cfg.param("fill_cell_px")?,
+            fill_reach: cfg.param("fill_reach")?,
             egomotion: egomotion_from_config(cfg)?,
         };
         Ok(Node {
