@@ -90,6 +90,52 @@ fn run(m: &mut BackgroundMerger, c: &Constructed, span: (f64, f64), prev: Option
     .unwrap()
 }
 
+/// Two slices of the scene `construct(t, t_obj, ..)` through one merger with `p`: the first
+/// (0-30 ms) without previous labels, the second (30-60 ms), after `edit`, with
+/// `labels(first)` as the previous labels.
+struct TwoSlices {
+    merger: BackgroundMerger,
+    second: Constructed,
+    labels: Vec<u32>,
+    first_result: MergeResult,
+    second_result: MergeResult,
+}
+
+fn two_slices(
+    p: BackgroundParams,
+    t: [f64; 3],
+    t_obj: Option<[f64; 3]>,
+    labels: impl FnOnce(&Constructed) -> Vec<u32>,
+    edit: impl FnOnce(&mut Constructed),
+) -> TwoSlices {
+    let mut merger = BackgroundMerger::new(p).unwrap();
+    let first = construct(t, t_obj, 0.0);
+    let first_result = run(&mut merger, &first, (0.0, 0.03), None);
+    let labels = labels(&first);
+    let mut second = construct(t, t_obj, 0.03);
+    edit(&mut second);
+    let second_result = run(&mut merger, &second, (0.03, 0.06), Some(&labels));
+    TwoSlices {
+        merger,
+        second,
+        labels,
+        first_result,
+        second_result,
+    }
+}
+
+/// The previous labels of a constructed slice: 1 on the object, 0 elsewhere.
+fn object_labels(c: &Constructed) -> Vec<u32> {
+    c.object.iter().map(|&o| u32::from(o)).collect()
+}
+
+/// Makes the planar vote call cluster 0 foreground and every other cluster background.
+fn planar_calls_only_cluster_0_foreground(c: &mut Constructed) {
+    for (i, b) in c.residuals.background.iter_mut().enumerate() {
+        *b = c.clusters.id[i] != 0;
+    }
+}
+
 #[test]
 fn a_static_scene_at_many_depths_is_one_background_with_the_right_direction() {
     let t = [0.4, 0.1, 0.3];
@@ -141,18 +187,16 @@ fn the_previous_segmentation_is_warped_in_and_corrects_a_wrong_planar_vote() {
         warp_weight: 0.5,
         ..BackgroundParams::default()
     };
-    let mut m = BackgroundMerger::new(p).unwrap();
-    let first = construct(t, t_obj, 0.0);
-    let r1 = run(&mut m, &first, (0.0, 0.03), None);
-    assert!(!r1.warped);
-    let labels: Vec<u32> = first.object.iter().map(|&o| u32::from(o)).collect();
     // Second slice: the planar vote now calls the object background *and* part of the
     // background foreground; the warp of the previous labels outvotes it for the background.
-    let mut second = construct(t, t_obj, 0.03);
-    for (i, b) in second.residuals.background.iter_mut().enumerate() {
-        *b = second.clusters.id[i] != 0;
-    }
-    let r2 = run(&mut m, &second, (0.03, 0.06), Some(&labels));
+    let TwoSlices {
+        merger: mut m,
+        second,
+        labels,
+        first_result: r1,
+        second_result: r2,
+    } = two_slices(p, t, t_obj, object_labels, planar_calls_only_cluster_0_foreground);
+    assert!(!r1.warped);
     assert!(r2.warped);
     let w0 = r2.clusters[0].warp_score.unwrap();
     assert!(w0 > 0.9, "cluster 0 warp score {w0}");
@@ -172,20 +216,17 @@ fn when_the_planar_vote_separates_nothing_the_warp_alone_decides() {
     // previous segmentation can.
     let t = [0.4, 0.0, 0.1];
     let t_obj = Some([0.8, 0.0, 0.2]);
-    let labels_of = |c: &Constructed| -> Vec<u32> { c.object.iter().map(|&o| u32::from(o)).collect() };
     let verdict = |share: f64| {
         let p = BackgroundParams {
             planar_silent_share: share,
             ..BackgroundParams::default()
         };
-        let mut m = BackgroundMerger::new(p).unwrap();
-        let first = construct(t, t_obj, 0.0);
-        run(&mut m, &first, (0.0, 0.03), None);
         // Second slice: the planar vote calls everything background (the fit followed the
         // object, or the split failed).
-        let mut second = construct(t, t_obj, 0.03);
-        second.residuals.background.iter_mut().for_each(|b| *b = true);
-        let r = run(&mut m, &second, (0.03, 0.06), Some(&labels_of(&first)));
+        let r = two_slices(p, t, t_obj, object_labels, |second| {
+            second.residuals.background.iter_mut().for_each(|b| *b = true)
+        })
+        .second_result;
         assert!(r.warped);
         r.clusters[12]
     };
@@ -210,20 +251,21 @@ fn previous_foreground_that_clearly_moved_weighs_the_warp_more_but_a_false_alarm
             warp_weight_moving: moving_weight,
             ..BackgroundParams::default()
         };
-        let mut m = BackgroundMerger::new(p).unwrap();
-        let first = construct(t, t_obj, 0.0);
-        let r1 = run(&mut m, &first, (0.0, 0.03), None);
-        let labels: Vec<u32> = (0..first.object.len())
-            .map(|i| u32::from(first.object[i] || first.clusters.id[i] == 4))
-            .collect();
         // Second slice: the planar vote calls the object and cluster 4 background and cluster
         // 0 foreground (so that it is not silent).
-        let mut second = construct(t, t_obj, 0.03);
-        for (i, b) in second.residuals.background.iter_mut().enumerate() {
-            *b = second.clusters.id[i] != 0;
-        }
-        let r2 = run(&mut m, &second, (0.03, 0.06), Some(&labels));
-        (r1, r2)
+        let object_and_cluster_4 = |first: &Constructed| {
+            (0..first.object.len())
+                .map(|i| u32::from(first.object[i] || first.clusters.id[i] == 4))
+                .collect()
+        };
+        let r = two_slices(
+            p,
+            t,
+            t_obj,
+            object_and_cluster_4,
+            planar_calls_only_cluster_0_foreground,
+        );
+        (r.first_result, r.second_result)
     };
     let prior = |w: f64, r: &ClusterReport| {
         let s = r.warp_score.unwrap();
