@@ -1007,31 +1007,16 @@ fn main() -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Per event: some grouped event (`group != u32::MAX`) lies in the 3x3 cells of 4 px around it
-/// (the hierarchical merger's fill at reach 1 finds a label).
+/// Per event without a group: some grouped event (`group != u32::MAX`) lies in the 3x3 cells
+/// of 4 px around it (the hierarchical merger's fill at reach 1 finds a label); true for the
+/// grouped events. The fill itself answers: with every grouped event labelled 1, an event
+/// without a group gets 1 exactly when one lies in its 3x3 cells.
 fn grouped_neighbours(ev: &evseg_schemas::Events, group: &[u32], width: u16, height: u16) -> Vec<bool> {
-    let (w, h) = (
-        usize::from(width).div_ceil(4).max(1),
-        usize::from(height).div_ceil(4).max(1),
-    );
-    let cell = |i: usize| {
-        (
-            (usize::from(ev.x[i]) / 4).min(w - 1),
-            (usize::from(ev.y[i]) / 4).min(h - 1),
-        )
-    };
-    let mut occupied = vec![false; w * h];
-    for (i, &g) in group.iter().enumerate().take(ev.len()) {
-        if g != u32::MAX {
-            let (cx, cy) = cell(i);
-            occupied[cy * w + cx] = true;
-        }
-    }
-    (0..ev.len())
-        .map(|i| {
-            let (cx, cy) = cell(i);
-            (cy.saturating_sub(1)..=(cy + 1).min(h - 1))
-                .any(|ny| (cx.saturating_sub(1)..=(cx + 1).min(w - 1)).any(|nx| occupied[ny * w + nx]))
-        })
-        .collect()
+    use evseg_hierarchical_merger::fill::{UNLABELLED, fill_unlabelled};
+    let mut label: Vec<u32> = group
+        .iter()
+        .map(|&g| if g == u32::MAX { UNLABELLED } else { 1 })
+        .collect();
+    fill_unlabelled(ev, width, height, 4, 1, &mut label);
+    label.iter().map(|&l| l == 1).collect()
 }
