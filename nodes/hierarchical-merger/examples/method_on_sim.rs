@@ -20,6 +20,8 @@
 //! true length).
 //! DEBUG_FIT: per slice, how many of the object's and of the background's events lie inside the
 //! planar segmenter's previous-foreground mask (whether the mask keeps the object out of the fit).
+//! SLICE_MS: the slice length (default 30 ms, as graph.yaml). SIM_SET: the simulator's sensor,
+//! IMU and texture settings (see `sim_override`).
 //! OVERSEG_K / OVERSEG_LAMBDA: the over-segmentation's cluster count and flow weight.
 //! FP_DIST: per scene, the final labels' false positives by their distance to the nearest true
 //! object event and false negatives by their distance to the nearest predicted foreground event
@@ -344,11 +346,18 @@ fn main() -> anyhow::Result<()> {
         .split(';')
         .map(str::to_string)
         .collect();
+    let sim_set: String = env_or("SIM_SET", String::new())?;
     for name in &names {
-        let mut src = SyntheticSource::new(name, seed, Some(seconds))?;
+        let mut config = evseg_sim::preset(name, seed)?;
+        config.duration_s = seconds;
+        sim_override(&sim_set, &mut config)?;
+        let mut src = SyntheticSource::from_config(config)?;
         let camera = src.camera();
         let cam = Camera::new(&camera);
-        let mut slicer = Slicer::new(SlicerParams::default())?;
+        let mut slicer = Slicer::new(SlicerParams {
+            window_s: env_or("SLICE_MS", 30.0)? * 1e-3,
+            ..SlicerParams::default()
+        })?;
         let mut slices: Vec<(Slice, Truth, (f64, f64))> = Vec::new();
         let mut t = 0.0;
         loop {
@@ -1002,6 +1011,37 @@ fn main() -> anyhow::Result<()> {
                     fill_why[0][0], fill_why[0][1], fill_why[1][0], fill_why[1][1]
                 );
             }
+        }
+    }
+    Ok(())
+}
+
+/// Applies SIM_SET ("name=value,..."): the sensor's (`c_on`, `c_off`, `c_sigma`,
+/// `refractory_s`, `noise_rate_hz`, `hot_pixels`, `hot_pixel_rate_hz`, `contrast` = both
+/// thresholds) and the IMU's (`gyro_noise_std` rad/s, `gyro_bias` rad/s on every axis) settings
+/// of a preset, and `texture_contrast` (the preset's textures' contrast scaled), for studies of
+/// how the method holds up on sensors and scenes unlike the presets'.
+fn sim_override(set: &str, cfg: &mut evseg_sim::SceneConfig) -> anyhow::Result<()> {
+    for kv in set.split(',').filter(|s| !s.trim().is_empty()) {
+        let (k, v) = kv.split_once('=').context("SIM_SET entries are name=value")?;
+        let f: f64 = v.trim().parse().with_context(|| kv.to_string())?;
+        let e = &mut cfg.esim;
+        match k.trim() {
+            "c_on" => e.c_on = f,
+            "c_off" => e.c_off = f,
+            "contrast" => {
+                e.c_on = f;
+                e.c_off = f;
+            }
+            "c_sigma" => e.c_sigma = f,
+            "refractory_s" => e.refractory_s = f,
+            "noise_rate_hz" => e.noise_rate_hz = f,
+            "hot_pixels" => e.hot_pixels = f as u32,
+            "hot_pixel_rate_hz" => e.hot_pixel_rate_hz = f,
+            "gyro_noise_std" => cfg.imu.gyro_noise_std = f,
+            "gyro_bias" => cfg.imu.gyro_bias = [f, -f, f],
+            "texture_contrast" => evseg_sim::scale_contrast(cfg, f),
+            other => bail!("SIM_SET: unknown setting {other}"),
         }
     }
     Ok(())

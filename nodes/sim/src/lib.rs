@@ -49,7 +49,7 @@ pub use camera::CameraConfig;
 pub use config::{RenderConfig, SceneConfig, TruthConfig};
 pub use esim::EsimConfig;
 pub use imu::{IMU_TO_CAMERA, ImuConfig};
-pub use presets::{PRESET_NAMES, preset};
+pub use presets::{PRESET_NAMES, preset, scale_contrast};
 pub use scene::{BoxConfig, Lighting, ObjectConfig, PlaneConfig, SceneContent};
 pub use texture::{Pattern, TextureConfig};
 pub use trajectory::{RigidTrajectory, Signal, Sinusoid};

@@ -20,6 +20,12 @@ impl SyntheticSource {
             }
             config.duration_s = s;
         }
+        Self::from_config(config)
+    }
+
+    /// A scene of the caller's own (a preset with changed sensor, IMU or scene settings, say);
+    /// refuses a configuration the simulator's checks refuse.
+    pub fn from_config(config: evseg_sim::SceneConfig) -> Result<Self, SourceError> {
         let sim = Simulator::new(config).map_err(|e| SourceError::Param(e.to_string()))?;
         Ok(Self { sim })
     }
@@ -125,4 +131,44 @@ pub fn write_evimo2(
     };
     write_sequence(out, &data).map_err(|e| SourceError::Read(e.to_string()))?;
     Ok(count)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Events of the first `seconds` of a source.
+    fn count(mut src: SyntheticSource, seconds: f64) -> usize {
+        let mut n = 0;
+        while let Some(b) = src.next_batch(seconds).unwrap() {
+            n += b.events.len();
+        }
+        n
+    }
+
+    #[test]
+    fn a_changed_configuration_is_the_one_simulated_and_a_bad_one_is_refused() {
+        let mut config = preset("one-object", 5).unwrap();
+        config.duration_s = 0.02;
+        let same = count(SyntheticSource::from_config(config.clone()).unwrap(), 0.02);
+        assert_eq!(
+            same,
+            count(SyntheticSource::new("one-object", 5, Some(0.02)).unwrap(), 0.02)
+        );
+        // Thresholds twice as high: far fewer crossings of the same scene.
+        let mut high = config.clone();
+        high.esim.c_on *= 2.0;
+        high.esim.c_off *= 2.0;
+        let fewer = count(SyntheticSource::from_config(high).unwrap(), 0.02);
+        assert!(
+            fewer * 2 < same,
+            "{fewer} events at twice the thresholds, {same} at the preset's"
+        );
+        let mut bad = config;
+        bad.esim.c_on = -1.0;
+        let err = SyntheticSource::from_config(bad)
+            .err()
+            .expect("a negative threshold is refused");
+        assert!(err.to_string().contains("c_on"), "{err}");
+    }
 }
