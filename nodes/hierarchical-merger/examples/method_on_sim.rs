@@ -65,16 +65,29 @@ fn env_or<T: std::str::FromStr>(name: &str, default: T) -> anyhow::Result<T> {
     }
 }
 
+/// The `name=value` pairs of a comma-separated list read from the variable `var` (empty
+/// entries skipped, names trimmed, values numbers).
+fn settings<'a>(set: &'a str, var: &str) -> anyhow::Result<Vec<(&'a str, f64)>> {
+    set.split(',')
+        .filter(|s| !s.trim().is_empty())
+        .map(|kv| {
+            let (k, v) = kv
+                .split_once('=')
+                .with_context(|| format!("{var} entries are name=value, got {kv:?}"))?;
+            let f: f64 = v.trim().parse().with_context(|| format!("{var}: {kv}"))?;
+            Ok((k.trim(), f))
+        })
+        .collect()
+}
+
 fn apply(
     set: &str,
     bg: &mut BackgroundParams,
     hier: &mut HierParams,
     planar: &mut PlanarParams,
 ) -> anyhow::Result<()> {
-    for kv in set.split(',').filter(|s| !s.trim().is_empty()) {
-        let (k, v) = kv.split_once('=').context("SET entries are name=value")?;
-        let f: f64 = v.trim().parse().with_context(|| kv.to_string())?;
-        match k.trim() {
+    for (k, f) in settings(set, "SET")? {
+        match k {
             "warp_weight" => bg.warp_weight = f,
             "warp_weight_moving" => bg.warp_weight_moving = f,
             "moving_relres" => bg.moving_relres = f,
@@ -347,6 +360,7 @@ fn main() -> anyhow::Result<()> {
         .map(str::to_string)
         .collect();
     let sim_set: String = env_or("SIM_SET", String::new())?;
+    let window_s = env_or("SLICE_MS", 30.0)? * 1e-3;
     for name in &names {
         let mut config = evseg_sim::preset(name, seed)?;
         config.duration_s = seconds;
@@ -355,7 +369,7 @@ fn main() -> anyhow::Result<()> {
         let camera = src.camera();
         let cam = Camera::new(&camera);
         let mut slicer = Slicer::new(SlicerParams {
-            window_s: env_or("SLICE_MS", 30.0)? * 1e-3,
+            window_s,
             ..SlicerParams::default()
         })?;
         let mut slices: Vec<(Slice, Truth, (f64, f64))> = Vec::new();
@@ -1022,11 +1036,9 @@ fn main() -> anyhow::Result<()> {
 /// of a preset, and `texture_contrast` (the preset's textures' contrast scaled), for studies of
 /// how the method holds up on sensors and scenes unlike the presets'.
 fn sim_override(set: &str, cfg: &mut evseg_sim::SceneConfig) -> anyhow::Result<()> {
-    for kv in set.split(',').filter(|s| !s.trim().is_empty()) {
-        let (k, v) = kv.split_once('=').context("SIM_SET entries are name=value")?;
-        let f: f64 = v.trim().parse().with_context(|| kv.to_string())?;
+    for (k, f) in settings(set, "SIM_SET")? {
         let e = &mut cfg.esim;
-        match k.trim() {
+        match k {
             "c_on" => e.c_on = f,
             "c_off" => e.c_off = f,
             "contrast" => {
