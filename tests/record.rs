@@ -13,8 +13,7 @@ use std::process::Command;
 use std::time::{Duration, Instant};
 
 use evseg_tests::{
-    Launcher, SIM_GRAPH_SECONDS, SIM_GRAPH_WINDOW_MS, bin, free_port, read_json, sim_graph, workspace_root,
-    write,
+    Launcher, SIM_GRAPH_SECONDS, SIM_GRAPH_WINDOW_MS, bin, free_port, read_json, sim_graph, write,
 };
 
 /// Simulated seconds of the run and the slicer window: 10 slices.
@@ -80,28 +79,7 @@ fn evseg(args: &[&str]) -> (bool, String, String) {
 
 /// Python with `mcap` and `numpy`, or `None` (skip) outside CI.
 fn python() -> Option<String> {
-    let venv = workspace_root().join(".venv/bin/python");
-    let exe = std::env::var("EVSEG_PYTHON").ok().unwrap_or_else(|| {
-        if venv.exists() {
-            venv.display().to_string()
-        } else if Path::new("/work/venv/bin/python").exists() {
-            "/work/venv/bin/python".to_string()
-        } else {
-            "python3".to_string()
-        }
-    });
-    let ok = Command::new(&exe)
-        .args(["-c", "import mcap.reader, numpy"])
-        .output()
-        .is_ok_and(|o| o.status.success());
-    if ok {
-        return Some(exe);
-    }
-    if std::env::var("CI").is_ok_and(|v| v == "true") {
-        panic!("python packages mcap and numpy are not importable with {exe} and CI=true: run scripts/test");
-    }
-    eprintln!("SKIPPED: mcap/numpy not importable with {exe}; Python checks of the recording not run");
-    None
+    evseg_tests::python_with(&["mcap.reader", "numpy"], "Python checks of the recording")
 }
 
 fn python_json(py: &str, script: &str, args: &[&str]) -> serde_json::Value {

@@ -62,6 +62,72 @@ pub fn workspace_root() -> PathBuf {
         .to_path_buf()
 }
 
+/// Under `CI=true` a missing tool is a failure, elsewhere a skipped check (with a message).
+fn missing_tool(message: &str) {
+    if std::env::var("CI").is_ok_and(|v| v == "true") {
+        panic!("{message} and CI=true: run scripts/test, which installs it");
+    }
+    eprintln!("SKIPPED: {message}");
+}
+
+/// A Python that imports every module of `modules` (e.g. `["numpy", "mcap.reader"]`), to read
+/// the project's files the way a user's own tools would: `$EVSEG_PYTHON`, else the workspace's
+/// `.venv/bin/python` (made by `scripts/test`), else `/work/venv/bin/python`, else `python3`.
+/// `None` when it cannot import them: the caller skips its check (`purpose` names it in the
+/// message), except under `CI=true`, where that is a failure.
+pub fn python_with(modules: &[&str], purpose: &str) -> Option<String> {
+    let venv = workspace_root().join(".venv/bin/python");
+    let exe = std::env::var("EVSEG_PYTHON").ok().unwrap_or_else(|| {
+        if venv.exists() {
+            venv.display().to_string()
+        } else if Path::new("/work/venv/bin/python").exists() {
+            "/work/venv/bin/python".to_string()
+        } else {
+            "python3".to_string()
+        }
+    });
+    let imports = format!("import {}", modules.join(", "));
+    let ok = Command::new(&exe)
+        .args(["-c", &imports])
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if ok {
+        return Some(exe);
+    }
+    missing_tool(&format!("`{imports}` fails with {exe}; {purpose} not run"));
+    None
+}
+
+/// The official Rerun command-line tool, version 0.36 (`pip install rerun-sdk==0.36.*`):
+/// `$EVSEG_RERUN`, else `rerun` next to `$EVSEG_PYTHON`, in the workspace's `.venv`, in
+/// `/work/venv`, or on `PATH`. `None` (the check is skipped, with a message) when none runs,
+/// except under `CI=true`, where that is a failure.
+pub fn rerun_cli() -> Option<PathBuf> {
+    let mut candidates: Vec<PathBuf> = Vec::new();
+    if let Ok(p) = std::env::var("EVSEG_RERUN") {
+        candidates.push(p.into());
+    }
+    if let Ok(py) = std::env::var("EVSEG_PYTHON")
+        && let Some(dir) = Path::new(&py).parent()
+    {
+        candidates.push(dir.join("rerun"));
+    }
+    candidates.push(workspace_root().join(".venv/bin/rerun"));
+    candidates.push("/work/venv/bin/rerun".into());
+    candidates.push("rerun".into());
+    for c in candidates {
+        let ok = Command::new(&c)
+            .arg("--version")
+            .output()
+            .is_ok_and(|o| o.status.success() && String::from_utf8_lossy(&o.stdout).contains("0.36"));
+        if ok {
+            return Some(c);
+        }
+    }
+    missing_tool("no Rerun 0.36 CLI (pip install rerun-sdk==0.36.*); .rrd not read back with Rerun");
+    None
+}
+
 /// Path of binary `name`.
 pub fn bin(name: &str) -> PathBuf {
     bin_dir().join(name)

@@ -4,34 +4,15 @@
 
 mod common;
 
-use std::path::Path;
 use std::process::Command;
 
 use evseg_evimo2::{MetaForm, ReadOptions, Sequence, WriteOptions, write_sequence_with};
 use evseg_schemas::Distortion;
 use serde_json::Value;
 
-/// The Python with numpy: `$EVSEG_PYTHON`, else /work/venv/bin/python if present, else python3.
+/// The Python with numpy ([`evseg_tests::python_with`]), or `None` (skip) outside CI.
 fn python() -> Option<String> {
-    let exe = std::env::var("EVSEG_PYTHON").ok().unwrap_or_else(|| {
-        if Path::new("/work/venv/bin/python").exists() {
-            "/work/venv/bin/python".to_string()
-        } else {
-            "python3".to_string()
-        }
-    });
-    let ok = Command::new(&exe)
-        .args(["-c", "import numpy"])
-        .output()
-        .is_ok_and(|o| o.status.success());
-    if ok {
-        return Some(exe);
-    }
-    if std::env::var("CI").is_ok_and(|v| v == "true") {
-        panic!("numpy is not importable with {exe} and CI=true: install it (pip install numpy)");
-    }
-    eprintln!("SKIPPED: numpy is not importable with {exe}; numpy cross-checks not run");
-    None
+    evseg_tests::python_with(&["numpy"], "numpy cross-checks")
 }
 
 fn run(py: &str, script: &str, args: &[&str]) -> String {

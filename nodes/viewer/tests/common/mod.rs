@@ -175,39 +175,9 @@ pub fn run(slices: u64, n: usize, labels_first: bool) -> Vec<(&'static str, Vec<
     out
 }
 
-/// The official Rerun command-line tool (`pip install rerun-sdk==0.36.*`): `$EVSEG_RERUN`, else
-/// `rerun` next to `$EVSEG_PYTHON`, in the workspace's `.venv`, in /work/venv, or on PATH.
-/// `None` (the check is skipped, with a message) when none runs, except under CI=true where
-/// that is a failure.
+/// The official Rerun command-line tool ([`evseg_tests::rerun_cli`]).
 pub fn rerun_cli() -> Option<std::path::PathBuf> {
-    use std::path::PathBuf;
-    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
-    let mut candidates: Vec<PathBuf> = Vec::new();
-    if let Ok(p) = std::env::var("EVSEG_RERUN") {
-        candidates.push(p.into());
-    }
-    if let Ok(py) = std::env::var("EVSEG_PYTHON")
-        && let Some(dir) = std::path::Path::new(&py).parent()
-    {
-        candidates.push(dir.join("rerun"));
-    }
-    candidates.push(root.join(".venv/bin/rerun"));
-    candidates.push("/work/venv/bin/rerun".into());
-    candidates.push("rerun".into());
-    for c in candidates {
-        let ok = std::process::Command::new(&c)
-            .arg("--version")
-            .output()
-            .is_ok_and(|o| o.status.success() && String::from_utf8_lossy(&o.stdout).contains("0.36"));
-        if ok {
-            return Some(c);
-        }
-    }
-    if std::env::var("CI").is_ok_and(|v| v == "true") {
-        panic!("the Rerun 0.36 CLI (pip install rerun-sdk==0.36.*) is not available and CI=true");
-    }
-    eprintln!("SKIPPED: no Rerun 0.36 CLI (pip install rerun-sdk==0.36.*); .rrd not read back with Rerun");
-    None
+    evseg_tests::rerun_cli()
 }
 
 /// Entity paths (without the leading `/`) and their row counts (summed over chunks) in an .rrd
