@@ -144,7 +144,7 @@ fn a_recording_becomes_an_rrd() {
     assert!(size(&rrd) > 2 * 10 * 4 * 1000, "{} bytes", size(&rrd));
 
     // Read back by Rerun itself: one row per slice on every per-slice entity.
-    if let Some(cli) = common::rerun_cli() {
+    if let Some(cli) = evseg_tests::rerun_cli() {
         let rows = common::rrd_entities(&cli, &rrd);
         for entity in [
             "events/polarity",

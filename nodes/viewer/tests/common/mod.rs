@@ -175,11 +175,6 @@ pub fn run(slices: u64, n: usize, labels_first: bool) -> Vec<(&'static str, Vec<
     out
 }
 
-/// The official Rerun command-line tool ([`evseg_tests::rerun_cli`]).
-pub fn rerun_cli() -> Option<std::path::PathBuf> {
-    evseg_tests::rerun_cli()
-}
-
 /// Entity paths (without the leading `/`) and their row counts (summed over chunks) in an .rrd
 /// file, as the official `rerun rrd print` lists them; panics when Rerun cannot read the file.
 pub fn rrd_entities(cli: &std::path::Path, rrd: &std::path::Path) -> std::collections::BTreeMap<String, u64> {
