@@ -107,6 +107,10 @@ fn apply(
                 bg.egomotion.refine_iterations = f as usize;
                 hier.egomotion.refine_iterations = f as usize;
             }
+            "ego_min_conf" => {
+                bg.egomotion.min_confidence = f as f32;
+                hier.egomotion.min_confidence = f as f32;
+            }
             "magnitude_weighting" => {
                 bg.egomotion.magnitude_weighting = f != 0.0;
                 hier.egomotion.magnitude_weighting = f != 0.0;
