@@ -12,10 +12,10 @@
 //! settings), PREV_FINAL (the planar segmenter's feedback is the final labels instead of the
 //! background merger's coarse groups that graph.yaml wires; the default was the final labels
 //! before 2026-11-27, which scored low-contrast higher than the graph does), CONS
-//! ("cell,min_neighbours,max_deviation[,ridge]" of the normal-flow consensus, default as the
-//! node; "0" = off), DUMP=k (PNG panels of slice k: truth, planar, coarse, final, in
-//! /tmp/dump-<scene>.png). It prints the share of normal-flow lengths more than 30 % off the
-//! truth. Flow oracles: FLOW=truemag (true length along the estimated direction), with
+//! ("cell,min_neighbours,max_deviation[,ridge]" of the normal-flow consensus, default as
+//! graph.yaml: the node's with `max_deviation` 0.15; "0" = off), DUMP=k (PNG panels of slice
+//! k: truth, planar, coarse, final, in /tmp/dump-<scene>.png). It prints the share of
+//! normal-flow lengths more than 30 % off the truth. Flow oracles: FLOW=truemag (true length along the estimated direction), with
 //! DROPTAIL=x (drop the estimates more than x off instead) or DROPTAIL=-x (only those take the
 //! true length).
 //! DEBUG_FIT: per slice, how many of the object's and of the background's events lie inside the
@@ -342,10 +342,15 @@ fn main() -> anyhow::Result<()> {
     let seconds: f64 = env_or("SECONDS", 2.0)?;
     let ideal = env_or("FLOW", String::from("est"))? == "ideal";
     let truemag = env_or("FLOW", String::from("est"))? == "truemag";
+    // The consensus as graph.yaml's flow node sets it (its `consensus_max_deviation`).
+    let graph_consensus = evseg_normal_flow::ConsensusParams {
+        max_deviation: 0.15,
+        ..Default::default()
+    };
     let cons: Option<evseg_normal_flow::ConsensusParams> = match std::env::var("CONS") {
-        Err(_) => Some(evseg_normal_flow::ConsensusParams::default()),
+        Err(_) => Some(graph_consensus),
         Ok(v) => {
-            let d = evseg_normal_flow::ConsensusParams::default();
+            let d = graph_consensus;
             let f: Vec<f64> = v.split(',').filter_map(|x| x.parse().ok()).collect();
             let p = evseg_normal_flow::ConsensusParams {
                 cell_px: f.first().map_or(d.cell_px, |&c| c as u16),
