@@ -15,9 +15,9 @@
 //! ("cell,min_neighbours,max_deviation[,ridge]" of the normal-flow consensus, default as
 //! graph.yaml: the node's with `max_deviation` 0.15; "0" = off), DUMP=k (PNG panels of slice
 //! k: truth, planar, coarse, final, in /tmp/dump-<scene>.png). It prints the share of
-//! normal-flow lengths more than 30 % off the truth. Flow oracles: FLOW=truemag (true length along the estimated direction), with
-//! DROPTAIL=x (drop the estimates more than x off instead) or DROPTAIL=-x (only those take the
-//! true length).
+//! normal-flow lengths more than 30 % off the truth. Flow oracles: FLOW=truemag (true length
+//! along the estimated direction), with DROPTAIL=x (drop the estimates more than x off instead)
+//! or DROPTAIL=-x (only those take the true length).
 //! DEBUG_FIT: per slice, how many of the object's and of the background's events lie inside the
 //! planar segmenter's previous-foreground mask (whether the mask keeps the object out of the fit).
 //! SLICE_MS: the slice length (default 30 ms, as graph.yaml). SIM_SET: the simulator's sensor,
