@@ -146,6 +146,16 @@ fn description() -> NodeDescription {
         d.split_min_events,
         "fewest events of a group split off a track",
     )
+    .param(
+        "matching_cascade",
+        d.matching_cascade,
+        "match the tracks matched most recently first (a track missed for a while cannot take another's segment)",
+    )
+    .param(
+        "merge_keeps_most_hits",
+        d.merge_keeps_most_hits,
+        "of two merged tracks, the one matched in more slices keeps its id (off: the older one)",
+    )
 
     .build()
 }
@@ -172,6 +182,8 @@ fn main() -> ExitCode {
             merge_inside_max_hits: cfg.param("merge_inside_max_hits")?,
             split_gap_px: cfg.param("split_gap_px")?,
             split_min_events: cfg.param("split_min_events")?,
+            matching_cascade: cfg.param("matching_cascade")?,
+            merge_keeps_most_hits: cfg.param("merge_keeps_most_hits")?,
         };
         Ok(Node(Tracker::new(params)?))
     })
@@ -217,6 +229,8 @@ mod tests {
                 "merge_inside_max_hits",
                 "split_gap_px",
                 "split_min_events",
+                "matching_cascade",
+                "merge_keeps_most_hits",
             ]
         );
         let default_of = |n: &str| d.params.iter().find(|p| p.name == n).map(|p| p.default.clone());

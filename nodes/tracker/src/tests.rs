@@ -817,3 +817,114 @@ fn a_split_track_stays_with_its_larger_group() -> Result<(), TrackerError> {
     assert_eq!(id_of(&seg, &out, 1), 1);
     Ok(())
 }
+
+/// Runs `params` over a stationary object (label 1 at (100, 100)) tracked for ten slices while a
+/// track opened in slice 0 on a stray segment at (120, 100) is missed; in slice 10 the object's
+/// segment appears at (112, 100). Returns the object's id before and in slice 10.
+fn stale_track_scenario(params: TrackerParams) -> Result<(u32, u32), TrackerError> {
+    let mut tracker = Tracker::new(params)?;
+    let object = |centroid| Obj {
+        label: 1,
+        centroid,
+        events: 200,
+    };
+    let stray = Obj {
+        label: 2,
+        centroid: [120.0, 100.0],
+        events: 100,
+    };
+    let (n, seg) = frame(&[object([100.0, 100.0]), stray], 50);
+    let first = tracker.update(span(0), n, &seg)?;
+    let id = id_of(&seg, &first, 1);
+    for k in 1..10 {
+        let (n, seg) = frame(&[object([100.0, 100.0])], 50);
+        let out = tracker.update(span(k), n, &seg)?;
+        assert_eq!(id_of(&seg, &out, 1), id);
+    }
+    let (n, seg) = frame(&[object([112.0, 100.0])], 50);
+    let out = tracker.update(span(10), n, &seg)?;
+    Ok((id, id_of(&seg, &out, 1)))
+}
+
+#[test]
+fn a_missed_track_does_not_take_the_segment_of_the_track_that_follows_the_object() -> Result<(), TrackerError>
+{
+    // The stray track, missed for nine slices, is closer to the segment in Mahalanobis distance
+    // (its position has grown uncertain) and in box overlap: without the cascade it wins.
+    let (before, after) = stale_track_scenario(TrackerParams::default())?;
+    assert_eq!(after, before, "the object's id must not change");
+    let plain = TrackerParams {
+        matching_cascade: false,
+        ..TrackerParams::default()
+    };
+    let (before, after) = stale_track_scenario(plain)?;
+    assert_ne!(
+        after, before,
+        "the scenario must show the plain association's failure"
+    );
+    Ok(())
+}
+
+/// An object (label 1, a 40 x 40 px box at (100, 100)) tracked from slice 0 beside a stray
+/// segment at (160, 100) whose track is opened first in slice 0 and then missed; in slice 6 a small segment at
+/// (104, 100), inside the object's box, is matched to the stray track, and the two merge.
+/// Returns the object's id in slice 5 and in slice 6.
+fn merge_scenario(params: TrackerParams) -> Result<(u32, u32), TrackerError> {
+    let mut tracker = Tracker::new(params)?;
+    let object = Obj {
+        label: 1,
+        centroid: [100.0, 100.0],
+        events: 300,
+    };
+    // The object's segment is widened wherever it is in the list.
+    let slice = |objs: &[Obj]| {
+        let (n, mut seg) = frame(objs, 50);
+        if let Some(k) = seg.segments.iter().position(|s| s.label == 1) {
+            widen(&mut seg, k, 10.0);
+        }
+        (n, seg)
+    };
+    let stray = Obj {
+        label: 2,
+        centroid: [160.0, 100.0],
+        events: 100,
+    };
+    // The stray segment first: its track gets the smaller (older) id.
+    let (n, seg) = slice(&[stray, object]);
+    tracker.update(span(0), n, &seg)?;
+    let mut id = 0;
+    for k in 1..6 {
+        let (n, seg) = slice(&[object]);
+        let out = tracker.update(span(k), n, &seg)?;
+        id = id_of(&seg, &out, 1);
+    }
+    let piece = Obj {
+        label: 2,
+        centroid: [104.0, 100.0],
+        events: 60,
+    };
+    let (n, seg) = slice(&[object, piece]);
+    let out = tracker.update(span(6), n, &seg)?;
+    assert_eq!(
+        id_of(&seg, &out, 1),
+        id_of(&seg, &out, 2),
+        "the piece inside the object's box must merge with it"
+    );
+    Ok((id, id_of(&seg, &out, 1)))
+}
+
+#[test]
+fn of_two_merged_tracks_the_one_matched_more_often_keeps_its_id() -> Result<(), TrackerError> {
+    let (before, after) = merge_scenario(TrackerParams::default())?;
+    assert_eq!(after, before, "the object's id must not change");
+    let oldest = TrackerParams {
+        merge_keeps_most_hits: false,
+        ..TrackerParams::default()
+    };
+    let (before, after) = merge_scenario(oldest)?;
+    assert_ne!(
+        after, before,
+        "with the older id kept, the stray track's id takes over"
+    );
+    Ok(())
+}

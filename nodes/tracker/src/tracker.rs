@@ -5,7 +5,7 @@ use std::collections::HashMap;
 
 use evseg_schemas::{Segment, Segmentation, Track, Tracks};
 
-use crate::association::{associate, pair_cost};
+use crate::association::{associate, associate_cascade, pair_cost};
 use crate::error::TrackerError;
 use crate::kalman::CvKalman;
 use crate::params::TrackerParams;
@@ -230,7 +230,13 @@ impl Tracker {
             }
         }
         let max_missing = self.params.max_missing_s;
-        self.tracks.retain(|tr| t - tr.last_match_t <= max_missing);
+        self.tracks.retain(|tr| {
+            let live = t - tr.last_match_t <= max_missing;
+            if !live {
+                tracing::debug!(t, id = tr.id, hits = tr.hits, "track expired");
+            }
+            live
+        });
 
         // ---- association ----
         // Boxes as predicted before any correction of this slice (matching and fragments).
@@ -249,7 +255,12 @@ impl Tracker {
                     .collect()
             })
             .collect();
-        let matches = associate(&costs, self.params.bbox_weight);
+        let matches = if self.params.matching_cascade {
+            let last: Vec<f64> = self.tracks.iter().map(|tr| tr.last_match_t).collect();
+            associate_cascade(&costs, &last, self.params.bbox_weight)
+        } else {
+            associate(&costs, self.params.bbox_weight)
+        };
         // The tracks as predicted, before this slice's corrections (a split may hand a track
         // to another of its groups, which then corrects it instead).
         let before: Vec<TrackState> = if self.params.split_gap_px > 0.0 {
@@ -290,6 +301,12 @@ impl Tracker {
                     .max_by(|a, b| a.1.total_cmp(&b.1));
                 if let Some((ti, _)) = best {
                     let s = &segments[k];
+                    tracing::debug!(
+                        t,
+                        id = self.tracks[ti].id,
+                        events = counts[k],
+                        "fragment absorbed"
+                    );
                     if !matched_track[ti] {
                         self.tracks[ti].take(s, t, &self.params);
                         matched_track[ti] = true;
@@ -396,6 +413,10 @@ impl Tracker {
             })
             .collect();
         tracks.sort_by_key(|tr| tr.id);
+        if tracing::enabled!(tracing::Level::DEBUG) {
+            let ids: Vec<(u32, u32)> = tracks.iter().map(|tr| (tr.id, tr.events)).collect();
+            tracing::debug!(t, tracks = ?ids, "slice tracked (id, events)");
+        }
 
         // Tentative tracks missed in this slice are dropped at once; tracks merged into another
         // end.
@@ -421,6 +442,7 @@ impl Tracker {
     fn open_track(&mut self, s: &Segment, t: f64) {
         let id = self.next_id;
         self.next_id += 1;
+        tracing::debug!(t, id, centroid = ?s.centroid, bbox = ?s.bbox, "track opened");
         let [sx, sy] = self.params.measurement_std(bbox_f64(s.bbox));
         self.tracks.push(TrackState {
             id,
@@ -493,6 +515,12 @@ impl Tracker {
                 let Some(main) = largest(group) else {
                     continue;
                 };
+                tracing::debug!(
+                    t,
+                    from = self.tracks[ti].id,
+                    events = events[g],
+                    "group split off"
+                );
                 self.open_track(&segments[main], t);
                 let nt = self.tracks.len() - 1;
                 for &k in group {
@@ -556,12 +584,22 @@ impl Tracker {
             let Some((a, b, _)) = best else {
                 return;
             };
-            // The older track (smaller id) keeps its id.
-            let (keep, end) = if self.tracks[a].id < self.tracks[b].id {
-                (a, b)
+            // The track matched more often keeps its id (`merge_keeps_most_hits`), else (and
+            // on a tie) the older one (smaller id).
+            let (ta, tb) = (&self.tracks[a], &self.tracks[b]);
+            let a_keeps = if p.merge_keeps_most_hits && ta.hits != tb.hits {
+                ta.hits > tb.hits
             } else {
-                (b, a)
+                ta.id < tb.id
             };
+            let (keep, end) = if a_keeps { (a, b) } else { (b, a) };
+            tracing::debug!(
+                id = self.tracks[keep].id,
+                hits = self.tracks[keep].hits,
+                ended = self.tracks[end].id,
+                ended_hits = self.tracks[end].hits,
+                "tracks merged"
+            );
             for (k, m) in track_of_segment.iter_mut().enumerate() {
                 if *m == Some(end) {
                     *m = Some(keep);
