@@ -147,6 +147,11 @@ fn description() -> NodeDescription {
         "fewest events of a group split off a track",
     )
     .param(
+        "split_min_share",
+        d.split_min_share,
+        "fewest events of a group split off a track, as a fraction of the events of the group that keeps it (0 = any)",
+    )
+    .param(
         "matching_cascade",
         d.matching_cascade,
         "match the tracks matched most recently first (a track missed for a while cannot take another's segment)",
@@ -182,6 +187,7 @@ fn main() -> ExitCode {
             merge_inside_max_hits: cfg.param("merge_inside_max_hits")?,
             split_gap_px: cfg.param("split_gap_px")?,
             split_min_events: cfg.param("split_min_events")?,
+            split_min_share: cfg.param("split_min_share")?,
             matching_cascade: cfg.param("matching_cascade")?,
             merge_keeps_most_hits: cfg.param("merge_keeps_most_hits")?,
         };
@@ -229,6 +235,7 @@ mod tests {
                 "merge_inside_max_hits",
                 "split_gap_px",
                 "split_min_events",
+                "split_min_share",
                 "matching_cascade",
                 "merge_keeps_most_hits",
             ]

@@ -928,3 +928,49 @@ fn of_two_merged_tracks_the_one_matched_more_often_keeps_its_id() -> Result<(), 
     );
     Ok(())
 }
+
+#[test]
+fn a_group_smaller_than_split_min_share_stays_with_its_track() -> Result<(), TrackerError> {
+    // The scene of `a_split_track_stays_with_its_larger_group`: a 120-event piece 19 px from
+    // the 400-event bulk. It splits off at the default share (0) but not at 0.5 (120 / 400).
+    let run = |split_min_share: f64| -> Result<(u32, u32), TrackerError> {
+        let mut tracker = Tracker::new(TrackerParams {
+            split_min_share,
+            ..TrackerParams::default()
+        })?;
+        for k in 0..3 {
+            let (n, mut seg) = frame(
+                &[Obj {
+                    label: 1,
+                    centroid: [300.0, 300.0],
+                    events: 500,
+                }],
+                50,
+            );
+            widen(&mut seg, 0, 20.0);
+            tracker.update(span(k), n, &seg)?;
+        }
+        let (n, mut seg) = frame(
+            &[
+                Obj {
+                    label: 1,
+                    centroid: [285.0, 300.0],
+                    events: 120,
+                },
+                Obj {
+                    label: 2,
+                    centroid: [335.0, 300.0],
+                    events: 400,
+                },
+            ],
+            50,
+        );
+        widen(&mut seg, 1, 10.0);
+        let out = tracker.update(span(3), n, &seg)?;
+        Ok((id_of(&seg, &out, 2), id_of(&seg, &out, 1)))
+    };
+    assert_eq!(run(0.0)?, (1, 2));
+    assert_eq!(run(0.5)?, (1, 1));
+    assert_eq!(run(0.25)?, (1, 2));
+    Ok(())
+}

@@ -414,8 +414,14 @@ impl Tracker {
             .collect();
         tracks.sort_by_key(|tr| tr.id);
         if tracing::enabled!(tracing::Level::DEBUG) {
-            let ids: Vec<(u32, u32)> = tracks.iter().map(|tr| (tr.id, tr.events)).collect();
-            tracing::debug!(t, tracks = ?ids, "slice tracked (id, events)");
+            let ids: Vec<(u32, u32, [f32; 4], [i32; 2])> = tracks
+                .iter()
+                .map(|tr| {
+                    let v = tr.velocity.map(|v| v.round() as i32);
+                    (tr.id, tr.events, tr.bbox, v)
+                })
+                .collect();
+            tracing::debug!(t, tracks = ?ids, "slice tracked (id, events, bbox px, velocity px/s)");
         }
 
         // Tentative tracks missed in this slice are dropped at once; tracks merged into another
@@ -509,7 +515,8 @@ impl Tracker {
                 absorbed[first] = true;
             }
             for (g, group) in groups.iter().enumerate() {
-                if g == keep || events[g] < min_events {
+                let share = f64::from(events[g]) / f64::from(events[keep].max(1));
+                if g == keep || events[g] < min_events || share < self.params.split_min_share {
                     continue;
                 }
                 let Some(main) = largest(group) else {
