@@ -147,7 +147,11 @@ pub struct PlanarParams {
     /// IoU (73.14 against 73.18 % mask), but on unseen seeds 11-14 it flipped low-contrast seed
     /// 12 (0.719 -> 0.467) and on a constructed curved static scene it did not reject the
     /// phantom (second-pass ratio 2.9), so what it removes is not understood well enough to
-    /// keep.
+    /// keep. The second pass without the ratio test (2026-12-03, `method_on_sim`, seeds 11-12,
+    /// 2 s, six object presets): mean IoU 0.888 -> 0.861, lowest 0.817 -> 0.480, again from
+    /// low-contrast seed 12 (0.859 -> 0.480; enter-leave 11 0.947 -> 0.961, two-objects 11
+    /// 0.897 -> 0.906): where the first pass took the background for the foreground, the
+    /// second pass fits the object and holds that.
     pub min_center_gap: f64,
     /// Most 2-means iterations (default 100; 1-D Lloyd converges in a handful).
     pub two_means_iter: usize,
