@@ -152,6 +152,11 @@ fn description() -> NodeDescription {
         "fewest events of a group split off a track, as a fraction of the events of the group that keeps it (0 = any)",
     )
     .param(
+        "split_after_slices",
+        d.split_after_slices,
+        "slices in a row in which a track's segments must lie apart before a group splits off",
+    )
+    .param(
         "matching_cascade",
         d.matching_cascade,
         "match the tracks matched most recently first (a track missed for a while cannot take another's segment)",
@@ -188,6 +193,7 @@ fn main() -> ExitCode {
             split_gap_px: cfg.param("split_gap_px")?,
             split_min_events: cfg.param("split_min_events")?,
             split_min_share: cfg.param("split_min_share")?,
+            split_after_slices: cfg.param("split_after_slices")?,
             matching_cascade: cfg.param("matching_cascade")?,
             merge_keeps_most_hits: cfg.param("merge_keeps_most_hits")?,
         };
@@ -236,6 +242,7 @@ mod tests {
                 "split_gap_px",
                 "split_min_events",
                 "split_min_share",
+                "split_after_slices",
                 "matching_cascade",
                 "merge_keeps_most_hits",
             ]

@@ -170,6 +170,20 @@ pub struct TrackerParams {
     /// -> 57.90 %: its second object stays joined to the first for longer). A trade left to
     /// the user, as `label_tentative`.
     pub split_min_share: f64,
+    /// See `split_gap_px`: slices in a row in which a track's segments must form groups lying
+    /// apart (large enough to split off) before they split; 0 or 1 = at once. Default 3 (not in
+    /// the paper): a small or faint object seen in pieces lost a piece to a track of its own
+    /// for a slice or two, and that piece was at times its best match (low-contrast 206: 12
+    /// switches). `evseg bench` (evseg-bench-v3, 74d9ea5's defaults with 1; mean per-object IoU
+    /// %, mean of the worst object's id switches): 1 79.26 / 2.8, 2 79.51 / 2.8, 3 79.32 / 2.1,
+    /// 4 79.38 / 2.1, 6 79.44 / 2.1 (at 3: low-contrast 106 5 -> 3, 206 12 -> 8, two-objects
+    /// 202 5 -> 2 but its per-object IoU 66.97 -> 56.81 %: its two objects, joined while young,
+    /// part for fewer slices in a row than that). On sequences the bench has not seen (`evseg
+    /// run graph.yaml`, seeds 11-13, 2 s, two-objects / one-object / low-contrast /
+    /// enter-leave) 1 -> 3: per-object IoU 81.80 -> 82.03 %, worst-object switches 1.83 -> 1.00
+    /// (two-objects 13 10 -> 1, low-contrast 11 2 -> 0, two-objects 11 2 -> 3; two-objects'
+    /// per-object IoU 57.2 -> 56.4 % on the mean of its three seeds).
+    pub split_after_slices: u32,
     /// Match the tracks in order of recency (`crate::association::associate_cascade`): those
     /// matched in the previous slice choose their segments first, then those missed for one
     /// slice, and so on. Without it a track missed for several slices, whose predicted position
@@ -219,6 +233,7 @@ impl Default for TrackerParams {
             split_gap_px: 16.0,
             split_min_events: 100,
             split_min_share: 0.0,
+            split_after_slices: 3,
             matching_cascade: true,
             merge_keeps_most_hits: true,
         }

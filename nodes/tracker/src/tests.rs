@@ -738,9 +738,10 @@ fn two_objects_tracked_apart_stay_apart_when_one_passes_inside_the_others_box() 
 fn objects_joined_while_overlapping_are_split_once_apart() -> Result<(), TrackerError> {
     // A large object (40 x 40 px box) still; a second one (20 x 20) starts inside its box, so
     // the two are one track from the first slice, then moves away at 400 px/s.
-    let run = |split_gap_px: f64| -> Result<Vec<(u32, u32)>, TrackerError> {
+    let run = |split_gap_px: f64, split_after_slices: u32| -> Result<Vec<(u32, u32)>, TrackerError> {
         let mut tracker = Tracker::new(TrackerParams {
             split_gap_px,
+            split_after_slices,
             ..TrackerParams::default()
         })?;
         let mut ids = Vec::new();
@@ -753,16 +754,29 @@ fn objects_joined_while_overlapping_are_split_once_apart() -> Result<(), Tracker
         Ok(ids)
     };
     // Off: the track's box grows over both objects and keeps absorbing the second one.
-    let off = run(0.0)?;
+    let d = TrackerParams::default();
+    let off = run(0.0, d.split_after_slices)?;
     assert!(off.iter().all(|&(a, b)| a == 1 && b == 1), "{off:?}");
     // On: one track while the boxes are within the gap, two once the second one is clear of
-    // it (its box 17 px away from slice 4 on); the first keeps its id.
-    let on = run(TrackerParams::default().split_gap_px)?;
-    assert_eq!(on[0], (1, 1), "{on:?}");
-    assert!(on.iter().all(|&(a, _)| a == 1), "{on:?}");
-    let apart = on.iter().position(|&(a, b)| a != b).unwrap_or(on.len());
-    assert!((3..=5).contains(&apart), "{on:?}");
-    assert!(on[apart..].iter().all(|&(_, b)| b == on[apart].1), "{on:?}");
+    // it (its box 17 px away from slice 4 on) for `split_after_slices` slices in a row; the
+    // first keeps its id.
+    let mut aparts = Vec::new();
+    for after in [1, d.split_after_slices] {
+        let on = run(d.split_gap_px, after)?;
+        assert_eq!(on[0], (1, 1), "{on:?}");
+        assert!(on.iter().all(|&(a, _)| a == 1), "{on:?}");
+        let apart = on.iter().position(|&(a, b)| a != b).unwrap_or(on.len());
+        let late = after.max(1) as usize - 1;
+        assert!((3 + late..=5 + late).contains(&apart), "after {after}: {on:?}");
+        assert!(on[apart..].iter().all(|&(_, b)| b == on[apart].1), "{on:?}");
+        aparts.push(apart);
+    }
+    // The default waits `split_after_slices - 1` slices longer than an immediate split.
+    assert_eq!(
+        aparts[1],
+        aparts[0] + d.split_after_slices as usize - 1,
+        "{aparts:?}"
+    );
     Ok(())
 }
 
@@ -770,8 +784,12 @@ fn objects_joined_while_overlapping_are_split_once_apart() -> Result<(), Tracker
 fn a_split_track_stays_with_its_larger_group() -> Result<(), TrackerError> {
     // A still object with a 60 x 60 px box for three slices; then its segmentation comes in
     // two groups 19 px apart: a small piece (120 events) nearest the predicted centroid, which
-    // the association matches, and the bulk (400 events) absorbed through the box.
-    let mut tracker = Tracker::new(TrackerParams::default())?;
+    // the association matches, and the bulk (400 events) absorbed through the box; split at
+    // once (`split_after_slices` 1).
+    let mut tracker = Tracker::new(TrackerParams {
+        split_after_slices: 1,
+        ..TrackerParams::default()
+    })?;
     for k in 0..3 {
         let (n, mut seg) = frame(
             &[Obj {
@@ -936,6 +954,7 @@ fn a_group_smaller_than_split_min_share_stays_with_its_track() -> Result<(), Tra
     let run = |split_min_share: f64| -> Result<(u32, u32), TrackerError> {
         let mut tracker = Tracker::new(TrackerParams {
             split_min_share,
+            split_after_slices: 1,
             ..TrackerParams::default()
         })?;
         for k in 0..3 {

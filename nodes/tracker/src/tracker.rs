@@ -26,6 +26,9 @@ struct TrackState {
     hits: u32,
     /// Centre time of the slice of the last match, seconds.
     last_match_t: f64,
+    /// Consecutive slices up to the previous one in which the track's segments formed groups
+    /// lying apart that were large enough to split off (see `TrackerParams::split_after_slices`).
+    apart_slices: u32,
 }
 
 impl TrackState {
@@ -457,6 +460,7 @@ impl Tracker {
             created_slice: self.slices,
             hits: 1,
             last_match_t: t,
+            apart_slices: 0,
         });
     }
 
@@ -479,7 +483,7 @@ impl Tracker {
         t: f64,
     ) -> usize {
         let p = &self.params;
-        let (gap, min_events) = (p.split_gap_px, p.split_min_events);
+        let (gap, min_events, split_after) = (p.split_gap_px, p.split_min_events, p.split_after_slices);
         let mut opened = 0;
         for (ti, first) in primary.iter().enumerate() {
             let Some(first) = *first else { continue };
@@ -514,9 +518,22 @@ impl Tracker {
                 absorbed[main] = false;
                 absorbed[first] = true;
             }
-            for (g, group) in groups.iter().enumerate() {
+            let min_share = self.params.split_min_share;
+            let splits = |g: usize| {
                 let share = f64::from(events[g]) / f64::from(events[keep].max(1));
-                if g == keep || events[g] < min_events || share < self.params.split_min_share {
+                g != keep && events[g] >= min_events && share >= min_share
+            };
+            if !(0..groups.len()).any(splits) {
+                self.tracks[ti].apart_slices = 0;
+                continue;
+            }
+            self.tracks[ti].apart_slices = self.tracks[ti].apart_slices.saturating_add(1);
+            if self.tracks[ti].apart_slices < split_after {
+                continue;
+            }
+            self.tracks[ti].apart_slices = 0;
+            for (g, group) in groups.iter().enumerate() {
+                if !splits(g) {
                     continue;
                 }
                 let Some(main) = largest(group) else {
