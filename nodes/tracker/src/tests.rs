@@ -558,6 +558,14 @@ fn invalid_parameters_are_refused() {
             split_gap_px: f64::NAN,
             ..Default::default()
         },
+        TrackerParams {
+            split_min_share: -0.5,
+            ..Default::default()
+        },
+        TrackerParams {
+            split_min_share: f64::INFINITY,
+            ..Default::default()
+        },
     ];
     for p in bad {
         assert!(
@@ -780,29 +788,24 @@ fn objects_joined_while_overlapping_are_split_once_apart() -> Result<(), Tracker
     Ok(())
 }
 
-#[test]
-fn a_split_track_stays_with_its_larger_group() -> Result<(), TrackerError> {
-    // A still object with a 60 x 60 px box for three slices; then its segmentation comes in
-    // two groups 19 px apart: a small piece (120 events) nearest the predicted centroid, which
-    // the association matches, and the bulk (400 events) absorbed through the box; split at
-    // once (`split_after_slices` 1).
-    let mut tracker = Tracker::new(TrackerParams {
-        split_after_slices: 1,
-        ..TrackerParams::default()
-    })?;
-    for k in 0..3 {
-        let (n, mut seg) = frame(
-            &[Obj {
-                label: 1,
-                centroid: [300.0, 300.0],
-                events: 500,
-            }],
-            50,
-        );
-        widen(&mut seg, 0, 20.0);
-        let out = tracker.update(span(k), n, &seg)?;
-        assert_eq!(id_of(&seg, &out, 1), 1);
-    }
+/// A still object (label 1, 500 events, a 60 x 60 px box at (300, 300)).
+fn still_object() -> (usize, Segmentation) {
+    let (n, mut seg) = frame(
+        &[Obj {
+            label: 1,
+            centroid: [300.0, 300.0],
+            events: 500,
+        }],
+        50,
+    );
+    widen(&mut seg, 0, 20.0);
+    (n, seg)
+}
+
+/// The object of [`still_object`] segmented in two groups 19 px apart: a small piece (label 1,
+/// 120 events, a 20 x 20 px box at (285, 300)) nearest its predicted centroid, and the bulk
+/// (label 2, 400 events, a 40 x 40 px box at (335, 300)).
+fn piece_and_bulk() -> (usize, Segmentation) {
     let (n, mut seg) = frame(
         &[
             Obj {
@@ -819,6 +822,25 @@ fn a_split_track_stays_with_its_larger_group() -> Result<(), TrackerError> {
         50,
     );
     widen(&mut seg, 1, 10.0);
+    (n, seg)
+}
+
+#[test]
+fn a_split_track_stays_with_its_larger_group() -> Result<(), TrackerError> {
+    // A still object with a 60 x 60 px box for three slices; then its segmentation comes in
+    // two groups 19 px apart: a small piece (120 events) nearest the predicted centroid, which
+    // the association matches, and the bulk (400 events) absorbed through the box; split at
+    // once (`split_after_slices` 1).
+    let mut tracker = Tracker::new(TrackerParams {
+        split_after_slices: 1,
+        ..TrackerParams::default()
+    })?;
+    for k in 0..3 {
+        let (n, seg) = still_object();
+        let out = tracker.update(span(k), n, &seg)?;
+        assert_eq!(id_of(&seg, &out, 1), 1);
+    }
+    let (n, seg) = piece_and_bulk();
     let out = tracker.update(span(3), n, &seg)?;
     assert_eq!((id_of(&seg, &out, 2), id_of(&seg, &out, 1)), (1, 2));
     // The track was corrected with the bulk, which it keeps following.
@@ -958,33 +980,10 @@ fn a_group_smaller_than_split_min_share_stays_with_its_track() -> Result<(), Tra
             ..TrackerParams::default()
         })?;
         for k in 0..3 {
-            let (n, mut seg) = frame(
-                &[Obj {
-                    label: 1,
-                    centroid: [300.0, 300.0],
-                    events: 500,
-                }],
-                50,
-            );
-            widen(&mut seg, 0, 20.0);
+            let (n, seg) = still_object();
             tracker.update(span(k), n, &seg)?;
         }
-        let (n, mut seg) = frame(
-            &[
-                Obj {
-                    label: 1,
-                    centroid: [285.0, 300.0],
-                    events: 120,
-                },
-                Obj {
-                    label: 2,
-                    centroid: [335.0, 300.0],
-                    events: 400,
-                },
-            ],
-            50,
-        );
-        widen(&mut seg, 1, 10.0);
+        let (n, seg) = piece_and_bulk();
         let out = tracker.update(span(3), n, &seg)?;
         Ok((id_of(&seg, &out, 2), id_of(&seg, &out, 1)))
     };

@@ -26,8 +26,9 @@ struct TrackState {
     hits: u32,
     /// Centre time of the slice of the last match, seconds.
     last_match_t: f64,
-    /// Consecutive slices up to the previous one in which the track's segments formed groups
-    /// lying apart that were large enough to split off (see `TrackerParams::split_after_slices`).
+    /// Consecutive slices, up to the last one tracked, in which the track's segments formed
+    /// groups lying apart that were large enough to split off without splitting yet (see
+    /// `TrackerParams::split_after_slices`).
     apart_slices: u32,
 }
 
@@ -483,7 +484,8 @@ impl Tracker {
         t: f64,
     ) -> usize {
         let p = &self.params;
-        let (gap, min_events, split_after) = (p.split_gap_px, p.split_min_events, p.split_after_slices);
+        let (gap, min_events, min_share) = (p.split_gap_px, p.split_min_events, p.split_min_share);
+        let split_after = p.split_after_slices;
         let mut opened = 0;
         for (ti, first) in primary.iter().enumerate() {
             let Some(first) = *first else { continue };
@@ -518,7 +520,6 @@ impl Tracker {
                 absorbed[main] = false;
                 absorbed[first] = true;
             }
-            let min_share = self.params.split_min_share;
             let splits = |g: usize| {
                 let share = f64::from(events[g]) / f64::from(events[keep].max(1));
                 g != keep && events[g] >= min_events && share >= min_share
