@@ -18,7 +18,7 @@ impl Stage for Node {
         let span = input.span();
         let tracks = self
             .0
-            .update(span, slice.events.len(), &segmentation)
+            .update_with_pixels(span, &slice.events.x, &slice.events.y, &segmentation)
             .map_err(|e| format!("slice {}: {e}", input.seq()))?;
         tracing::debug!(
             slice = input.seq(),
@@ -152,6 +152,11 @@ fn description() -> NodeDescription {
         "fewest events of a group split off a track, as a fraction of the events of the group that keeps it (0 = any)",
     )
     .param(
+        "split_cell_px",
+        d.split_cell_px,
+        "group a track's segments for the split by the cells of this side (pixels) their events occupy (0 = by their boxes)",
+    )
+    .param(
         "split_after_slices",
         d.split_after_slices,
         "slices in a row in which a track's segments must lie apart before a group splits off",
@@ -193,6 +198,7 @@ fn main() -> ExitCode {
             split_gap_px: cfg.param("split_gap_px")?,
             split_min_events: cfg.param("split_min_events")?,
             split_min_share: cfg.param("split_min_share")?,
+            split_cell_px: cfg.param("split_cell_px")?,
             split_after_slices: cfg.param("split_after_slices")?,
             matching_cascade: cfg.param("matching_cascade")?,
             merge_keeps_most_hits: cfg.param("merge_keeps_most_hits")?,
@@ -242,6 +248,7 @@ mod tests {
                 "split_gap_px",
                 "split_min_events",
                 "split_min_share",
+                "split_cell_px",
                 "split_after_slices",
                 "matching_cascade",
                 "merge_keeps_most_hits",

@@ -161,6 +161,26 @@ pub struct TrackerParams {
     /// from its prediction): at 74f59cd's segmentation, worst-object switches 5.0 -> 4.1
     /// (low-contrast 106 / 206: 16 -> 10, 17 -> 13), per-object 71.05 -> 70.77 %.
     pub split_gap_px: f64,
+    /// See `split_gap_px`: group a track's segments by the cells of this side (pixels) that
+    /// their events occupy, two segments being neighbours when occupied cells of the two lie
+    /// at most `split_gap_px` apart (0 = by their boxes). Needs the slice's event pixels
+    /// ([`crate::Tracker::update_with_pixels`], which the node uses); without them the boxes
+    /// are used. Not in the paper. A box spans every event of its segment, so a few stray
+    /// events stretched an object's pieces' boxes over the gap to another object: in
+    /// two-objects 202 the second object's pieces lay 30-60 px from the first object's
+    /// events but within 16 px of its boxes, and stayed in its track for 50 slices. Opt-in
+    /// (default 0), since it splits crossing objects and objects seen in pieces sooner too.
+    /// `evseg bench` (evseg-bench-v3, 49a6161's defaults; mean per-object IoU %, mean of the
+    /// worst object's id switches): 0 79.32 / 2.1, 4 px 79.45 / 2.1, 8 px 79.68 / 2.1
+    /// (two-objects 202 56.81 -> 63.40 %, its second object's own id from slice 32 instead of
+    /// 51; 102 61.79 -> 58.94 %), 8 px with `split_gap_px` 24 / 32 79.26 / 2.1, 79.18 / 2.3.
+    /// On sequences the bench has not seen (`evseg run graph.yaml`, seeds 11-13, 2 s,
+    /// two-objects / one-object / low-contrast / enter-leave) 0 -> 8 px: 82.03 -> 82.33 %,
+    /// worst-object switches 1.00 -> 1.42 (two-objects 13, whose objects cross, 1 -> 6).
+    /// Also measured, not kept: the hierarchical merger publishing boxes without 2 / 5 % of a
+    /// segment's events at each side (boxes by every grouping, absorption and merge rule
+    /// here): 79.24 / 3.0 and 78.17 / 4.8.
+    pub split_cell_px: u16,
     /// See `split_gap_px`: fewest events of a group split off a track as a fraction of the
     /// events of the group that keeps it. 0 = no such condition (default). A small object seen
     /// in pieces loses a piece to a track of its own, and that piece is at times the larger
@@ -233,6 +253,7 @@ impl Default for TrackerParams {
             split_gap_px: 16.0,
             split_min_events: 100,
             split_min_share: 0.0,
+            split_cell_px: 0,
             split_after_slices: 3,
             matching_cascade: true,
             merge_keeps_most_hits: true,

@@ -788,6 +788,83 @@ fn objects_joined_while_overlapping_are_split_once_apart() -> Result<(), Tracker
     Ok(())
 }
 
+/// Event pixels for `seg`: the events of each label spread row by row over the box
+/// `area(label)` (`[x_min, y_min, x_max, y_max]`, pixels), background events at (0, 0).
+fn pixels(seg: &Segmentation, area: impl Fn(u32) -> [f64; 4]) -> (Vec<u16>, Vec<u16>) {
+    let mut seen = std::collections::HashMap::new();
+    seg.label
+        .iter()
+        .map(|&l| {
+            if l == 0 {
+                return (0, 0);
+            }
+            let j = seen.entry(l).or_insert(0usize);
+            let [x0, y0, x1, y1] = area(l);
+            let w = (x1 - x0) as usize + 1;
+            let h = (y1 - y0) as usize + 1;
+            let p = (x0 as usize + *j % w, y0 as usize + (*j / w) % h);
+            *j += 1;
+            (p.0 as u16, p.1 as u16)
+        })
+        .unzip()
+}
+
+#[test]
+fn segments_whose_boxes_touch_but_whose_events_lie_apart_split_when_grouped_by_events()
+-> Result<(), TrackerError> {
+    // As `objects_joined_while_overlapping_are_split_once_apart`, but the second object's box
+    // always reaches back to the first one's (a stray event), while its events lie in its 20 x
+    // 20 px core moving away at 400 px/s.
+    let run = |split_cell_px: u16| -> Result<Vec<(u32, u32)>, TrackerError> {
+        let mut tracker = Tracker::new(TrackerParams {
+            split_cell_px,
+            ..TrackerParams::default()
+        })?;
+        let mut ids = Vec::new();
+        for k in 0..15 {
+            let sx = 300.0 + 400.0 * k as f64 * DT;
+            let (_, mut seg) = large_and_small([300.0, 300.0], [sx, 300.0], 150);
+            seg.segments[1].bbox[0] = seg.segments[1].bbox[0].min(321.0);
+            let (x, y) = pixels(&seg, |l| {
+                if l == 1 {
+                    [280.0, 280.0, 320.0, 320.0]
+                } else {
+                    [sx - 10.0, 290.0, sx + 10.0, 310.0]
+                }
+            });
+            let out = tracker.update_with_pixels(span(k), &x, &y, &seg)?;
+            ids.push((id_of(&seg, &out, 1), id_of(&seg, &out, 2)));
+        }
+        Ok(ids)
+    };
+    // By boxes (the default): the boxes touch in every slice, so the two stay one track.
+    let boxes = run(0)?;
+    assert!(boxes.iter().all(|&(a, b)| a == 1 && b == 1), "{boxes:?}");
+    // By 8 px cells: events within 3 cells of each other join. The first object's events reach
+    // x = 320 (cell 40); the second one's start at x = 350 (cell 43) in slice 5, still joined,
+    // and at x = 362 (cell 45) in slice 6, apart; split after `split_after_slices` 3 slices
+    // apart, in slice 8.
+    let cells = run(8)?;
+    assert!(cells.iter().all(|&(a, _)| a == 1), "{cells:?}");
+    let apart = cells.iter().position(|&(a, b)| a != b).unwrap_or(cells.len());
+    assert_eq!(apart, 8, "{cells:?}");
+    assert!(
+        cells[apart..].iter().all(|&(_, b)| b == cells[apart].1),
+        "{cells:?}"
+    );
+    // Pixels that do not fit the labels are refused.
+    let mut tracker = Tracker::new(TrackerParams::default())?;
+    let (_, seg) = large_and_small([300.0, 300.0], [300.0, 300.0], 150);
+    let (x, y) = pixels(&seg, |_| [280.0, 280.0, 320.0, 320.0]);
+    assert!(
+        tracker
+            .update_with_pixels(span(0), &x[1..], &y[1..], &seg)
+            .is_err()
+    );
+    assert!(tracker.update_with_pixels(span(0), &x, &y[1..], &seg).is_err());
+    Ok(())
+}
+
 /// A still object (label 1, 500 events, a 60 x 60 px box at (300, 300)).
 fn still_object() -> (usize, Segmentation) {
     let (n, mut seg) = frame(

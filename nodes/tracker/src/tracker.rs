@@ -183,6 +183,35 @@ impl Tracker {
         events: usize,
         segmentation: &Segmentation,
     ) -> Result<Tracks, TrackerError> {
+        self.track_slice(span, events, None, segmentation)
+    }
+
+    /// As [`Tracker::update`], with the slice's event pixels `x`, `y` (aligned with the
+    /// per-event labels): with `split_cell_px` > 0 a track's segments are grouped for the
+    /// split by the cells their events occupy instead of by their boxes.
+    pub fn update_with_pixels(
+        &mut self,
+        span: (f64, f64),
+        x: &[u16],
+        y: &[u16],
+        segmentation: &Segmentation,
+    ) -> Result<Tracks, TrackerError> {
+        if x.len() != y.len() {
+            return Err(TrackerError::LabelCount {
+                labels: y.len(),
+                events: x.len(),
+            });
+        }
+        self.track_slice(span, x.len(), Some((x, y)), segmentation)
+    }
+
+    fn track_slice(
+        &mut self,
+        span: (f64, f64),
+        events: usize,
+        pixels: Option<(&[u16], &[u16])>,
+        segmentation: &Segmentation,
+    ) -> Result<Tracks, TrackerError> {
         // ---- validation (no state change before this block succeeds) ----
         let (t_start, t_end) = span;
         if !(t_start.is_finite() && t_end.is_finite() && t_end >= t_start) {
@@ -309,6 +338,7 @@ impl Tracker {
                         t,
                         id = self.tracks[ti].id,
                         events = counts[k],
+                        bbox = ?segments[k].bbox,
                         "fragment absorbed"
                     );
                     if !matched_track[ti] {
@@ -343,8 +373,20 @@ impl Tracker {
         }
         // ---- groups far from a track's matched segment: another object ----
         if self.params.split_gap_px > 0.0 {
+            let cells = match pixels {
+                Some((x, y)) if self.params.split_cell_px > 0 => Some(SegmentCells::new(
+                    &segmentation.label,
+                    &index,
+                    x,
+                    y,
+                    segments.len(),
+                    self.params.split_cell_px,
+                )),
+                _ => None,
+            };
             let opened = self.split_apart(
                 segments,
+                cells.as_ref(),
                 &counts,
                 &primary,
                 &before,
@@ -476,6 +518,7 @@ impl Tracker {
     fn split_apart(
         &mut self,
         segments: &[Segment],
+        cells: Option<&SegmentCells>,
         counts: &[u32],
         primary: &[Option<usize>],
         before: &[TrackState],
@@ -498,11 +541,22 @@ impl Tracker {
             if members.len() < 2 {
                 continue;
             }
-            let groups = box_groups(segments, &members, gap);
+            let groups = match cells {
+                Some(c) => c.groups(&members, gap),
+                None => box_groups(segments, &members, gap),
+            };
             let events: Vec<u32> = groups
                 .iter()
                 .map(|g| g.iter().map(|&k| counts[k]).sum())
                 .collect();
+            if groups.len() > 1 {
+                tracing::debug!(
+                    t,
+                    id = self.tracks[ti].id,
+                    ?events,
+                    "track's segments in groups apart"
+                );
+            }
             let largest = |g: &[usize]| g.iter().copied().max_by_key(|&k| counts[k]);
             let first_group = groups.iter().position(|g| g.contains(&first)).unwrap_or(0);
             let mut keep = first_group;
@@ -652,6 +706,112 @@ fn union_boxes(
         }
     }
     boxes
+}
+
+/// The grid cells each segment's events occupy, for grouping a track's segments by where
+/// their events lie (`TrackerParams::split_cell_px`).
+struct SegmentCells {
+    /// Cell side, pixels.
+    cell_px: u16,
+    /// Grid columns.
+    cols: u32,
+    /// Per segment index: the row-major indices of the cells holding any of its events,
+    /// sorted, without repeats.
+    cells: Vec<Vec<u32>>,
+}
+
+impl SegmentCells {
+    /// The cells of `segment_count` segments from the per-event `labels` (segment index through
+    /// `index`; label 0 and unknown labels skipped) at pixels `x`, `y`.
+    fn new(
+        labels: &[u32],
+        index: &LabelIndex,
+        x: &[u16],
+        y: &[u16],
+        segment_count: usize,
+        cell_px: u16,
+    ) -> Self {
+        let c = u32::from(cell_px.max(1));
+        let cols = x.iter().map(|&v| u32::from(v) / c).max().unwrap_or(0) + 1;
+        let mut keys: Vec<u64> = labels
+            .iter()
+            .zip(x.iter().zip(y))
+            .filter(|&(&l, _)| l != 0)
+            .filter_map(|(&l, (&px, &py))| {
+                let k = index.get(l)?;
+                let cell = (u32::from(py) / c) * cols + u32::from(px) / c;
+                Some(((k as u64) << 32) | u64::from(cell))
+            })
+            .collect();
+        keys.sort_unstable();
+        keys.dedup();
+        let mut cells = vec![Vec::new(); segment_count];
+        for key in keys {
+            if let Some(v) = cells.get_mut((key >> 32) as usize) {
+                v.push(key as u32);
+            }
+        }
+        Self {
+            cell_px: cell_px.max(1),
+            cols,
+            cells,
+        }
+    }
+
+    /// `members` (segment indices) in groups, transitively joining two segments with occupied
+    /// cells at most `gap_px` apart (rounded up to whole cells; cells sharing a side or a
+    /// corner are 0 apart). Groups in the order of their first member, members sorted; a
+    /// segment without cells is a group of its own.
+    fn groups(&self, members: &[usize], gap_px: f64) -> Vec<Vec<usize>> {
+        let reach = (gap_px / f64::from(self.cell_px)).ceil() as i64 + 1;
+        let mut parent: Vec<usize> = (0..members.len()).collect();
+        fn root(parent: &mut [usize], mut a: usize) -> usize {
+            while parent[a] != a {
+                parent[a] = parent[parent[a]];
+                a = parent[a];
+            }
+            a
+        }
+        let mut owner: HashMap<u32, usize> = HashMap::new();
+        let cols = i64::from(self.cols);
+        for (local, &k) in members.iter().enumerate() {
+            let Some(cells) = self.cells.get(k) else { continue };
+            for &cell in cells {
+                let (cx, cy) = (i64::from(cell) % cols, i64::from(cell) / cols);
+                for dy in -reach..=reach {
+                    for dx in -reach..=reach {
+                        let (nx, ny) = (cx + dx, cy + dy);
+                        if nx < 0 || ny < 0 || nx >= cols {
+                            continue;
+                        }
+                        if let Some(&other) = u32::try_from(ny * cols + nx).ok().and_then(|n| owner.get(&n)) {
+                            let (ra, rb) = (root(&mut parent, local), root(&mut parent, other));
+                            if ra != rb {
+                                parent[ra.max(rb)] = ra.min(rb);
+                            }
+                        }
+                    }
+                }
+            }
+            for &cell in cells {
+                owner.entry(cell).or_insert(local);
+            }
+        }
+        let mut groups: Vec<Vec<usize>> = Vec::new();
+        let mut group_of_root: HashMap<usize, usize> = HashMap::new();
+        for (local, &k) in members.iter().enumerate() {
+            let r = root(&mut parent, local);
+            let g = *group_of_root.entry(r).or_insert_with(|| {
+                groups.push(Vec::new());
+                groups.len() - 1
+            });
+            groups[g].push(k);
+        }
+        for g in &mut groups {
+            g.sort_unstable();
+        }
+        groups
+    }
 }
 
 /// Groups of `members` (indices into `segments`) whose boxes lie at most `gap` pixels apart,
