@@ -126,6 +126,11 @@ fn description() -> NodeDescription {
         "matches each track needs before it can be merged with another",
     )
     .param(
+        "merge_velocity_max_hits",
+        d.merge_velocity_max_hits,
+        "the velocity merge only joins a track matched at most this many times to another (0 = no limit)",
+    )
+    .param(
         "merge_inside",
         d.merge_inside,
         "two tracks where one's box lies at least this fraction inside the other's are one object (0 = off)",
@@ -193,6 +198,7 @@ fn main() -> ExitCode {
             merge_velocity_px_s: cfg.param("merge_velocity_px_s")?,
             merge_gap_px: cfg.param("merge_gap_px")?,
             min_hits_to_merge: cfg.param("min_hits_to_merge")?,
+            merge_velocity_max_hits: cfg.param("merge_velocity_max_hits")?,
             merge_inside: cfg.param("merge_inside")?,
             merge_inside_max_hits: cfg.param("merge_inside_max_hits")?,
             split_gap_px: cfg.param("split_gap_px")?,
@@ -243,6 +249,7 @@ mod tests {
                 "merge_velocity_px_s",
                 "merge_gap_px",
                 "min_hits_to_merge",
+                "merge_velocity_max_hits",
                 "merge_inside",
                 "merge_inside_max_hits",
                 "split_gap_px",

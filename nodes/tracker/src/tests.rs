@@ -692,6 +692,48 @@ fn touching_tracks_that_move_alike_become_one_and_others_stay_apart() -> Result<
 }
 
 #[test]
+fn long_tracked_neighbours_that_come_to_touch_merge_only_without_a_hit_limit() -> Result<(), TrackerError> {
+    // Two objects moving alike at 150 px/s with boxes 10 px apart for 12 slices, then 1 px
+    // apart (touching within `merge_gap_px`).
+    let run = |merge_velocity_max_hits: u32| -> Result<Vec<(u32, u32)>, TrackerError> {
+        let mut tracker = Tracker::new(TrackerParams {
+            merge_velocity_max_hits,
+            ..TrackerParams::default()
+        })?;
+        let mut ids = Vec::new();
+        for k in 0..16 {
+            let t = k as f64 * DT;
+            let offset = if k < 12 { 30.0 } else { 21.0 };
+            let (n, seg) = frame(
+                &[
+                    Obj {
+                        label: 1,
+                        centroid: [200.0 + 150.0 * t, 100.0],
+                        events: 150,
+                    },
+                    Obj {
+                        label: 2,
+                        centroid: [200.0 + offset + 150.0 * t, 100.0],
+                        events: 150,
+                    },
+                ],
+                50,
+            );
+            let out = tracker.update(span(k), n, &seg)?;
+            ids.push((id_of(&seg, &out, 1), id_of(&seg, &out, 2)));
+        }
+        Ok(ids)
+    };
+    let unlimited = run(0)?;
+    assert!(unlimited[..12].iter().all(|&(a, b)| a != b), "{unlimited:?}");
+    assert!(unlimited[12..].iter().all(|&(a, b)| a == b), "{unlimited:?}");
+    // Each track has 12 matches when they touch: above a limit of 10, so they stay apart.
+    let limited = run(10)?;
+    assert!(limited.iter().all(|&(a, b)| a == 1 && b == 2), "{limited:?}");
+    Ok(())
+}
+
+#[test]
 fn a_piece_inside_another_tracks_box_is_merged_whatever_its_velocity() -> Result<(), TrackerError> {
     // A large piece (40 x 40 px box) and a small one (20 x 20) inside it whose centroid swings
     // 10 px either way from slice to slice (a fragment's centroid jumps with the pieces): their

@@ -648,6 +648,8 @@ impl Tracker {
                     } else {
                         if ta.hits < p.min_hits_to_merge
                             || tb.hits < p.min_hits_to_merge
+                            || (p.merge_velocity_max_hits > 0
+                                && ta.hits.min(tb.hits) > p.merge_velocity_max_hits)
                             || box_gap(ba, bb) > p.merge_gap_px
                         {
                             continue;
