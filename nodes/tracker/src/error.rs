@@ -23,6 +23,14 @@ pub enum TrackerError {
         /// Number of events in the slice.
         events: usize,
     },
+    /// The slice's event columns differ in length.
+    #[error("the slice has {x} event x coordinates but {y} y coordinates")]
+    PixelCount {
+        /// Length of the x column.
+        x: usize,
+        /// Length of the y column.
+        y: usize,
+    },
     /// An event carries a label that no segment describes.
     #[error("event {index} has label {label}, which is not among the segments")]
     UnknownLabel {

@@ -646,6 +646,26 @@ fn fragments_of_a_tracked_object_take_its_id_and_a_distant_segment_does_not() ->
     Ok(())
 }
 
+/// Two pieces of 150 events each on the row y = 100, label 1 at x = `xa` and label 2 at `xb`
+/// (20 x 20 px boxes), besides 50 background events.
+fn two_pieces(xa: f64, xb: f64) -> (usize, Segmentation) {
+    frame(
+        &[
+            Obj {
+                label: 1,
+                centroid: [xa, 100.0],
+                events: 150,
+            },
+            Obj {
+                label: 2,
+                centroid: [xb, 100.0],
+                events: 150,
+            },
+        ],
+        50,
+    )
+}
+
 #[test]
 fn touching_tracks_that_move_alike_become_one_and_others_stay_apart() -> Result<(), TrackerError> {
     // Two pieces 20 px apart (their 20 px boxes touch), moving at `va` and `vb` px/s.
@@ -654,21 +674,7 @@ fn touching_tracks_that_move_alike_become_one_and_others_stay_apart() -> Result<
         let mut ids = Vec::new();
         for k in 0..8 {
             let t = k as f64 * DT;
-            let (n, seg) = frame(
-                &[
-                    Obj {
-                        label: 1,
-                        centroid: [200.0 + va * t, 100.0],
-                        events: 150,
-                    },
-                    Obj {
-                        label: 2,
-                        centroid: [220.0 + vb * t, 100.0],
-                        events: 150,
-                    },
-                ],
-                50,
-            );
+            let (n, seg) = two_pieces(200.0 + va * t, 220.0 + vb * t);
             let out = tracker.update(span(k), n, &seg)?;
             ids.push((id_of(&seg, &out, 1), id_of(&seg, &out, 2)));
         }
@@ -704,21 +710,7 @@ fn long_tracked_neighbours_that_come_to_touch_merge_only_without_a_hit_limit() -
         for k in 0..16 {
             let t = k as f64 * DT;
             let offset = if k < 12 { 30.0 } else { 21.0 };
-            let (n, seg) = frame(
-                &[
-                    Obj {
-                        label: 1,
-                        centroid: [200.0 + 150.0 * t, 100.0],
-                        events: 150,
-                    },
-                    Obj {
-                        label: 2,
-                        centroid: [200.0 + offset + 150.0 * t, 100.0],
-                        events: 150,
-                    },
-                ],
-                50,
-            );
+            let (n, seg) = two_pieces(200.0 + 150.0 * t, 200.0 + offset + 150.0 * t);
             let out = tracker.update(span(k), n, &seg)?;
             ids.push((id_of(&seg, &out, 1), id_of(&seg, &out, 2)));
         }
@@ -898,12 +890,18 @@ fn segments_whose_boxes_touch_but_whose_events_lie_apart_split_when_grouped_by_e
     let mut tracker = Tracker::new(TrackerParams::default())?;
     let (_, seg) = large_and_small([300.0, 300.0], [300.0, 300.0], 150);
     let (x, y) = pixels(&seg, |_| [280.0, 280.0, 320.0, 320.0]);
-    assert!(
-        tracker
-            .update_with_pixels(span(0), &x[1..], &y[1..], &seg)
-            .is_err()
+    let n = seg.label.len();
+    assert_eq!(
+        tracker.update_with_pixels(span(0), &x[1..], &y[1..], &seg),
+        Err(TrackerError::LabelCount {
+            labels: n,
+            events: n - 1
+        })
     );
-    assert!(tracker.update_with_pixels(span(0), &x, &y[1..], &seg).is_err());
+    assert_eq!(
+        tracker.update_with_pixels(span(0), &x, &y[1..], &seg),
+        Err(TrackerError::PixelCount { x: n, y: n - 1 })
+    );
     Ok(())
 }
 

@@ -197,9 +197,9 @@ impl Tracker {
         segmentation: &Segmentation,
     ) -> Result<Tracks, TrackerError> {
         if x.len() != y.len() {
-            return Err(TrackerError::LabelCount {
-                labels: y.len(),
-                events: x.len(),
+            return Err(TrackerError::PixelCount {
+                x: x.len(),
+                y: y.len(),
             });
         }
         self.track_slice(span, x.len(), Some((x, y)), segmentation)
