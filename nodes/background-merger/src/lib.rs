@@ -9,7 +9,9 @@
 //!    warped previous background rather than warped previous foreground. The first slice, or a
 //!    cluster that lands on too few warped events, uses the planar vote alone ("Initialization");
 //!    a slice whose planar vote separated (almost) nothing uses the warp score alone
-//!    ([`BackgroundParams::planar_silent_share`]); a cluster that lands on previous foreground
+//!    ([`BackgroundParams::planar_silent_share`]) where it lands on confirmed previous foreground
+//!    or within a short grace ([`BackgroundParams::silent_warp_needs_confirmation`],
+//!    [`BackgroundParams::unconfirmed_silent_slices`]); a cluster that lands on previous foreground
 //!    which clearly moved gets the larger weight [`BackgroundParams::warp_weight_moving`] where
 //!    the warp says more foreground than the planar vote.
 //!    Clusters with a prior of at least [`BackgroundParams::candidate_threshold`] are background
@@ -120,6 +122,10 @@ pub struct ClusterReport {
     pub candidate: bool,
     /// Mean `|r_new|` / mean `|n_derot|` (NaN without samples or without a translation).
     pub relative_residual: f64,
+    /// Angle between the cluster's fitted 2-D derotated flow and the translational flow
+    /// direction, degrees (NaN when the direction test did not run: no translation, residual
+    /// below the floor, or a flow the samples do not determine).
+    pub flow_angle_deg: f64,
     /// Merged into the coarse background.
     pub background: bool,
 }
@@ -214,6 +220,8 @@ impl BackgroundMerger {
         // The part of `hits.1` (foreground) on cells with warped events whose cluster clearly
         // moved ([`PreviousSlice::moving`]).
         let mut moving_hits = vec![0.0f64; k];
+        // The same for [`PreviousSlice::confirmed`].
+        let mut confirmed_hits = vec![0.0f64; k];
         for i in 0..n {
             let Some(c) = cluster_of(input.clusters, i) else {
                 continue;
@@ -225,23 +233,35 @@ impl BackgroundMerger {
             {
                 let (b, f) = (w.background.values[cell] > 0.0, w.foreground.values[cell] > 0.0);
                 let moving = f64::from(u8::from(w.moving_foreground.values[cell] > 0.0));
+                let confirmed = f64::from(u8::from(w.confirmed_foreground.values[cell] > 0.0));
                 // An event on both kinds of warped cells votes half for each.
                 match (b, f) {
                     (true, false) => hits[c].0 += 1.0,
                     (false, true) => {
                         hits[c].1 += 1.0;
                         moving_hits[c] += moving;
+                        confirmed_hits[c] += confirmed;
                     }
                     (true, true) => {
                         hits[c].0 += 0.5;
                         hits[c].1 += 0.5;
                         moving_hits[c] += 0.5 * moving;
+                        confirmed_hits[c] += 0.5 * confirmed;
                     }
                     (false, false) => {}
                 }
             }
         }
         let planar_silent = planar_is_silent(&reports, &planar_bg, p.planar_silent_share);
+        // Consecutive slices with a silent planar vote, this one included.
+        let silent_run = match (&warped, &self.previous) {
+            (Some(_), Some(prev)) if planar_silent => prev.silent_run.saturating_add(1),
+            _ => u32::from(planar_silent),
+        };
+        // Unconfirmed foreground is still carried by the warp alone within the grace.
+        let grace = silent_run <= p.unconfirmed_silent_slices;
+        // Per cluster: confirmed foreground ([`PreviousSlice::confirmed`]).
+        let mut confirmed = vec![!p.silent_warp_needs_confirmation; k];
         for (c, r) in reports.iter_mut().enumerate() {
             if r.events == 0 {
                 continue;
@@ -251,12 +271,22 @@ impl BackgroundMerger {
             if b + f >= p.warp_min_hits as f64 {
                 r.warp_score = Some(b / (b + f));
             }
+            let mostly = |part: f64| hits[c].1 > 0.0 && part >= 0.5 * hits[c].1;
+            // Mostly on previous foreground that clearly moved.
+            let moved = mostly(moving_hits[c]);
+            if p.silent_warp_needs_confirmation {
+                // Two independent votes for moving in this slice, or mostly on confirmed
+                // previous foreground.
+                let both_moving = !planar_silent
+                    && r.planar_background < p.candidate_threshold
+                    && r.warp_score.is_some_and(|s| s < p.candidate_threshold);
+                confirmed[c] = both_moving || mostly(confirmed_hits[c]);
+            }
             r.prior = match r.warp_score {
-                Some(s) if planar_silent => s,
+                Some(s) if planar_silent && (confirmed[c] || grace) => s,
                 Some(s) => {
-                    // Mostly on previous foreground that clearly moved, and the warp says more
-                    // foreground than the planar vote: the warp gets the larger weight.
-                    let moved = hits[c].1 > 0.0 && moving_hits[c] >= 0.5 * hits[c].1;
+                    // ...and the warp says more foreground than the planar vote: the warp gets
+                    // the larger weight.
                     let w = if moved && s < r.planar_background {
                         p.warp_weight_moving
                     } else {
@@ -376,6 +406,9 @@ impl BackgroundMerger {
                 cluster_of(input.clusters, i).is_some_and(|c| reports[c].relative_residual >= p.moving_relres)
             })
             .collect();
+        let confirmed: Vec<bool> = (0..n)
+            .map(|i| cluster_of(input.clusters, i).is_some_and(|c| confirmed[c]))
+            .collect();
         self.previous = Some(PreviousSlice {
             camera: input.camera.clone(),
             x: events.x.clone(),
@@ -385,6 +418,8 @@ impl BackgroundMerger {
             t_mid,
             direction,
             moving,
+            confirmed,
+            silent_run,
         });
         Ok(MergeResult {
             coarse: CoarseSegmentation {
@@ -446,7 +481,14 @@ fn cluster_fit(
 /// ([`BackgroundParams::max_flow_angle_deg`] > 0 and the cluster's 2-D flow is determined), its
 /// fitted flow is within that angle of the translation's flow direction; or else its residual
 /// is at most [`BackgroundParams::consistency_ratio`] of its derotated flow.
-fn is_consistent(members: &[&FlowSample], t: [f64; 3], sum_r: f64, sum_n: f64, p: &BackgroundParams) -> bool {
+fn is_consistent(
+    members: &[&FlowSample],
+    t: [f64; 3],
+    sum_r: f64,
+    sum_n: f64,
+    p: &BackgroundParams,
+    report: &mut ClusterReport,
+) -> bool {
     let m = members.len();
     if m == 0 {
         return false;
@@ -462,6 +504,7 @@ fn is_consistent(members: &[&FlowSample], t: [f64; 3], sum_r: f64, sum_n: f64, p
             p.flow_direction_magnitude_weighting,
         )
     {
+        report.flow_angle_deg = d.angle_deg;
         return d.angle_deg <= p.max_flow_angle_deg;
     }
     sum_r <= p.consistency_ratio * sum_n
@@ -563,7 +606,7 @@ fn select_hypothesis(
             .iter()
             .map(|m| {
                 let (r, nsum) = cluster_fit(m, Some(t), |_, _| {});
-                is_consistent(m, t, r, nsum, p)
+                is_consistent(m, t, r, nsum, p, &mut ClusterReport::default())
             })
             .collect();
         let score: f64 = consistent
@@ -600,7 +643,8 @@ fn explain(
     } else {
         f64::NAN
     };
-    direction.is_none_or(|t| is_consistent(members, t, sum_r, sum_n, p))
+    report.flow_angle_deg = f64::NAN;
+    direction.is_none_or(|t| is_consistent(members, t, sum_r, sum_n, p, report))
 }
 
 /// Least-squares inverse depth of `members` under translation `t`, clamped at 0 (cheirality).

@@ -134,6 +134,16 @@ fn main() -> ExitCode {
         "planar foreground share of clustered events at or below which the warp score alone is the prior",
     )
     .param(
+        "silent_warp_needs_confirmation",
+        d.silent_warp_needs_confirmation,
+        "with a silent planar vote, the warp score alone is the prior only where it lands on confirmed previous foreground (both votes once said moving)",
+    )
+    .param(
+        "unconfirmed_silent_slices",
+        d.unconfirmed_silent_slices,
+        "consecutive slices with a silent planar vote during which unconfirmed foreground is still carried by the warp alone",
+    )
+    .param(
         "candidate_threshold",
         d.candidate_threshold,
         "background prior at or above which a cluster is a background candidate",
@@ -200,6 +210,8 @@ fn main() -> ExitCode {
             warp_weight_moving: cfg.param("warp_weight_moving")?,
             moving_relres: cfg.param("moving_relres")?,
             planar_silent_share: cfg.param("planar_silent_share")?,
+            silent_warp_needs_confirmation: cfg.param("silent_warp_needs_confirmation")?,
+            unconfirmed_silent_slices: cfg.param("unconfirmed_silent_slices")?,
             candidate_threshold: cfg.param("candidate_threshold")?,
             consistency_ratio: cfg.param("consistency_ratio")?,
             consistency_floor: cfg.param("consistency_floor")?,

@@ -103,6 +103,23 @@ pub struct BackgroundParams {
     /// 0.29 -> 0.45). Letting the warp also *invert* a split it contradicts was tried and lost
     /// (high-contrast 0.50 -> 0.40).
     pub planar_silent_share: f64,
+    /// When the planar vote is silent ([`BackgroundParams::planar_silent_share`]), the warp
+    /// score alone is the prior only for a cluster that lands mostly on *confirmed* previous
+    /// foreground; any other cluster mixes the warp with the (unanimous) planar vote at
+    /// [`BackgroundParams::warp_weight`]. A cluster is confirmed when, in one slice, both
+    /// independent votes call it moving (planar background share and warp score below
+    /// [`BackgroundParams::candidate_threshold`], planar vote not silent), or when it lands
+    /// mostly on confirmed previous foreground (the status is carried by the warp). Off: every
+    /// cluster takes the warp alone. With it off, a phantom of the first slice (which has no
+    /// warp, so only the planar vote made it) is carried forward by the warp alone for as long
+    /// as the planar vote stays silent, since nothing else can outvote it.
+    pub silent_warp_needs_confirmation: bool,
+    /// Grace for [`BackgroundParams::silent_warp_needs_confirmation`]: unconfirmed foreground is
+    /// still carried by the warp alone during the first this many consecutive slices with a
+    /// silent planar vote (a real object the first slice found, before any warp could confirm
+    /// it, survives a short silence; a first-slice phantom does not survive a long one). 0 =
+    /// no grace.
+    pub unconfirmed_silent_slices: u32,
     /// A cluster whose background prior (weighted mean of the fraction of its events the planar
     /// segmenter called background and its warp score) is at least this is a background
     /// candidate (default 0.5: the majority).
@@ -179,6 +196,8 @@ impl Default for BackgroundParams {
             warp_weight_moving: 0.6,
             moving_relres: 0.8,
             planar_silent_share: 0.02,
+            silent_warp_needs_confirmation: true,
+            unconfirmed_silent_slices: 1,
             candidate_threshold: 0.5,
             consistency_ratio: 10.0,
             consistency_floor: 0.02,

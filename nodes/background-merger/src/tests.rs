@@ -238,6 +238,76 @@ fn when_the_planar_vote_separates_nothing_the_warp_alone_decides() {
     assert!(off.candidate && off.background, "{off:?}");
 }
 
+/// A planar vote: true = background for event `i` of a constructed slice.
+type PlanarVote<'a> = &'a dyn Fn(&Constructed, usize) -> bool;
+
+/// Runs `planar.len()` slices of `construct(t, t_obj, ..)` (30 ms each) through one merger with
+/// `p`; slice `j` gets its planar vote from `planar[j]` (true = background, per event). The
+/// first slice has no previous labels; each later one gets the previous slice's result (group
+/// `!= 0` = foreground), except that `first_labels` replaces the first slice's. Returns the
+/// per-cluster reports of every slice.
+fn slices_with_feedback(
+    p: BackgroundParams,
+    t: [f64; 3],
+    t_obj: Option<[f64; 3]>,
+    first_labels: impl FnOnce(&Constructed) -> Vec<u32>,
+    planar: &[PlanarVote<'_>],
+) -> Vec<Vec<ClusterReport>> {
+    let mut merger = BackgroundMerger::new(p).unwrap();
+    let mut labels: Option<Vec<u32>> = None;
+    let mut first_labels = Some(first_labels);
+    let mut out = Vec::new();
+    for (j, vote) in planar.iter().enumerate() {
+        let t0 = 0.03 * j as f64;
+        let mut c = construct(t, t_obj, t0);
+        for i in 0..c.object.len() {
+            c.residuals.background[i] = vote(&c, i);
+        }
+        let r = run(&mut merger, &c, (t0, t0 + 0.03), labels.as_deref());
+        labels = Some(match first_labels.take() {
+            Some(f) => f(&c),
+            None => r.coarse.group.iter().map(|&g| u32::from(g != 0)).collect(),
+        });
+        out.push(r.clusters);
+    }
+    out
+}
+
+#[test]
+fn a_first_slice_phantom_is_not_carried_through_a_long_silence_but_a_confirmed_object_is() {
+    let t = [0.4, 0.0, 0.1];
+    let silent: PlanarVote = &|_, _| true;
+    let truth: PlanarVote = &|c, i| !c.object[i];
+    // A static scene whose first planar vote called background cluster 4 foreground (the first
+    // slice has no warp to outvote it); every later planar vote is silent.
+    let cluster_4_moving: PlanarVote = &|c, i| c.clusters.id[i] != 4;
+    let phantom = |needs_confirmation: bool| {
+        let p = BackgroundParams {
+            silent_warp_needs_confirmation: needs_confirmation,
+            ..BackgroundParams::default()
+        };
+        let cluster_4 = |c: &Constructed| c.clusters.id.iter().map(|&id| u32::from(id == 4)).collect();
+        let planar = [cluster_4_moving, silent, silent, silent];
+        let r = slices_with_feedback(p, t, None, cluster_4, &planar);
+        r.iter().map(|s| s[4].background).collect::<Vec<_>>()
+    };
+    let d = BackgroundParams::default();
+    assert_eq!(d.unconfirmed_silent_slices, 1);
+    // Kept through the grace (slice 1), released after it.
+    assert_eq!(phantom(true)[1..], [false, true, true]);
+    // Off: the warp alone carries it for as long as the silence lasts.
+    assert_eq!(phantom(false)[1..], [false, false, false]);
+
+    // An object moving along the camera's translation (no consistency test can tell it apart):
+    // the first slice finds it, the second confirms it (planar vote and warp both say moving),
+    // and the warp alone then carries it through the silence.
+    let planar = [truth, truth, silent, silent, silent];
+    let r = slices_with_feedback(d, t, Some([0.8, 0.0, 0.2]), object_labels, &planar);
+    for (j, s) in r.iter().enumerate() {
+        assert!(!s[12].background, "slice {j}: {:?}", s[12]);
+    }
+}
+
 #[test]
 fn previous_foreground_that_clearly_moved_weighs_the_warp_more_but_a_false_alarm_does_not() {
     // First slice: the object (cluster 12) moves against the camera, so no depth explains it;

@@ -34,6 +34,12 @@ pub struct PreviousSlice {
     /// Per event: its cluster was clearly not explained by the camera's motion (relative
     /// residual at least [`crate::BackgroundParams::moving_relres`]).
     pub moving: Vec<bool>,
+    /// Per event: its cluster was confirmed foreground (see
+    /// [`crate::BackgroundParams::silent_warp_needs_confirmation`]; all true when that is off).
+    pub confirmed: Vec<bool>,
+    /// Consecutive slices up to and including this one whose planar vote was silent
+    /// ([`crate::BackgroundParams::planar_silent_share`]).
+    pub silent_run: u32,
 }
 
 /// The previous segmentation moved to the current time.
@@ -46,6 +52,9 @@ pub struct WarpedPrevious {
     /// Warped previous foreground events whose cluster clearly moved
     /// ([`PreviousSlice::moving`]), per cell, dilated by one cell.
     pub moving_foreground: CellGrid,
+    /// Warped previous foreground events of confirmed clusters ([`PreviousSlice::confirmed`]),
+    /// per cell, dilated by one cell.
+    pub confirmed_foreground: CellGrid,
     /// The planar model used (`None`: too few background samples, rotation only).
     pub model: Option<[f64; 8]>,
 }
@@ -76,6 +85,7 @@ pub fn warp_previous(
     let mut background = CellGrid::new(w, h, cell_px);
     let mut foreground = CellGrid::new(w, h, cell_px);
     let mut moving_foreground = CellGrid::new(w, h, cell_px);
+    let mut confirmed_foreground = CellGrid::new(w, h, cell_px);
     for (i, &label) in labels.iter().enumerate() {
         table.prefetch_ahead(&prev.x, &prev.y, i);
         let Some([x, y]) = table.get(prev.x[i], prev.y[i]) else {
@@ -98,12 +108,16 @@ pub fn warp_previous(
             if label != 0 && prev.moving.get(i).is_some_and(|&m| m) {
                 moving_foreground.values[c] += 1.0;
             }
+            if label != 0 && prev.confirmed.get(i).is_some_and(|&m| m) {
+                confirmed_foreground.values[c] += 1.0;
+            }
         }
     }
     Some(WarpedPrevious {
         background: background.dilated(),
         foreground: foreground.dilated(),
         moving_foreground: moving_foreground.dilated(),
+        confirmed_foreground: confirmed_foreground.dilated(),
         model,
     })
 }
