@@ -5,7 +5,9 @@
 //! `cargo run --release -p evseg-hierarchical-merger --example method_on_sim -- [preset ...]`
 //! env: SEED (1), SECONDS (2), FLOW (est | ideal; "ideal" puts n0 along the true flow, which
 //! makes the SVM degenerate), SET ("name=value,...": background-merger, hierarchical-merger and
-//! planar parameters, several variants separated by ';'), VERBOSE (per-slice cluster reports),
+//! planar parameters, several variants separated by ';'), VERBOSE (per-slice cluster reports:
+//! `[B][*]events:planar/warp/relres/angle`, B = merged into the background, * = most of its
+//! events on a true object), DIRS (per-slice direction error of the merger and of the final),
 //! FLOW_MIN_CONF (the plane-fit estimator's min_confidence; default 0 as in graph.yaml),
 //! NF_MAX_SD_DEG (default 16 as in graph.yaml; "inf" = no test), NF_LOOKAHEAD_MS / NF_RADIUS /
 //! NF_DT_MAX_MS / NF_OUTLIER_MS / NF_CHECK_RADIUS / NF_CHECK_DEG / NF_CHECK_SPEED (its other
@@ -153,6 +155,8 @@ fn apply(
             "previous_cell_px" => planar.previous.cell_px = f as u16,
             "previous_min_free_share" => planar.previous.min_free_share = f,
             "planar_silent_share" => bg.planar_silent_share = f,
+            "silent_warp_needs_confirmation" => bg.silent_warp_needs_confirmation = f != 0.0,
+            "unconfirmed_silent_slices" => bg.unconfirmed_silent_slices = f as u32,
             other => bail!("unknown parameter {other}"),
         }
     }
@@ -801,17 +805,29 @@ fn main() -> anyhow::Result<()> {
                 if std::env::var("VERBOSE").is_ok() {
                     let fg = label.iter().filter(|&&l| l != 0).count();
                     let gt = truth.event_object.iter().filter(|&&o| o != 0).count();
+                    let mut obj = vec![0usize; m.clusters.len()];
+                    for (i, &o) in truth.event_object.iter().enumerate() {
+                        if o != 0
+                            && let Some(c) = c_of(&clusters_k, i)
+                            && c < obj.len()
+                        {
+                            obj[c] += 1;
+                        }
+                    }
                     let cl: Vec<String> = m
                         .clusters
                         .iter()
-                        .map(|c| {
+                        .zip(&obj)
+                        .map(|(c, &o)| {
                             format!(
-                                "{}{}:{:.2}/{}/{:.2}",
+                                "{}{}{}:{:.2}/{}/{:.2}/{:.0}",
                                 if c.background { "B" } else { "" },
+                                if o * 2 > c.events { "*" } else { "" },
                                 c.events,
                                 c.planar_background,
                                 c.warp_score.map_or("-".into(), |w| format!("{w:.2}")),
-                                c.relative_residual
+                                c.relative_residual,
+                                c.flow_angle_deg
                             )
                         })
                         .collect();
@@ -948,6 +964,14 @@ fn main() -> anyhow::Result<()> {
                     }
                     if (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt() / vel.len() as f64 > 0.05 {
                         dirs.push(angle_deg(h.segmentation.egomotion.direction, v));
+                        if std::env::var("DIRS").is_ok() {
+                            println!(
+                                "  dir t {:.2} merger {:.1} final {:.1} deg",
+                                span.0,
+                                angle_deg(m.coarse.egomotion.direction, v),
+                                angle_deg(h.segmentation.egomotion.direction, v)
+                            );
+                        }
                     }
                 }
                 prev = Some(label.clone());
