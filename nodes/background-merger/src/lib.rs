@@ -260,6 +260,8 @@ impl BackgroundMerger {
         };
         // Unconfirmed foreground is still carried by the warp alone within the grace.
         let grace = silent_run <= p.unconfirmed_silent_slices;
+        // Confirmed foreground too, up to a longer limit (0 = none).
+        let confirmed_in_time = p.confirmed_silent_slices == 0 || silent_run <= p.confirmed_silent_slices;
         // Per cluster: confirmed foreground ([`PreviousSlice::confirmed`]).
         let mut confirmed = vec![!p.silent_warp_needs_confirmation; k];
         for (c, r) in reports.iter_mut().enumerate() {
@@ -283,7 +285,7 @@ impl BackgroundMerger {
                 confirmed[c] = both_moving || mostly(confirmed_hits[c]);
             }
             r.prior = match r.warp_score {
-                Some(s) if planar_silent && (confirmed[c] || grace) => s,
+                Some(s) if planar_silent && ((confirmed[c] && confirmed_in_time) || grace) => s,
                 Some(s) => {
                     // ...and the warp says more foreground than the planar vote: the warp gets
                     // the larger weight.

@@ -144,6 +144,11 @@ fn main() -> ExitCode {
         "consecutive slices with a silent planar vote during which unconfirmed foreground is still carried by the warp alone",
     )
     .param(
+        "confirmed_silent_slices",
+        d.confirmed_silent_slices,
+        "consecutive slices with a silent planar vote during which confirmed foreground is carried by the warp alone (0 = no limit)",
+    )
+    .param(
         "candidate_threshold",
         d.candidate_threshold,
         "background prior at or above which a cluster is a background candidate",
@@ -212,6 +217,7 @@ fn main() -> ExitCode {
             planar_silent_share: cfg.param("planar_silent_share")?,
             silent_warp_needs_confirmation: cfg.param("silent_warp_needs_confirmation")?,
             unconfirmed_silent_slices: cfg.param("unconfirmed_silent_slices")?,
+            confirmed_silent_slices: cfg.param("confirmed_silent_slices")?,
             candidate_threshold: cfg.param("candidate_threshold")?,
             consistency_ratio: cfg.param("consistency_ratio")?,
             consistency_floor: cfg.param("consistency_floor")?,

@@ -120,6 +120,15 @@ pub struct BackgroundParams {
     /// it, survives a short silence; a first-slice phantom does not survive a long one). 0 =
     /// no grace.
     pub unconfirmed_silent_slices: u32,
+    /// Confirmed foreground is carried by the warp alone for at most this many consecutive
+    /// slices with a silent planar vote (0 = no limit); after that its warp score is mixed with
+    /// the planar vote like any other. Default 3 (90 ms at 30 ms slices). A phantom that two
+    /// slices of the planar vote happened to agree on (a near box's silhouette against a far
+    /// wall in camera-only 205) was otherwise carried for 30 slices; on the simulator no real
+    /// object needed more than 2 (the limit changed no IoU at 2, 3, 5 or 10; 1 cost
+    /// fast-rotation 203 0.6 points). An object the planar vote cannot see for longer (one
+    /// moving along the camera's translation) is then given up until it is seen again.
+    pub confirmed_silent_slices: u32,
     /// A cluster whose background prior (weighted mean of the fraction of its events the planar
     /// segmenter called background and its warp score) is at least this is a background
     /// candidate (default 0.5: the majority).
@@ -198,6 +207,7 @@ impl Default for BackgroundParams {
             planar_silent_share: 0.02,
             silent_warp_needs_confirmation: true,
             unconfirmed_silent_slices: 1,
+            confirmed_silent_slices: 3,
             candidate_threshold: 0.5,
             consistency_ratio: 10.0,
             consistency_floor: 0.02,

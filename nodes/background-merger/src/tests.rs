@@ -274,7 +274,7 @@ fn slices_with_feedback(
 }
 
 #[test]
-fn a_first_slice_phantom_is_not_carried_through_a_long_silence_but_a_confirmed_object_is() {
+fn a_first_slice_phantom_is_not_carried_through_a_long_silence_but_a_confirmed_object_is_within_the_limit() {
     let t = [0.4, 0.0, 0.1];
     let silent: PlanarVote = &|_, _| true;
     let truth: PlanarVote = &|c, i| !c.object[i];
@@ -301,11 +301,18 @@ fn a_first_slice_phantom_is_not_carried_through_a_long_silence_but_a_confirmed_o
     // An object moving along the camera's translation (no consistency test can tell it apart):
     // the first slice finds it, the second confirms it (planar vote and warp both say moving),
     // and the warp alone then carries it through the silence.
-    let planar = [truth, truth, silent, silent, silent];
-    let r = slices_with_feedback(d, t, Some([0.8, 0.0, 0.2]), object_labels, &planar);
-    for (j, s) in r.iter().enumerate() {
-        assert!(!s[12].background, "slice {j}: {:?}", s[12]);
-    }
+    let object = |confirmed_silent_slices: u32| {
+        let p = BackgroundParams {
+            confirmed_silent_slices,
+            ..BackgroundParams::default()
+        };
+        let planar = [truth, truth, silent, silent, silent];
+        let r = slices_with_feedback(p, t, Some([0.8, 0.0, 0.2]), object_labels, &planar);
+        r.iter().map(|s| s[12].background).collect::<Vec<_>>()
+    };
+    assert_eq!(object(0), [false; 5]);
+    // With a limit of 2 silent slices it is given up in the third (slice 4).
+    assert_eq!(object(2), [false, false, false, false, true]);
 }
 
 #[test]

@@ -157,6 +157,7 @@ fn apply(
             "planar_silent_share" => bg.planar_silent_share = f,
             "silent_warp_needs_confirmation" => bg.silent_warp_needs_confirmation = f != 0.0,
             "unconfirmed_silent_slices" => bg.unconfirmed_silent_slices = f as u32,
+            "confirmed_silent_slices" => bg.confirmed_silent_slices = f as u32,
             other => bail!("unknown parameter {other}"),
         }
     }
