@@ -402,15 +402,15 @@ impl BackgroundMerger {
             .collect();
 
         let warped_in = warped.is_some();
-        // Per event: its cluster was clearly not explained by this slice's translation.
-        let moving: Vec<bool> = (0..n)
+        // Per event, from its cluster: clearly not explained by this slice's translation
+        // (`moving`), and confirmed foreground (`confirmed`).
+        let (moving, confirmed): (Vec<bool>, Vec<bool>) = (0..n)
             .map(|i| {
-                cluster_of(input.clusters, i).is_some_and(|c| reports[c].relative_residual >= p.moving_relres)
+                cluster_of(input.clusters, i).map_or((false, false), |c| {
+                    (reports[c].relative_residual >= p.moving_relres, confirmed[c])
+                })
             })
-            .collect();
-        let confirmed: Vec<bool> = (0..n)
-            .map(|i| cluster_of(input.clusters, i).is_some_and(|c| confirmed[c]))
-            .collect();
+            .unzip();
         self.previous = Some(PreviousSlice {
             camera: input.camera.clone(),
             x: events.x.clone(),
@@ -482,21 +482,21 @@ fn cluster_fit(
 /// explained: its mean residual is below the floor; or else, when the direction test applies
 /// ([`BackgroundParams::max_flow_angle_deg`] > 0 and the cluster's 2-D flow is determined), its
 /// fitted flow is within that angle of the translation's flow direction; or else its residual
-/// is at most [`BackgroundParams::consistency_ratio`] of its derotated flow.
+/// is at most [`BackgroundParams::consistency_ratio`] of its derotated flow. Also returns the
+/// direction test's angle (degrees) when that test decided.
 fn is_consistent(
     members: &[&FlowSample],
     t: [f64; 3],
     sum_r: f64,
     sum_n: f64,
     p: &BackgroundParams,
-    report: &mut ClusterReport,
-) -> bool {
+) -> (bool, Option<f64>) {
     let m = members.len();
     if m == 0 {
-        return false;
+        return (false, None);
     }
     if sum_r / m as f64 <= p.consistency_floor {
-        return true;
+        return (true, None);
     }
     if p.max_flow_angle_deg > 0.0
         && let Some(d) = flow_direction(
@@ -506,10 +506,9 @@ fn is_consistent(
             p.flow_direction_magnitude_weighting,
         )
     {
-        report.flow_angle_deg = d.angle_deg;
-        return d.angle_deg <= p.max_flow_angle_deg;
+        return (d.angle_deg <= p.max_flow_angle_deg, Some(d.angle_deg));
     }
-    sum_r <= p.consistency_ratio * sum_n
+    (sum_r <= p.consistency_ratio * sum_n, None)
 }
 
 /// Step 2a: background translation hypotheses and the one that explains the most image area.
@@ -608,7 +607,7 @@ fn select_hypothesis(
             .iter()
             .map(|m| {
                 let (r, nsum) = cluster_fit(m, Some(t), |_, _| {});
-                is_consistent(m, t, r, nsum, p, &mut ClusterReport::default())
+                is_consistent(m, t, r, nsum, p).0
             })
             .collect();
         let score: f64 = consistent
@@ -645,8 +644,13 @@ fn explain(
     } else {
         f64::NAN
     };
-    report.flow_angle_deg = f64::NAN;
-    direction.is_none_or(|t| is_consistent(members, t, sum_r, sum_n, p, report))
+    let Some(t) = direction else {
+        report.flow_angle_deg = f64::NAN;
+        return true;
+    };
+    let (consistent, angle) = is_consistent(members, t, sum_r, sum_n, p);
+    report.flow_angle_deg = angle.unwrap_or(f64::NAN);
+    consistent
 }
 
 /// Least-squares inverse depth of `members` under translation `t`, clamped at 0 (cheirality).
