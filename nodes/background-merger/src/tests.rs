@@ -281,9 +281,10 @@ fn a_first_slice_phantom_is_not_carried_through_a_long_silence_but_a_confirmed_o
     // A static scene whose first planar vote called background cluster 4 foreground (the first
     // slice has no warp to outvote it); every later planar vote is silent.
     let cluster_4_moving: PlanarVote = &|c, i| c.clusters.id[i] != 4;
-    let phantom = |needs_confirmation: bool| {
+    let phantom = |needs_confirmation: bool, unconfirmed_silent_slices: u32| {
         let p = BackgroundParams {
             silent_warp_needs_confirmation: needs_confirmation,
+            unconfirmed_silent_slices,
             ..BackgroundParams::default()
         };
         let cluster_4 = |c: &Constructed| c.clusters.id.iter().map(|&id| u32::from(id == 4)).collect();
@@ -291,12 +292,12 @@ fn a_first_slice_phantom_is_not_carried_through_a_long_silence_but_a_confirmed_o
         let r = slices_with_feedback(p, t, None, cluster_4, &planar);
         r.iter().map(|s| s[4].background).collect::<Vec<_>>()
     };
-    let d = BackgroundParams::default();
-    assert_eq!(d.unconfirmed_silent_slices, 1);
-    // Kept through the grace (slice 1), released after it.
-    assert_eq!(phantom(true)[1..], [false, true, true]);
+    // Kept through a grace of one silent slice (slice 1), released after it; a grace of two
+    // keeps it one slice longer.
+    assert_eq!(phantom(true, 1)[1..], [false, true, true]);
+    assert_eq!(phantom(true, 2)[1..], [false, false, true]);
     // Off: the warp alone carries it for as long as the silence lasts.
-    assert_eq!(phantom(false)[1..], [false, false, false]);
+    assert_eq!(phantom(false, 1)[1..], [false, false, false]);
 
     // An object moving along the camera's translation (no consistency test can tell it apart):
     // the first slice finds it, the second confirms it (planar vote and warp both say moving),
