@@ -976,8 +976,7 @@ pub fn run_stage<S: Stage>(
     make: impl FnOnce(&NodeConfig) -> Result<S, BoxError>,
 ) -> std::process::ExitCode {
     main_wrapper(description, true, |run| {
-        let mut stage =
-            make(&run.cfg).map_err(|e| RuntimeError::Config(format!("node {}: {e}", run.cfg.node)))?;
+        let mut stage = make(&run.cfg).map_err(|e| in_node(&run.cfg.node, e))?;
         stage_loop(run, &mut stage)
     })
 }
@@ -988,8 +987,7 @@ pub fn run_source<S: Source>(
     make: impl FnOnce(&NodeConfig) -> Result<S, BoxError>,
 ) -> std::process::ExitCode {
     main_wrapper(description, true, |run| {
-        let mut source =
-            make(&run.cfg).map_err(|e| RuntimeError::Config(format!("node {}: {e}", run.cfg.node)))?;
+        let mut source = make(&run.cfg).map_err(|e| in_node(&run.cfg.node, e))?;
         source_loop(run, &mut source)
     })
 }
@@ -1004,8 +1002,7 @@ pub fn run_raw_source<S: Source>(
     make: impl FnOnce(&NodeConfig) -> Result<S, BoxError>,
 ) -> std::process::ExitCode {
     main_wrapper(description, false, |run| {
-        let mut source =
-            make(&run.cfg).map_err(|e| RuntimeError::Config(format!("node {}: {e}", run.cfg.node)))?;
+        let mut source = make(&run.cfg).map_err(|e| in_node(&run.cfg.node, e))?;
         source_loop(run, &mut source)
     })
 }
@@ -1246,6 +1243,16 @@ pub(crate) fn note_losses(run: &Running, inbox: &Inbox, joins_dropped: u64, gaps
     }
 }
 
+/// A node set-up error `e` as a runtime error naming `node`: a [`RuntimeError::Param`] (which
+/// already names it) as it is, anything else prefixed with the node.
+fn in_node(node: &str, e: BoxError) -> RuntimeError {
+    match e.downcast::<RuntimeError>() {
+        Ok(e) if matches!(*e, RuntimeError::Param { .. }) => *e,
+        Ok(e) => RuntimeError::Config(format!("node {node}: {e}")),
+        Err(e) => RuntimeError::Config(format!("node {node}: {e}")),
+    }
+}
+
 fn logic_error(run: &Running, seq: u64, e: BoxError) -> RuntimeError {
     match e.downcast::<RuntimeError>() {
         Ok(rt) => *rt,
@@ -1279,5 +1286,33 @@ mod credit_tests {
         assert!(has_credit(&consumed, &consumers, 6, 2));
         assert!(!has_credit(&consumed, &consumers, 7, 2));
         assert!(has_credit(&consumed, &[], 99, 1), "no consumer, no wait");
+    }
+}
+
+#[cfg(test)]
+mod set_up_error_tests {
+    use super::*;
+
+    #[test]
+    fn a_set_up_error_names_the_node_once() {
+        let param: BoxError = Box::new(RuntimeError::Param {
+            node: "background".into(),
+            name: "limit".into(),
+            reason: "expected u32".into(),
+        });
+        assert_eq!(
+            in_node("background", param).to_string(),
+            "node background: parameter `limit`: expected u32"
+        );
+        let other: BoxError = "no camera table".into();
+        assert_eq!(
+            in_node("background", other).to_string(),
+            "node background: no camera table"
+        );
+        let config: BoxError = Box::new(RuntimeError::Config("bad file".into()));
+        assert_eq!(
+            in_node("background", config).to_string(),
+            "node background: bad file"
+        );
     }
 }
