@@ -7,7 +7,10 @@
 //! makes the SVM degenerate), SET ("name=value,...": background-merger, hierarchical-merger and
 //! planar parameters, several variants separated by ';'), VERBOSE (per-slice cluster reports:
 //! `[B][*]events:planar/warp/relres/angle`, B = merged into the background, * = most of its
-//! events on a true object), DIRS (per-slice direction error of the merger and of the final),
+//! events on a true object), DIRS (per-slice direction error of the merger and of the final,
+//! and the angle the true and the estimated direction turned since the previous slice), SEGS
+//! (per slice: each true object's clustered events in clusters it is the majority of (pure) or
+//! not (mixed), and each final segment's events per true object id),
 //! FLOW_MIN_CONF (the plane-fit estimator's min_confidence; default 0 as in graph.yaml),
 //! NF_MAX_SD_DEG (default 16 as in graph.yaml; "inf" = no test), NF_LOOKAHEAD_MS / NF_RADIUS /
 //! NF_DT_MAX_MS / NF_OUTLIER_MS / NF_CHECK_RADIUS / NF_CHECK_DEG / NF_CHECK_SPEED (its other
@@ -581,6 +584,8 @@ fn main() -> anyhow::Result<()> {
             let mut bg = BackgroundMerger::new(bgp)?;
             let mut hier = HierarchicalMerger::new(hp)?;
             let mut prev: Option<Vec<u32>> = None;
+            // The previous slice's (true, estimated) translation directions, for DIRS.
+            let mut prev_dirs: Option<([f64; 3], [f64; 3])> = None;
             // The planar segmenter's feedback: the background merger's coarse groups (group != 0
             // = foreground), as graph.yaml wires it, or (PREV_FINAL) the final labels.
             let mut prev_planar: Option<Vec<u32>> = None;
@@ -660,6 +665,51 @@ fn main() -> anyhow::Result<()> {
                 let h = hier.merge(&s.camera, &s.events, f, rate, &m.coarse)?;
                 let mut oracle_label;
                 let mut label = &h.segmentation.label;
+                if std::env::var("SEGS").is_ok() {
+                    // Per segment: its events per true object id (0 = background).
+                    let mut per: std::collections::BTreeMap<u32, std::collections::BTreeMap<u16, usize>> =
+                        Default::default();
+                    for (i, &l) in h.segmentation.label.iter().enumerate() {
+                        if l != 0 {
+                            *per.entry(l)
+                                .or_default()
+                                .entry(truth.event_object[i])
+                                .or_default() += 1;
+                        }
+                    }
+                    // Per true object: its clustered events in clusters whose majority is that
+                    // object (pure) or another object or the background (mixed).
+                    let mut by_cluster: std::collections::BTreeMap<
+                        u16,
+                        std::collections::BTreeMap<u16, usize>,
+                    > = Default::default();
+                    for (i, &id) in c.id.iter().enumerate() {
+                        if id != u16::MAX {
+                            *by_cluster
+                                .entry(id)
+                                .or_default()
+                                .entry(truth.event_object[i])
+                                .or_default() += 1;
+                        }
+                    }
+                    let mut purity: std::collections::BTreeMap<u16, (usize, usize)> = Default::default();
+                    for m in by_cluster.values() {
+                        let major = m.iter().max_by_key(|e| *e.1).map(|e| *e.0);
+                        for (&o, &n) in m {
+                            let e = purity.entry(o).or_default();
+                            if Some(o) == major {
+                                e.0 += n;
+                            } else {
+                                e.1 += n;
+                            }
+                        }
+                    }
+                    let mut line = format!("  segs t {:.2} clusters (pure, mixed) {purity:?} |", span.0);
+                    for (l, m) in &per {
+                        line.push_str(&format!(" {l}:{m:?}"));
+                    }
+                    println!("{line}");
+                }
                 // FILL_PLANAR=1: ungrouped events without a grouped event in the 3x3 cells of 4 px
                 // take the planar label; =2: every ungrouped event does; =3: as 1, and the other
                 // ungrouped events are foreground only where the fill and the planar label agree.
@@ -965,14 +1015,21 @@ fn main() -> anyhow::Result<()> {
                     }
                     if (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt() / vel.len() as f64 > 0.05 {
                         dirs.push(angle_deg(h.segmentation.egomotion.direction, v));
+                        let est = h.segmentation.egomotion.direction;
                         if std::env::var("DIRS").is_ok() {
+                            let (turn_true, turn_est) = prev_dirs.map_or((f64::NAN, f64::NAN), |(pv, pe)| {
+                                (angle_deg(pv, v), angle_deg(pe, est))
+                            });
                             println!(
-                                "  dir t {:.2} merger {:.1} final {:.1} deg",
+                                "  dir t {:.2} merger {:.1} final {:.1} deg turn true {:.1} est {:.1}",
                                 span.0,
                                 angle_deg(m.coarse.egomotion.direction, v),
-                                angle_deg(h.segmentation.egomotion.direction, v)
+                                angle_deg(est, v),
+                                turn_true,
+                                turn_est
                             );
                         }
+                        prev_dirs = Some((v, est));
                     }
                 }
                 prev = Some(label.clone());
