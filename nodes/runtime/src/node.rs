@@ -1245,7 +1245,7 @@ pub(crate) fn note_losses(run: &Running, inbox: &Inbox, joins_dropped: u64, gaps
 
 /// A node set-up error `e` as a runtime error naming `node`: a [`RuntimeError::Param`] (which
 /// already names it) as it is, anything else prefixed with the node.
-fn in_node(node: &str, e: BoxError) -> RuntimeError {
+pub(crate) fn in_node(node: &str, e: BoxError) -> RuntimeError {
     match e.downcast::<RuntimeError>() {
         Ok(e) if matches!(*e, RuntimeError::Param { .. }) => *e,
         Ok(e) => RuntimeError::Config(format!("node {node}: {e}")),
