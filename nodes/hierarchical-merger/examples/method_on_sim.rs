@@ -61,6 +61,21 @@ use evseg_slicer::{Slicer, SlicerParams};
 use evseg_source::EventSource;
 use evseg_source::synthetic::SyntheticSource;
 
+/// Per group key (`None` = the event belongs to no group), the events per true object id of
+/// `object` (0 = background), for the SEGS diagnostic.
+fn events_per_object<K: Ord>(
+    keys: impl Iterator<Item = Option<K>>,
+    object: &[u16],
+) -> std::collections::BTreeMap<K, std::collections::BTreeMap<u16, usize>> {
+    let mut out: std::collections::BTreeMap<K, std::collections::BTreeMap<u16, usize>> = Default::default();
+    for (k, &o) in keys.zip(object) {
+        if let Some(k) = k {
+            *out.entry(k).or_default().entry(o).or_default() += 1;
+        }
+    }
+    out
+}
+
 fn env_or<T: std::str::FromStr>(name: &str, default: T) -> anyhow::Result<T> {
     match std::env::var(name) {
         Ok(v) => v
@@ -666,32 +681,18 @@ fn main() -> anyhow::Result<()> {
                 let mut oracle_label;
                 let mut label = &h.segmentation.label;
                 if std::env::var("SEGS").is_ok() {
-                    // Per segment: its events per true object id (0 = background).
-                    let mut per: std::collections::BTreeMap<u32, std::collections::BTreeMap<u16, usize>> =
-                        Default::default();
-                    for (i, &l) in h.segmentation.label.iter().enumerate() {
-                        if l != 0 {
-                            *per.entry(l)
-                                .or_default()
-                                .entry(truth.event_object[i])
-                                .or_default() += 1;
-                        }
-                    }
+                    // Per segment (label != 0) and per over-segmentation cluster: events per
+                    // true object id (0 = background).
+                    let per = events_per_object(
+                        h.segmentation.label.iter().map(|&l| (l != 0).then_some(l)),
+                        &truth.event_object,
+                    );
+                    let by_cluster = events_per_object(
+                        c.id.iter().map(|&id| (id != u16::MAX).then_some(id)),
+                        &truth.event_object,
+                    );
                     // Per true object: its clustered events in clusters whose majority is that
                     // object (pure) or another object or the background (mixed).
-                    let mut by_cluster: std::collections::BTreeMap<
-                        u16,
-                        std::collections::BTreeMap<u16, usize>,
-                    > = Default::default();
-                    for (i, &id) in c.id.iter().enumerate() {
-                        if id != u16::MAX {
-                            *by_cluster
-                                .entry(id)
-                                .or_default()
-                                .entry(truth.event_object[i])
-                                .or_default() += 1;
-                        }
-                    }
                     let mut purity: std::collections::BTreeMap<u16, (usize, usize)> = Default::default();
                     for m in by_cluster.values() {
                         let major = m.iter().max_by_key(|e| *e.1).map(|e| *e.0);
