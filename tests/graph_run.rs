@@ -404,7 +404,7 @@ fn a_node_that_receives_nothing_at_start_up_is_restarted_and_the_run_completes()
         dir.path(),
         0.2,
         &env,
-        &["--startup-timeout", "3"],
+        &["--startup-timeout", "5"],
         Duration::from_secs(180),
     );
     assert!(run.status.success(), "run failed:\n{}", run.stderr);

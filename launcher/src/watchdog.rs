@@ -7,14 +7,21 @@
 //! drops a put that matches no subscriber it knows of). Two rules, checked by the launcher from
 //! the nodes' stats:
 //!
-//! - **start-up**: a node of this machine that has received nothing while a producer of one of
-//!   its (non-feedback) inputs has published for [`WatchdogSettings::startup`] is restarted: its
-//!   new session declares its subscriptions afresh, and lock-step producers publish what it has
-//!   not consumed again. Nothing is lost: it had consumed nothing. After
-//!   [`WatchdogSettings::startup_restarts`] such restarts the run stops, naming the node.
-//! - **stall** (lock-step only): when no node's counters (received, published, processed,
-//!   finished) change for [`WatchdogSettings::stall`], the run stops with every node's counters,
-//!   instead of waiting forever.
+//! - **start-up**: a node of this machine that is up (its stats arrive) and has received nothing
+//!   while a producer of one of its (non-feedback) inputs has published for
+//!   [`WatchdogSettings::startup`] is restarted: its new session declares its subscriptions
+//!   afresh, and lock-step producers publish what it has not consumed again. Nothing is lost: it
+//!   had consumed nothing (a node publishes its stats as soon as its first input arrives, before
+//!   it acknowledges it). After [`WatchdogSettings::startup_restarts`] such restarts the run
+//!   stops, naming the node. A node whose stats have not arrived yet is not judged: it may
+//!   still be starting (seen in CI: a debug-build slicer on a loaded 2-core machine restarted
+//!   after a 3 s limit before its first stats, having in fact consumed frames; the run then
+//!   waited forever). After a restart, the previous process's last stats (told apart by
+//!   [`Stats::up_s`]) are not judged either.
+//! - **stall** (lock-step only): when no node's published, processed or finished counters
+//!   change for [`WatchdogSettings::stall`], the run stops with every node's counters, instead
+//!   of waiting forever. Receipts do not count: a stalled lock-step graph keeps receiving the
+//!   duplicates its idle producers publish again each second.
 
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
@@ -84,8 +91,11 @@ pub struct Watchdog {
     fed_since: BTreeMap<String, Instant>,
     /// Start-up restarts done per node.
     restarts: BTreeMap<String, u32>,
+    /// Node -> its [`Stats::up_s`] when it was restarted: stats that old or older are its
+    /// previous process's.
+    restarted_up_s: BTreeMap<String, f64>,
     /// The counters last seen, and when they last changed.
-    last_counters: Vec<(String, [u64; 4])>,
+    last_counters: Vec<(String, [u64; 3])>,
     last_change: Instant,
 }
 
@@ -96,6 +106,7 @@ impl Watchdog {
             settings,
             fed_since: BTreeMap::new(),
             restarts: BTreeMap::new(),
+            restarted_up_s: BTreeMap::new(),
             last_counters: Vec::new(),
             last_change: now,
         }
@@ -103,9 +114,9 @@ impl Watchdog {
 
     /// Checks the rules at `now`. `nodes`: every node of the graph; `running_here`: true for the
     /// nodes this launcher started that still run; `stats`: the nodes' last stats;
-    /// `lockstep`: the graph's mode. A node without stats counts as having received nothing
-    /// in lock-step mode (a node built on evseg-runtime publishes stats every half second);
-    /// in live mode it is left alone (a foreign node may publish none).
+    /// `lockstep`: the graph's mode. A node without stats is left alone by the start-up rule
+    /// (it may still be starting, or be a foreign node that publishes none); the stall rule
+    /// still ends a lock-step run that waits for it forever.
     pub fn check(
         &mut self,
         now: Instant,
@@ -117,7 +128,7 @@ impl Watchdog {
         let mut actions = Vec::new();
         if let Some(limit) = self.settings.startup {
             for node in nodes {
-                if let Some(a) = self.check_startup(now, limit, node, running_here, stats, lockstep) {
+                if let Some(a) = self.check_startup(now, limit, node, running_here, stats) {
                     actions.push(a);
                 }
             }
@@ -125,14 +136,9 @@ impl Watchdog {
         if actions.iter().any(|a| matches!(a, Action::Restart { .. })) {
             self.last_change = now;
         }
-        let counters: Vec<(String, [u64; 4])> = stats
+        let counters: Vec<(String, [u64; 3])> = stats
             .iter()
-            .map(|(id, s)| {
-                (
-                    id.clone(),
-                    [s.received, s.published, s.processed, u64::from(s.finished)],
-                )
-            })
+            .map(|(id, s)| (id.clone(), [s.published, s.processed, u64::from(s.finished)]))
             .collect();
         if counters != self.last_counters {
             self.last_counters = counters;
@@ -154,7 +160,6 @@ impl Watchdog {
         node: &NodeSpec,
         running_here: &dyn Fn(&str) -> bool,
         stats: &BTreeMap<String, Stats>,
-        lockstep: bool,
     ) -> Option<Action> {
         let id = node.id.as_str();
         let producers: Vec<&str> = node
@@ -163,10 +168,18 @@ impl Watchdog {
             .filter(|i| !i.feedback)
             .map(|i| i.from_node.as_str())
             .collect();
-        let received = match stats.get(id) {
-            Some(s) => s.received,
-            None if lockstep => 0,
-            None => return None,
+        let own = stats.get(id);
+        if let (Some(s), Some(&before)) = (own, self.restarted_up_s.get(id)) {
+            if s.up_s >= before {
+                // The previous process's last stats: the new one is not up yet.
+                self.fed_since.remove(id);
+                return None;
+            }
+            self.restarted_up_s.remove(id);
+        }
+        let Some(received) = own.map(|s| s.received) else {
+            self.fed_since.remove(id);
+            return None;
         };
         let fed: Vec<&str> = producers
             .iter()
@@ -195,7 +208,9 @@ impl Watchdog {
             )));
         }
         *done += 1;
-        self.fed_since.insert(id.to_string(), now);
+        self.fed_since.remove(id);
+        self.restarted_up_s
+            .insert(id.to_string(), own.map_or(0.0, |s| s.up_s));
         Some(Action::Restart {
             node: id.to_string(),
             why: format!("{why}; restarting it (start-up restart {done})"),
@@ -261,13 +276,21 @@ mod tests {
         }
     }
 
+    fn up(id: &str, received: u64, up_s: f64) -> Stats {
+        Stats {
+            up_s,
+            ..stats(id, received, 0).1
+        }
+    }
+
     #[test]
     fn a_node_fed_but_receiving_nothing_is_restarted_then_the_run_stopped() {
         let nodes = [node("src", &[]), node("a", &[("src", false)])];
         let t0 = Instant::now();
         let mut w = Watchdog::new(settings(), t0);
         let all = |_: &str| true;
-        let mut st: BTreeMap<String, Stats> = [stats("src", 0, 0), stats("a", 0, 0)].into();
+        let mut st: BTreeMap<String, Stats> = [stats("src", 0, 0)].into();
+        st.insert("a".into(), up("a", 0, 1.0));
         // Nothing published yet: no waiting starts.
         assert!(
             w.check(t0 + Duration::from_secs(30), &nodes, &all, &st, true)
@@ -280,22 +303,62 @@ mod tests {
             w.check(t1 + Duration::from_secs(19), &nodes, &all, &st, true)
                 .is_empty()
         );
+        st.insert("a".into(), up("a", 0, 50.0));
         let a = w.check(t1 + Duration::from_secs(20), &nodes, &all, &st, true);
         assert!(
             matches!(&a[..], [Action::Restart { node, why }] if node == "a" && why.contains("src published")),
             "{a:?}"
         );
-        // The restarted node gets its own 20 s again; then the run stops.
+        // The previous process's last stats (up 50 s) do not start the clock again.
         let t2 = t1 + Duration::from_secs(20);
         assert!(
-            w.check(t2 + Duration::from_secs(10), &nodes, &all, &st, true)
+            w.check(t2 + Duration::from_secs(100), &nodes, &all, &st, true)
                 .is_empty()
         );
-        let a = w.check(t2 + Duration::from_secs(20), &nodes, &all, &st, true);
+        // The new process is up: it gets its own 20 s; then the run stops.
+        st.insert("a".into(), up("a", 0, 0.5));
+        let t3 = t2 + Duration::from_secs(101);
+        assert!(w.check(t3, &nodes, &all, &st, true).is_empty());
+        st.insert("a".into(), up("a", 0, 10.5));
         assert!(
-            matches!(&a[..], [Action::Stop(m)] if m.contains("`a`") && m.contains("1 restart")),
+            w.check(t3 + Duration::from_secs(10), &nodes, &all, &st, true)
+                .is_empty()
+        );
+        let a = w.check(t3 + Duration::from_secs(20), &nodes, &all, &st, true);
+        assert!(
+            // (the stall rule fires too: nothing was published for 120 s)
+            matches!(&a[..], [Action::Stop(m), ..] if m.contains("`a`") && m.contains("1 restart")),
             "{a:?}"
         );
+    }
+
+    /// The CI failure this guards against: a node still starting (no stats yet) was restarted
+    /// although it was about to consume its first frames.
+    #[test]
+    fn a_node_whose_stats_have_not_arrived_is_not_restarted() {
+        let nodes = [node("src", &[]), node("a", &[("src", false)])];
+        let t0 = Instant::now();
+        let mut w = Watchdog::new(settings(), t0);
+        let all = |_: &str| true;
+        let mut st: BTreeMap<String, Stats> = [stats("src", 0, 7)].into();
+        assert!(w.check(t0, &nodes, &all, &st, true).is_empty());
+        assert!(
+            w.check(t0 + Duration::from_secs(60), &nodes, &all, &st, true)
+                .is_empty(),
+            "no stats: not judged"
+        );
+        // Up at last, with nothing received: its 20 s start now, not at t0.
+        st.insert("a".into(), up("a", 0, 0.5));
+        let t1 = t0 + Duration::from_secs(61);
+        assert!(w.check(t1, &nodes, &all, &st, true).is_empty());
+        assert!(
+            w.check(t1 + Duration::from_secs(19), &nodes, &all, &st, true)
+                .is_empty()
+        );
+        assert!(matches!(
+            &w.check(t1 + Duration::from_secs(20), &nodes, &all, &st, true)[..],
+            [Action::Restart { .. }]
+        ));
     }
 
     #[test]
@@ -344,12 +407,15 @@ mod tests {
             w.check(t0 + Duration::from_secs(100), &nodes, &all, &st, true)
                 .is_empty()
         );
-        st.insert("a".into(), stats("a", 3, 1).1);
+        st.insert("a".into(), stats("a", 3, 2).1);
         assert!(
             w.check(t0 + Duration::from_secs(119), &nodes, &all, &st, true)
                 .is_empty(),
             "progress"
         );
+        // Duplicates received (producers publishing their unconsumed frames again) are not
+        // progress.
+        st.insert("a".into(), stats("a", 9, 2).1);
         assert!(
             w.check(t0 + Duration::from_secs(200), &nodes, &all, &st, false)
                 .is_empty(),
@@ -357,7 +423,7 @@ mod tests {
         );
         let a = w.check(t0 + Duration::from_secs(239), &nodes, &all, &st, true);
         assert!(
-            matches!(&a[..], [Action::Stop(m)] if m.contains("a: received 3, published 1") && m.contains("src:")),
+            matches!(&a[..], [Action::Stop(m)] if m.contains("a: received 9, published 2") && m.contains("src:")),
             "{a:?}"
         );
         let off = WatchdogSettings::from_seconds(0.0, 0.0).unwrap();

@@ -710,6 +710,10 @@ pub(crate) struct Running {
     pub(crate) counters: Arc<Counters>,
     schemas: HashMap<String, String>,
     pub(crate) inbox: Arc<Inbox>,
+    /// When the node started (subscriptions declared): [`Stats::up_s`].
+    started: Instant,
+    /// True once stats with a non-zero `received` have been published (see [`maybe_stats`]).
+    receipt_announced: std::sync::atomic::AtomicBool,
     _handles: Vec<Box<dyn std::any::Any + Send>>,
     _token: zenoh::liveliness::LivelinessToken,
 }
@@ -729,6 +733,7 @@ impl Running {
             last_seq: if last == u64::MAX { None } else { Some(last) },
             busy_s: c.busy_ns.load(Ordering::Relaxed) as f64 * 1e-9,
             finished,
+            up_s: self.started.elapsed().as_secs_f64(),
         }
     }
 
@@ -964,6 +969,8 @@ pub(crate) fn start(
         counters,
         schemas,
         inbox,
+        started: Instant::now(),
+        receipt_announced: std::sync::atomic::AtomicBool::new(false),
         _handles: handles,
         _token: token,
     })
@@ -1054,8 +1061,16 @@ pub(crate) fn main_wrapper(
     }
 }
 
+/// Publishes the node's stats every half second, and at once when its first input has
+/// arrived: the launcher's start-up watchdog restarts a node whose stats say it received
+/// nothing, so that news must not wait for the next half-second tick.
 pub(crate) fn maybe_stats(run: &Running, last: &mut Instant) {
-    if last.elapsed() >= Duration::from_millis(500) {
+    let first_receipt =
+        !run.receipt_announced.load(Ordering::Relaxed) && run.counters.received.load(Ordering::Relaxed) > 0;
+    if first_receipt {
+        run.receipt_announced.store(true, Ordering::Relaxed);
+    }
+    if first_receipt || last.elapsed() >= Duration::from_millis(500) {
         run.publish_stats(false);
         *last = Instant::now();
     }
@@ -1171,6 +1186,9 @@ fn stage_loop<S: Stage>(mut run: Running, stage: &mut S) -> Result<(), RuntimeEr
                 }
             }
         }
+        // Before processing: the launcher learns of the first receipt before this node
+        // acknowledges (consumes) anything.
+        maybe_stats(&run, &mut last_stats);
         loop {
             let state = joiner
                 .poll()

@@ -44,4 +44,9 @@ pub struct Stats {
     pub busy_s: f64,
     /// True once the node has finished.
     pub finished: bool,
+    /// Seconds since this process's node started (its subscriptions declared), by its own
+    /// clock. Tells a restarted node's first stats from its previous process's last ones (the
+    /// launcher's start-up watchdog). 0 from a node that does not send it.
+    #[serde(default)]
+    pub up_s: f64,
 }

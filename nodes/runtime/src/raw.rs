@@ -207,6 +207,8 @@ fn raw_loop<C: RawConsumer>(run: Running, consumer: &mut C) -> Result<(), Runtim
                 tracing::error!("{err} (message dropped)");
             }
         }
+        // Before acknowledging: the launcher learns of the first receipt first.
+        maybe_stats(&run, &mut last_stats);
         let changes: Vec<(String, u64)> = progress
             .take_changes()
             .into_iter()
