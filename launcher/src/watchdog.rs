@@ -168,25 +168,24 @@ impl Watchdog {
             .filter(|i| !i.feedback)
             .map(|i| i.from_node.as_str())
             .collect();
-        let own = stats.get(id);
-        if let (Some(s), Some(&before)) = (own, self.restarted_up_s.get(id)) {
-            if s.up_s >= before {
+        let Some(own) = stats.get(id) else {
+            self.fed_since.remove(id);
+            return None;
+        };
+        if let Some(&before) = self.restarted_up_s.get(id) {
+            if own.up_s >= before {
                 // The previous process's last stats: the new one is not up yet.
                 self.fed_since.remove(id);
                 return None;
             }
             self.restarted_up_s.remove(id);
         }
-        let Some(received) = own.map(|s| s.received) else {
-            self.fed_since.remove(id);
-            return None;
-        };
         let fed: Vec<&str> = producers
             .iter()
             .copied()
             .filter(|p| stats.get(*p).is_some_and(|s| s.published > 0))
             .collect();
-        if !running_here(id) || producers.is_empty() || received > 0 || fed.is_empty() {
+        if !running_here(id) || producers.is_empty() || own.received > 0 || fed.is_empty() {
             self.fed_since.remove(id);
             return None;
         }
@@ -209,8 +208,7 @@ impl Watchdog {
         }
         *done += 1;
         self.fed_since.remove(id);
-        self.restarted_up_s
-            .insert(id.to_string(), own.map_or(0.0, |s| s.up_s));
+        self.restarted_up_s.insert(id.to_string(), own.up_s);
         Some(Action::Restart {
             node: id.to_string(),
             why: format!("{why}; restarting it (start-up restart {done})"),

@@ -712,8 +712,6 @@ pub(crate) struct Running {
     pub(crate) inbox: Arc<Inbox>,
     /// When the node started (subscriptions declared): [`Stats::up_s`].
     started: Instant,
-    /// True once stats with a non-zero `received` have been published (see [`maybe_stats`]).
-    receipt_announced: std::sync::atomic::AtomicBool,
     _handles: Vec<Box<dyn std::any::Any + Send>>,
     _token: zenoh::liveliness::LivelinessToken,
 }
@@ -970,7 +968,6 @@ pub(crate) fn start(
         schemas,
         inbox,
         started: Instant::now(),
-        receipt_announced: std::sync::atomic::AtomicBool::new(false),
         _handles: handles,
         _token: token,
     })
@@ -1061,23 +1058,38 @@ pub(crate) fn main_wrapper(
     }
 }
 
+/// When a node's loop last published its stats, and whether they have reported its first
+/// input yet ([`maybe_stats`]).
+pub(crate) struct StatsClock {
+    last: Instant,
+    receipt_announced: bool,
+}
+
+impl StatsClock {
+    /// A clock whose half second starts now.
+    pub(crate) fn new() -> Self {
+        Self {
+            last: Instant::now(),
+            receipt_announced: false,
+        }
+    }
+}
+
 /// Publishes the node's stats every half second, and at once when its first input has
 /// arrived: the launcher's start-up watchdog restarts a node whose stats say it received
-/// nothing, so that news must not wait for the next half-second tick.
-pub(crate) fn maybe_stats(run: &Running, last: &mut Instant) {
-    let first_receipt =
-        !run.receipt_announced.load(Ordering::Relaxed) && run.counters.received.load(Ordering::Relaxed) > 0;
-    if first_receipt {
-        run.receipt_announced.store(true, Ordering::Relaxed);
-    }
-    if first_receipt || last.elapsed() >= Duration::from_millis(500) {
+/// nothing, so that news must not wait for the next half-second tick. Called after a loop's
+/// drain of its inbox and before it acknowledges anything.
+pub(crate) fn maybe_stats(run: &Running, clock: &mut StatsClock) {
+    let first_receipt = !clock.receipt_announced && run.counters.received.load(Ordering::Relaxed) > 0;
+    clock.receipt_announced |= first_receipt;
+    if first_receipt || clock.last.elapsed() >= Duration::from_millis(500) {
         run.publish_stats(false);
-        *last = Instant::now();
+        clock.last = Instant::now();
     }
 }
 
 fn source_loop<S: Source>(mut run: Running, source: &mut S) -> Result<(), RuntimeError> {
-    let mut last_stats = Instant::now();
+    let mut stats_clock = StatsClock::new();
     loop {
         if signals::stop_requested() {
             return Err(RuntimeError::Stopped);
@@ -1099,7 +1111,7 @@ fn source_loop<S: Source>(mut run: Running, source: &mut S) -> Result<(), Runtim
             Ordering::Relaxed,
         );
         run.counters.processed.fetch_add(1, Ordering::Relaxed);
-        maybe_stats(&run, &mut last_stats);
+        maybe_stats(&run, &mut stats_clock);
         if !more {
             break;
         }
@@ -1117,7 +1129,7 @@ fn stage_loop<S: Stage>(mut run: Running, stage: &mut S) -> Result<(), RuntimeEr
         .collect();
     let mut joiner = Joiner::new(&ports, run.cfg.mode == Mode::Live);
     let mut gaps = SeqGaps::new(ports.len());
-    let mut last_stats = Instant::now();
+    let mut stats_clock = StatsClock::new();
     // The last progress published and when (repeated while idle in lock-step mode).
     let mut last_progress: Option<(Vec<(String, u64)>, Instant)> = None;
     loop {
@@ -1188,7 +1200,8 @@ fn stage_loop<S: Stage>(mut run: Running, stage: &mut S) -> Result<(), RuntimeEr
         }
         // Before processing: the launcher learns of the first receipt before this node
         // acknowledges (consumes) anything.
-        maybe_stats(&run, &mut last_stats);
+        note_losses(&run, &inbox, joiner.dropped(), &gaps);
+        maybe_stats(&run, &mut stats_clock);
         loop {
             let state = joiner
                 .poll()
@@ -1240,8 +1253,6 @@ fn stage_loop<S: Stage>(mut run: Running, stage: &mut S) -> Result<(), RuntimeEr
                 }
             }
         }
-        note_losses(&run, &inbox, joiner.dropped(), &gaps);
-        maybe_stats(&run, &mut last_stats);
     }
 }
 

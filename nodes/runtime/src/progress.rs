@@ -50,3 +50,24 @@ pub struct Stats {
     #[serde(default)]
     pub up_s: f64,
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Stats from a node built before `up_s` existed (or a foreign node) still parse, with
+    /// `up_s` 0; stats of the wrong shape are an error, not a panic.
+    #[test]
+    fn stats_without_up_s_parse_and_malformed_stats_are_an_error() {
+        let old = br#"{"node":"a","received":3,"published":1,"processed":1,"dropped":0,
+            "refused":0,"last_seq":0,"busy_s":0.5,"finished":false}"#;
+        let s: Stats = serde_json::from_slice(old).unwrap();
+        assert_eq!((s.node.as_str(), s.received, s.up_s), ("a", 3, 0.0));
+        let with = br#"{"node":"a","received":0,"published":0,"processed":0,"dropped":0,
+            "refused":0,"last_seq":null,"busy_s":0,"finished":false,"up_s":2.5}"#;
+        assert_eq!(serde_json::from_slice::<Stats>(with).unwrap().up_s, 2.5);
+        for bad in [&br#"{"node":"a","up_s":"soon"}"#[..], b"{", b"[]"] {
+            assert!(serde_json::from_slice::<Stats>(bad).is_err());
+        }
+    }
+}

@@ -16,7 +16,7 @@ use evseg_schemas::{Envelope, FrameKind, codec};
 
 use crate::config::{Mode, NodeConfig};
 use crate::error::{BoxError, RuntimeError};
-use crate::node::{RESEND_AFTER, Running, in_node, main_wrapper, maybe_stats, note_losses};
+use crate::node::{RESEND_AFTER, Running, StatsClock, in_node, main_wrapper, maybe_stats, note_losses};
 use crate::progress::DONE;
 use crate::signals;
 use crate::transport::{POLL, SeqGaps};
@@ -140,7 +140,7 @@ fn raw_loop<C: RawConsumer>(run: Running, consumer: &mut C) -> Result<(), Runtim
     let inbox = run.inbox.clone();
     let mut progress = PortProgress::new(run.cfg.inputs.len());
     let mut gaps = SeqGaps::new(run.cfg.inputs.len());
-    let mut last_stats = Instant::now();
+    let mut stats_clock = StatsClock::new();
     let mut last_progress = Instant::now();
     let counters = run.counters.clone();
     while !progress.all_ended() {
@@ -208,7 +208,8 @@ fn raw_loop<C: RawConsumer>(run: Running, consumer: &mut C) -> Result<(), Runtim
             }
         }
         // Before acknowledging: the launcher learns of the first receipt first.
-        maybe_stats(&run, &mut last_stats);
+        note_losses(&run, &inbox, 0, &gaps);
+        maybe_stats(&run, &mut stats_clock);
         let changes: Vec<(String, u64)> = progress
             .take_changes()
             .into_iter()
@@ -228,8 +229,6 @@ fn raw_loop<C: RawConsumer>(run: Running, consumer: &mut C) -> Result<(), Runtim
             run.publish_progress(all)?;
             last_progress = Instant::now();
         }
-        note_losses(&run, &inbox, 0, &gaps);
-        maybe_stats(&run, &mut last_stats);
     }
     let t0 = Instant::now();
     consumer.finish().map_err(|source| RuntimeError::Logic {
