@@ -513,6 +513,9 @@ fn main() -> anyhow::Result<()> {
         if cons.is_some() {
             println!("consensus: replaced {} of {} valid", cstat.1, cstat.0);
         }
+        if std::env::var_os("CELLS").is_some() {
+            print_cell_extent(&slices, &flows, camera.width, camera.height);
+        }
         {
             // Tail census of the normal-flow lengths against the truth: share of valid estimates
             // with |len / (u . n0) - 1| > 0.3, background and objects, and of those the share
@@ -1125,8 +1128,10 @@ fn main() -> anyhow::Result<()> {
 /// Applies SIM_SET ("name=value,..."): the sensor's (`c_on`, `c_off`, `c_sigma`,
 /// `refractory_s`, `noise_rate_hz`, `hot_pixels`, `hot_pixel_rate_hz`, `contrast` = both
 /// thresholds) and the IMU's (`gyro_noise_std` rad/s, `gyro_bias` rad/s on every axis) settings
-/// of a preset, and `texture_contrast` (the preset's textures' contrast scaled), for studies of
-/// how the method holds up on sensors and scenes unlike the presets'.
+/// of a preset, `texture_contrast` (the preset's textures' contrast scaled) and `camera_motion`
+/// (the camera trajectory's rates and sinusoid amplitudes scaled: 0 holds the camera still at
+/// its start pose's offsets), for studies of how the method holds up on sensors and scenes
+/// unlike the presets'.
 fn sim_override(set: &str, cfg: &mut evseg_sim::SceneConfig) -> anyhow::Result<()> {
     for (k, f) in settings(set, "SIM_SET")? {
         let e = &mut cfg.esim;
@@ -1145,10 +1150,77 @@ fn sim_override(set: &str, cfg: &mut evseg_sim::SceneConfig) -> anyhow::Result<(
             "gyro_noise_std" => cfg.imu.gyro_noise_std = f,
             "gyro_bias" => cfg.imu.gyro_bias = [f, -f, f],
             "texture_contrast" => evseg_sim::scale_contrast(cfg, f),
+            "camera_motion" => scale_camera_motion(&mut cfg.camera_trajectory, f),
             other => bail!("SIM_SET: unknown setting {other}"),
         }
     }
     Ok(())
+}
+
+/// CELLS diagnostic: per slice, the 32 px cells in which the true background and the true
+/// objects each hold at least 4 events (all events, and events with flow); prints the medians
+/// over the slices that have object events and the share of those slices in which the
+/// background occupies more cells than the objects.
+fn print_cell_extent(slices: &[(Slice, Truth, (f64, f64))], flows: &[NormalFlow], width: u16, height: u16) {
+    const CELL: usize = 32;
+    const MIN_EVENTS: u32 = 4;
+    let cols = usize::from(width).div_ceil(CELL);
+    let rows = usize::from(height).div_ceil(CELL);
+    // [all, with flow] x [background, objects] occupied-cell counts per slice.
+    let mut counts: Vec<[[usize; 2]; 2]> = Vec::new();
+    for ((s, truth, _), f) in slices.iter().zip(flows) {
+        if !truth.event_object.iter().any(|&o| o != 0) {
+            continue;
+        }
+        let mut grid = vec![[[0u32; 2]; 2]; cols * rows];
+        for i in 0..s.events.len() {
+            let c = usize::from(s.events.y[i]) / CELL * cols + usize::from(s.events.x[i]) / CELL;
+            let side = usize::from(truth.event_object[i] != 0);
+            grid[c][0][side] += 1;
+            if f.confidence[i] > 0.0 {
+                grid[c][1][side] += 1;
+            }
+        }
+        let mut k = [[0usize; 2]; 2];
+        for g in &grid {
+            for kind in 0..2 {
+                for side in 0..2 {
+                    k[kind][side] += usize::from(g[kind][side] >= MIN_EVENTS);
+                }
+            }
+        }
+        counts.push(k);
+    }
+    let median = |kind: usize, side: usize| {
+        let mut v: Vec<usize> = counts.iter().map(|k| k[kind][side]).collect();
+        v.sort_unstable();
+        v.get(v.len() / 2).copied().unwrap_or(0)
+    };
+    let bg_more = |kind: usize| {
+        counts.iter().filter(|k| k[kind][0] > k[kind][1]).count() as f64 / counts.len().max(1) as f64
+    };
+    println!(
+        "cells of {CELL} px with >= {MIN_EVENTS} events ({} cells, {} slices): all events background {} objects {} (background more in {:.2}); with flow background {} objects {} ({:.2})",
+        cols * rows,
+        counts.len(),
+        median(0, 0),
+        median(0, 1),
+        bg_more(0),
+        median(1, 0),
+        median(1, 1),
+        bg_more(1)
+    );
+}
+
+/// Scales every rate and sinusoid amplitude of `traj` (positions and angles) by `factor`, so
+/// the camera moves `factor` times as fast along a path of the same shape; 0 keeps it still.
+fn scale_camera_motion(traj: &mut evseg_sim::RigidTrajectory, factor: f64) {
+    for s in traj.position.iter_mut().chain(traj.angles.iter_mut()) {
+        s.rate *= factor;
+        for term in &mut s.terms {
+            term.amplitude *= factor;
+        }
+    }
 }
 
 /// Per event without a group: some grouped event (`group != u32::MAX`) lies in the 3x3 cells
