@@ -15,7 +15,7 @@ use crate::samples::FlowSample;
 /// The alternation stops once the unit direction moves by less than this between two rounds
 /// (radians, about 6e-5 degrees: far below the direction's accuracy of a degree or more). It
 /// was 1e-9, which the Huber-weighted alternation, converging linearly, almost never reached,
-/// so it ran all of its rounds; see the project README's end-to-end speed section.
+/// so it ran all of its rounds; see `docs/speed-history.md`.
 pub const CONVERGED: f64 = 1e-6;
 
 /// Refines `t0` (any length, camera frame) over `regions` (each a set of samples, with a prior

@@ -44,7 +44,7 @@ pub const MIN_SAMPLES_FOR_SLOPE: usize = 3;
 pub const SLOPE_PARAM: &str = "derotate_slope";
 
 /// Default of [`SLOPE_PARAM`]: on. Measured on `evseg bench` (evseg-bench-v1); see the
-/// project README's scoreboard notes.
+/// project's `docs/scoreboard-history.md`.
 pub const SLOPE_DEFAULT: bool = true;
 
 /// `--describe` text of [`SLOPE_PARAM`].
