@@ -16,6 +16,8 @@
 //! The wire format lives in [`codec`] alone; the key layout in [`keys`]; node self-descriptions
 //! (`--describe`) in [`describe`].
 
+#![warn(missing_docs)]
+
 pub mod align;
 pub mod codec;
 pub mod columns;

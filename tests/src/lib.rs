@@ -2,6 +2,8 @@
 //! loopback ports, and a launcher handle that kills its process tree when dropped, so a failing
 //! test leaves nothing running.
 
+#![warn(missing_docs)]
+
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
 use std::sync::OnceLock;

@@ -9,6 +9,8 @@
 //!
 //! Pure: no Zenoh, no processes. The format is documented on [`check_str`].
 
+#![warn(missing_docs)]
+
 mod check;
 mod cycles;
 mod diagnostic;

@@ -37,6 +37,8 @@
 //!    Each group's mean map value (before this slice's update) is published for the hierarchical
 //!    merger's background penalty.
 
+#![warn(missing_docs)]
+
 pub mod map;
 pub mod params;
 pub mod warp;

@@ -15,6 +15,8 @@
 //! Flows in normalized coordinates per second; rotation rates in rad/s; translations in the units
 //! the caller chose (m/s with depth in m, or "per unit depth").
 
+#![warn(missing_docs)]
+
 pub mod assignment;
 pub mod cache;
 pub mod camera;

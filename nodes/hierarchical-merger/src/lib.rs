@@ -23,6 +23,8 @@
 //!    the next slice (section 3.5, last paragraph), refined with one inverse depth per image cell
 //!    (`evseg_geometry::egomotion`).
 
+#![warn(missing_docs)]
+
 pub mod fill;
 pub mod params;
 

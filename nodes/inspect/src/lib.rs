@@ -2,6 +2,8 @@
 //! inside their slice's window, and keeps a digest of every event so another place of the graph
 //! (the source) can be compared with it.
 
+#![warn(missing_docs)]
+
 use evseg_schemas::Slice;
 use evseg_schemas::digest::EventDigest;
 use serde::{Deserialize, Serialize};

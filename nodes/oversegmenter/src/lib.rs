@@ -15,6 +15,8 @@
 //! Events without a valid flow (confidence not above [`OversegParams::min_confidence`], or a
 //! non-finite component) are not clustered; their id is `u16::MAX`.
 
+#![warn(missing_docs)]
+
 pub mod kmeans;
 pub mod rng;
 

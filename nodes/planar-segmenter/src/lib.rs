@@ -42,6 +42,8 @@
 //!   ([`PlanarParams::split_power`] 0.5; 1 is the paper's linear split): the linear midpoint
 //!   left the slower parts of objects to the background.
 
+#![warn(missing_docs)]
+
 pub mod fit;
 pub mod previous;
 pub mod smooth;

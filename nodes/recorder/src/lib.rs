@@ -11,6 +11,8 @@
 //! ([`PARAMS_METADATA`]) and the resolved graph (attachment `graph.resolved.json`) are stored too.
 //! Chunks are zstd-compressed.
 
+#![warn(missing_docs)]
+
 pub mod error;
 pub mod export;
 pub mod read;

@@ -9,6 +9,8 @@
 //! paced, whose recorded publish time has come), so the replay never waits on one output while a
 //! consumer needs another.
 
+#![warn(missing_docs)]
+
 pub mod check;
 pub mod error;
 pub mod schedule;

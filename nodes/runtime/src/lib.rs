@@ -19,6 +19,8 @@
 //! whose outputs the launcher chooses (the replay source) calls [`run_raw_source`] and publishes
 //! recorded frames with [`Outputs::send_bytes`], polling [`Outputs::credit_available`].
 
+#![warn(missing_docs)]
+
 pub mod config;
 pub mod describe;
 pub mod error;

@@ -23,6 +23,8 @@
 //! their first 0.5 s and about real time over whole sequences on a quiet machine). Figures,
 //! how to reproduce them and what remains are in the crate README.
 
+#![warn(missing_docs)]
+
 pub mod camera;
 pub mod config;
 pub mod engine;

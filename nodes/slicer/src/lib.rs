@@ -5,6 +5,8 @@
 //! one. Each slice carries the IMU samples whose camera-clock time falls in it and the mean
 //! camera rotation rate (IMU rate rotated into the camera frame).
 
+#![warn(missing_docs)]
+
 use evseg_schemas::{
     CameraInfo, CameraMotion, EventPacket, Events, ImuSample, Mask, ObjectPose, Slice, Truth,
 };

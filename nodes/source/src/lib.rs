@@ -1,6 +1,8 @@
 //! Event sources, each behind one trait so the source node (and in-process tools such as the
 //! transport benchmark) can drive any of them batch by batch.
 
+#![warn(missing_docs)]
+
 pub mod evimo2;
 pub mod file;
 mod order;

@@ -10,6 +10,8 @@
 //! object; track boxes labelled `id N`; egomotion (estimated and true) and evaluator metrics as
 //! time series. Slices are decimated to [`ViewerParams::max_points_per_slice`] events.
 
+#![warn(missing_docs)]
+
 pub mod colour;
 pub mod decimate;
 pub mod error;
