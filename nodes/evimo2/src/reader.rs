@@ -610,6 +610,7 @@ pub struct Sequence {
 impl Sequence {
     /// Reads `dataset_info.npz` and the first event time.
     pub fn open(folder: &Path, options: &ReadOptions) -> Result<Self> {
+        check_sequence_folder(folder)?;
         let events = EventReader::open(folder)?;
         let t0 = events.t0_s();
         let info_path = folder.join(INFO_NPZ);
@@ -675,4 +676,93 @@ impl Sequence {
             .flat_map(|f| f.objects.iter().copied())
             .collect()
     }
+}
+
+/// How deep [`check_sequence_folder`] looks below a folder that is not a sequence: EVIMO2's
+/// layout is `<camera>/<category>/<split>/<sequence>/`, so 4 levels reach the sequences from
+/// the dataset's root.
+const SEQUENCE_SEARCH_DEPTH: usize = 4;
+
+/// Most folders [`check_sequence_folder`] visits while looking for sequences below a folder.
+const SEQUENCE_SEARCH_VISITS: usize = 10_000;
+
+/// Most sequence folders named in the error of [`check_sequence_folder`].
+const SEQUENCE_SEARCH_NAMED: usize = 5;
+
+/// Checks that `folder` is an EVIMO2 sequence folder (holds [`EVENTS_T`]) before its files are
+/// opened. When it is a folder that is not one, the error names the sequence folders below it
+/// (a user who passed the dataset's root or a split's folder sees which paths to pass).
+fn check_sequence_folder(folder: &Path) -> Result<()> {
+    let shown = folder.display().to_string();
+    if !folder.is_dir() {
+        let message = if folder.exists() {
+            "is not a folder; an EVIMO2 v2 sequence is a folder of .npy and .npz files".to_string()
+        } else {
+            "no such folder".to_string()
+        };
+        return Err(Evimo2Error::invalid(shown, message));
+    }
+    if folder.join(EVENTS_T).is_file() {
+        return Ok(());
+    }
+    let (found, complete) = sequence_folders_below(folder);
+    let message = if found.is_empty() {
+        format!(
+            "not an EVIMO2 v2 sequence folder (no {EVENTS_T}), and none of the folders up to \
+             {SEQUENCE_SEARCH_DEPTH} levels below it is one"
+        )
+    } else {
+        let named: Vec<String> = found
+            .iter()
+            .take(SEQUENCE_SEARCH_NAMED)
+            .map(|p| p.strip_prefix(folder).unwrap_or(p).display().to_string())
+            .collect();
+        let more = found.len() - named.len();
+        let count = match (more, complete) {
+            (0, true) => String::new(),
+            (_, true) => format!(" and {more} more"),
+            (_, false) => format!(" and more (the search stopped after {SEQUENCE_SEARCH_VISITS} folders)"),
+        };
+        format!(
+            "not an EVIMO2 v2 sequence folder (no {EVENTS_T}); the sequence folders below it \
+             include {}{count}; pass one of them as the path",
+            named.join(", ")
+        )
+    };
+    Err(Evimo2Error::invalid(shown, message))
+}
+
+/// Folders below `root` (up to [`SEQUENCE_SEARCH_DEPTH`] levels, sorted) that hold [`EVENTS_T`],
+/// and whether the search visited every folder within that depth. Unreadable folders are
+/// skipped: this only feeds an error message.
+fn sequence_folders_below(root: &Path) -> (Vec<PathBuf>, bool) {
+    let mut found = Vec::new();
+    let mut level = vec![root.to_path_buf()];
+    let mut visits = 0usize;
+    for _ in 0..SEQUENCE_SEARCH_DEPTH {
+        let mut next = Vec::new();
+        for dir in &level {
+            let Ok(entries) = std::fs::read_dir(dir) else {
+                continue;
+            };
+            let mut children: Vec<PathBuf> = entries
+                .filter_map(|e| e.ok().map(|e| e.path()))
+                .filter(|p| p.is_dir())
+                .collect();
+            children.sort();
+            for child in children {
+                visits += 1;
+                if visits > SEQUENCE_SEARCH_VISITS {
+                    return (found, false);
+                }
+                if child.join(EVENTS_T).is_file() {
+                    found.push(child);
+                } else {
+                    next.push(child);
+                }
+            }
+        }
+        level = next;
+    }
+    (found, true)
 }

@@ -207,6 +207,39 @@ fn missing_files() {
 }
 
 #[test]
+fn a_folder_that_is_not_a_sequence_names_the_sequences_below_it() {
+    // A dataset's layout: <camera>/<category>/<split>/<sequence>/, two sequences.
+    let root = tempfile::tempdir().unwrap();
+    let split = root.path().join("samsung_mono/imo/eval");
+    for name in ["scene13_dyn_test_00_000000", "scene14_dyn_test_03_000000"] {
+        write_sequence(&split.join(name), &common::sequence()).unwrap();
+    }
+    let e = open_err(&split);
+    assert!(e.contains("not an EVIMO2 v2 sequence folder"), "{e}");
+    assert!(
+        e.contains("scene13_dyn_test_00_000000, scene14_dyn_test_03_000000; pass one"),
+        "{e}"
+    );
+    // From the dataset's root the names carry the path below it.
+    let e = open_err(root.path());
+    assert!(
+        e.contains("samsung_mono/imo/eval/scene13_dyn_test_00_000000"),
+        "{e}"
+    );
+    // A folder with no sequence below it, and a path that does not exist.
+    let empty = tempfile::tempdir().unwrap();
+    let e = open_err(empty.path());
+    assert!(
+        e.contains("none of the folders up to 4 levels below it is one"),
+        "{e}"
+    );
+    let e = open_err(&empty.path().join("nowhere"));
+    assert!(e.contains("no such folder") && e.contains("nowhere"), "{e}");
+    // The sequence folder itself opens.
+    Sequence::open(&split.join("scene13_dyn_test_00_000000"), &ReadOptions::default()).unwrap();
+}
+
+#[test]
 fn npz_that_is_not_a_zip_or_is_corrupt() {
     let dir = folder();
     std::fs::write(

@@ -85,8 +85,13 @@ impl Source for SourceNode {
 
 fn path_param(cfg: &NodeConfig) -> Result<std::path::PathBuf, BoxError> {
     let path: Option<String> = cfg.param_opt("path")?;
-    let path =
-        path.ok_or_else(|| format!("node {}: this source kind needs the `path` parameter", cfg.node))?;
+    // The runtime prefixes set-up errors with the node's name.
+    let path = path.ok_or_else(|| {
+        format!(
+            "this source kind needs the `path` parameter: `--set {}.path=PATH` on the command line, or `path:` in the node's params",
+            cfg.node
+        )
+    })?;
     Ok(std::path::PathBuf::from(path))
 }
 
