@@ -40,7 +40,7 @@ pub mod reader;
 pub mod writer;
 
 pub use error::{Evimo2Error, Result};
-pub use meta::{EVIMO2_IMU_TIME_OFFSET_S, EVIMO2_IMU_TO_CAMERA, FrameTruth, MetaOptions};
+pub use meta::{CameraFallback, EVIMO2_IMU_TIME_OFFSET_S, EVIMO2_IMU_TO_CAMERA, FrameTruth, MetaOptions};
 pub use reader::{DepthFrame, DepthReader, EventReader, FrameEntry, MaskReader, ReadOptions, Sequence};
 pub use writer::{
     DEFAULT_IMU_TOPIC, MetaForm, SequenceData, WriteOptions, write_sequence, write_sequence_with,

@@ -302,17 +302,53 @@ pub struct MetaContents {
     pub camera_poses: Vec<CameraMotion>,
     /// Ground-truth frames, in file order.
     pub frames: Vec<FrameTruth>,
+    /// Camera fields that `meta['meta']` lacks and [`CameraFallback`] supplied, each with its
+    /// source (e.g. "fx, fy, cx, cy from dataset_info.npz[K]"); empty for a complete meta.
+    pub camera_fallbacks: Vec<String>,
+}
+
+/// Where the camera's calibration comes from when `meta['meta']` lacks it: the same folder's
+/// other files. Only a field missing from `meta['meta']` is taken from here.
+pub struct CameraFallback<'a> {
+    /// `dataset_info.npz[K]`, row-major (fx = K[0], cx = K[2], fy = K[4], cy = K[5]), pixels.
+    pub k: Option<[f64; 9]>,
+    /// The sensor's (width, height) in pixels, e.g. from the masks' shape; called only when
+    /// `res_x` or `res_y` is missing.
+    pub resolution: &'a dyn Fn() -> Option<(u16, u16)>,
+    /// Where `resolution` looks, for messages (e.g. "dataset_mask.npz").
+    pub resolution_source: &'a str,
+}
+
+impl CameraFallback<'_> {
+    /// No fallback: every camera field must be in `meta['meta']`.
+    pub const NONE: CameraFallback<'static> = CameraFallback {
+        k: None,
+        resolution: &|| None,
+        resolution_source: "nothing",
+    };
 }
 
 /// Converts the meta dict. `t0` = absolute time of the first event, seconds on the EVIMO2 clock.
+/// Every camera field must be in `meta['meta']` ([`convert_with`] takes a fallback).
 pub fn convert(meta: &PyValue, t0: f64, opts: &MetaOptions, file: &str) -> Result<MetaContents> {
+    convert_with(meta, t0, opts, &CameraFallback::NONE, file)
+}
+
+/// [`convert`], with camera fields missing from `meta['meta']` taken from `fallback`.
+pub fn convert_with(
+    meta: &PyValue,
+    t0: f64,
+    opts: &MetaOptions,
+    fallback: &CameraFallback<'_>,
+    file: &str,
+) -> Result<MetaContents> {
     let root = Field {
         file,
         path: String::new(),
         value: meta,
     };
     let m = root.key("meta")?;
-    let camera = camera_info(&m, t0, opts)?;
+    let (camera, camera_fallbacks) = camera_info(&m, t0, opts, fallback)?;
     let ros_time_offset_s = m.opt("ros_time_offset")?.map(|f| f.f64()).transpose()?;
 
     let (imu_topics, imu_topic, imu) = imu_samples(&root, t0, opts)?;
@@ -342,14 +378,51 @@ pub fn convert(meta: &PyValue, t0: f64, opts: &MetaOptions, file: &str) -> Resul
         imu,
         camera_poses,
         frames,
+        camera_fallbacks,
     })
 }
 
-fn camera_info(m: &Field<'_>, t0: f64, opts: &MetaOptions) -> Result<CameraInfo> {
-    let dim = |key: &str| -> Result<u16> {
-        let f = m.key(key)?;
-        let v = f.int()?;
-        u16::try_from(v).map_err(|_| f.err(format!("resolution {v} out of range 0..=65535")))
+fn camera_info(
+    m: &Field<'_>,
+    t0: f64,
+    opts: &MetaOptions,
+    fallback: &CameraFallback<'_>,
+) -> Result<(CameraInfo, Vec<String>)> {
+    let mut fallbacks = Vec::new();
+    // Intrinsics: meta['meta'] first, else all four from K (never a mix of the two sources).
+    let intrinsic_keys = ["fx", "fy", "cx", "cy"];
+    let mut missing = Vec::new();
+    for key in intrinsic_keys {
+        if m.opt(key)?.is_none() {
+            missing.push(key);
+        }
+    }
+    let intrinsics = if missing.is_empty() {
+        [m.num("fx")?, m.num("fy")?, m.num("cx")?, m.num("cy")?]
+    } else if let Some(k) = fallback.k {
+        fallbacks.push("fx, fy, cx, cy from dataset_info.npz[K]".to_string());
+        [k[0], k[4], k[2], k[5]]
+    } else {
+        return Err(m.err(format!(
+            "missing {} (and dataset_info.npz has no usable K to take them from)",
+            missing.join(", ")
+        )));
+    };
+    let resolution = if m.opt("res_x")?.is_some() && m.opt("res_y")?.is_some() {
+        let dim = |key: &str| -> Result<u16> {
+            let f = m.key(key)?;
+            let v = f.int()?;
+            u16::try_from(v).map_err(|_| f.err(format!("resolution {v} out of range 0..=65535")))
+        };
+        (dim("res_x")?, dim("res_y")?)
+    } else if let Some(r) = (fallback.resolution)() {
+        fallbacks.push(format!("res_x, res_y from {}", fallback.resolution_source));
+        r
+    } else {
+        return Err(m.err(format!(
+            "missing res_x or res_y (and {} gives no resolution)",
+            fallback.resolution_source
+        )));
     };
     let coef = |key: &str| -> Result<f64> { m.opt(key)?.map_or(Ok(0.0), |f| f.f64()) };
     let model = match m.opt("dist_model")? {
@@ -404,19 +477,20 @@ fn camera_info(m: &Field<'_>, t0: f64, opts: &MetaOptions) -> Result<CameraInfo>
         (None, Some(f)) => f.str()?.to_string(),
         (None, None) => "evimo2".to_string(),
     };
-    Ok(CameraInfo {
-        width: dim("res_x")?,
-        height: dim("res_y")?,
-        fx: m.num("fx")?,
-        fy: m.num("fy")?,
-        cx: m.num("cx")?,
-        cy: m.num("cy")?,
+    let camera = CameraInfo {
+        width: resolution.0,
+        height: resolution.1,
+        fx: intrinsics[0],
+        fy: intrinsics[1],
+        cx: intrinsics[2],
+        cy: intrinsics[3],
         distortion,
         imu_to_camera,
         imu_time_offset_s,
         time_origin_us: (t0 * 1e6).round() as i64,
         sensor,
-    })
+    };
+    Ok((camera, fallbacks))
 }
 
 type ImuParts = (Vec<String>, Option<String>, Vec<ImuSample>);

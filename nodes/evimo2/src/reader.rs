@@ -605,6 +605,11 @@ pub struct Sequence {
     pub camera_poses: Vec<CameraMotion>,
     /// Ground-truth frames (times, camera pose, object poses object -> camera).
     pub frames: Vec<FrameTruth>,
+    /// Camera fields that `meta['meta']` lacks, with the file they were taken from instead
+    /// (intrinsics from `dataset_info.npz[K]`, resolution from the masks' shape); empty when
+    /// `meta['meta']` has them all. A reader should say so: such a folder was written by a
+    /// tool that does not follow the layout to the letter.
+    pub camera_fallbacks: Vec<String>,
 }
 
 impl Sequence {
@@ -618,7 +623,16 @@ impl Sequence {
         let label = format!("{}[meta.npy]", info.file());
         let arr = info.read_key("meta")?;
         let value = meta::meta_from_npy(&arr, &label)?;
-        let m = meta::convert(&value, t0, options, &label)?;
+        // Only consulted for fields that meta['meta'] lacks.
+        let k = info.read_key("K").ok().and_then(|a| intrinsic_matrix(&a));
+        let mask_path = folder.join(MASK_NPZ);
+        let resolution = || mask_resolution(&mask_path);
+        let fallback = meta::CameraFallback {
+            k,
+            resolution: &resolution,
+            resolution_source: MASK_NPZ,
+        };
+        let m = meta::convert_with(&value, t0, options, &fallback, &label)?;
         Ok(Self {
             folder: folder.to_path_buf(),
             camera: m.camera,
@@ -630,6 +644,7 @@ impl Sequence {
             imu: m.imu,
             camera_poses: m.camera_poses,
             frames: m.frames,
+            camera_fallbacks: m.camera_fallbacks,
         })
     }
 
@@ -675,6 +690,48 @@ impl Sequence {
             .iter()
             .flat_map(|f| f.objects.iter().copied())
             .collect()
+    }
+}
+
+/// `K` of `dataset_info.npz` as a row-major 3 x 3 matrix, if it is one: a float array of shape
+/// (3, 3) with finite, positive focal lengths. Anything else is `None` (it is only a fallback).
+fn intrinsic_matrix(arr: &npy::NpyArray) -> Option<[f64; 9]> {
+    let h = &arr.header;
+    if h.shape != [3, 3] {
+        return None;
+    }
+    let mut v = Vec::with_capacity(9);
+    if !npy::decode_f64_into(h.dtype, h.big_endian, &arr.data, &mut v) || v.len() != 9 {
+        return None;
+    }
+    let mut k = [0.0; 9];
+    for r in 0..3 {
+        for c in 0..3 {
+            // Fortran order stores columns first.
+            k[3 * r + c] = if h.fortran_order {
+                v[3 * c + r]
+            } else {
+                v[3 * r + c]
+            };
+        }
+    }
+    let ok = k.iter().all(|x| x.is_finite()) && k[0] > 0.0 && k[4] > 0.0;
+    ok.then_some(k)
+}
+
+/// The sensor's (width, height) from the shape (height, width) of the first mask in `path`
+/// (`dataset_mask.npz`), if it has one; `None` on any problem (it is only a fallback).
+fn mask_resolution(path: &Path) -> Option<(u16, u16)> {
+    let mut npz = NpzReader::open(path).ok()?;
+    let first = npz
+        .member_names()
+        .into_iter()
+        .filter(|n| n.starts_with("mask_"))
+        .min()?;
+    let shape = npz.read_member(&first).ok()?.header.shape;
+    match shape[..] {
+        [h, w] => Some((u16::try_from(w).ok()?, u16::try_from(h).ok()?)),
+        _ => None,
     }
 }
 

@@ -240,6 +240,47 @@ fn a_folder_that_is_not_a_sequence_names_the_sequences_below_it() {
 }
 
 #[test]
+fn camera_fields_missing_from_meta_come_from_k_and_the_masks() {
+    let dir = folder();
+    let full = Sequence::open(dir.path(), &ReadOptions::default()).unwrap();
+    assert!(full.camera_fallbacks.is_empty());
+    // A writer that keeps the calibration in K and the masks only.
+    replace_meta(dir.path(), &unicode_npy("{'meta': {'dist_model': 'none'}}"));
+    let s = Sequence::open(dir.path(), &ReadOptions::default()).unwrap();
+    let c = (&s.camera, &full.camera);
+    assert_eq!((c.0.fx, c.0.fy, c.0.cx, c.0.cy), (c.1.fx, c.1.fy, c.1.cx, c.1.cy));
+    assert_eq!((c.0.width, c.0.height), (c.1.width, c.1.height));
+    assert_eq!(
+        s.camera_fallbacks,
+        [
+            "fx, fy, cx, cy from dataset_info.npz[K]",
+            "res_x, res_y from dataset_mask.npz"
+        ]
+    );
+    // Without masks, the resolution has no source: the error names the fields and the file.
+    std::fs::remove_file(dir.path().join("dataset_mask.npz")).unwrap();
+    let e = open_err(dir.path());
+    assert!(
+        e.contains("res_x or res_y") && e.contains("dataset_mask.npz"),
+        "{e}"
+    );
+    // Without K (and without fx), the intrinsics have none either.
+    let path = dir.path().join("dataset_info.npz");
+    let mut w = evseg_evimo2::npz::NpzWriter::create(&path, true).unwrap();
+    w.add(
+        "meta",
+        &unicode_npy("{'meta': {'fy': 1.0, 'res_x': 8, 'res_y': 6}}"),
+    )
+    .unwrap();
+    w.finish().unwrap();
+    let e = open_err(dir.path());
+    assert!(
+        e.contains("missing fx, cx, cy") && e.contains("no usable K"),
+        "{e}"
+    );
+}
+
+#[test]
 fn npz_that_is_not_a_zip_or_is_corrupt() {
     let dir = folder();
     std::fs::write(
@@ -304,15 +345,14 @@ fn meta_garbage() {
     let e = open_err(dir.path());
     assert!(e.contains("meta has dtype '<f8'"), "{e}");
 
+    // Without 'fx' the four intrinsics come from K; without K it is an error
+    // (`camera_fields_missing_from_meta_come_from_k_and_the_masks`).
     replace_meta(
         dir.path(),
         &unicode_npy("{'meta': {'fy': 1.0, 'cx': 2, 'cy': 3, 'res_x': 64, 'res_y': 48}}"),
     );
-    let e = open_err(dir.path());
-    assert!(
-        e.contains("meta['meta']") && e.contains("missing key 'fx'"),
-        "{e}"
-    );
+    let s = Sequence::open(dir.path(), &ReadOptions::default()).unwrap();
+    assert_eq!(s.camera_fallbacks, ["fx, fy, cx, cy from dataset_info.npz[K]"]);
 
     replace_meta(
         dir.path(),

@@ -34,6 +34,12 @@ impl Evimo2Source {
     /// Opens `folder` with `options` (IMU topic, IMU-to-camera rotation and offset overrides).
     pub fn open(folder: &Path, options: &ReadOptions, seconds: Option<f64>) -> Result<Self, SourceError> {
         let seq = Sequence::open(folder, options).map_err(|e| SourceError::Read(e.to_string()))?;
+        for fallback in &seq.camera_fallbacks {
+            tracing::warn!(
+                "{}: meta['meta'] lacks camera fields; {fallback}",
+                folder.display()
+            );
+        }
         let events = seq.events().map_err(|e| SourceError::Read(e.to_string()))?;
         let masks = match seq.masks() {
             Ok(m) => Some(m),
