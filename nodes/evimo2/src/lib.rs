@@ -12,7 +12,8 @@
 //!
 //! # Times
 //! Every time returned is in seconds **relative to the first event**: `t = t_file - t0` with
-//! `t0 = dataset_events_t.npy[0]` ([`Sequence::t0_s`]; `round(t0 * 1e6)` is
+//! `t0` the earliest of the first 65 536 stored times, `dataset_events_t.npy[0]` in a sorted
+//! file ([`Sequence::t0_s`]; `round(t0 * 1e6)` is
 //! [`evseg_schemas::CameraInfo::time_origin_us`]). Meta `ts` values share the events' clock.
 //! IMU sample times stay on the IMU clock: add `CameraInfo::imu_time_offset_s` (EVIMO2 default
 //! -0.02 s) for camera time.

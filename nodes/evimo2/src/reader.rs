@@ -1,8 +1,10 @@
 //! Reading an EVIMO2 v2 sequence folder.
 //!
 //! Time convention of everything this module returns: seconds **relative to the first event**,
-//! i.e. `t = t_file - t0` where `t0 = dataset_events_t.npy[0]` (absolute, seconds on the EVIMO2
-//! sequence clock, the clock of every `ts` in meta). `t0` is kept as [`Sequence::t0_s`] and, rounded
+//! i.e. `t = t_file - t0` where `t0` is the earliest time among the first 65 536 stored events of
+//! `dataset_events_t.npy` (absolute, seconds on the EVIMO2 sequence clock, the clock of every
+//! `ts` in meta). In a time-sorted file, as EVIMO2's own, that is `dataset_events_t.npy[0]`; in a
+//! file stored out of order it keeps the earliest events at non-negative times. `t0` is kept as [`Sequence::t0_s`] and, rounded
 //! to µs, as [`CameraInfo::time_origin_us`]. A folder with no events has `t0 = 0`. IMU sample times
 //! are on the IMU clock (add [`CameraInfo::imu_time_offset_s`] for camera time).
 
@@ -193,8 +195,19 @@ impl EventReader {
             buf: Vec::new(),
         };
         if reader.t.rows > 0 {
+            // The first scan block (see the module docs on t0).
             reader.fill_t(1)?;
-            reader.t0 = reader.t_cache[0];
+            let earliest = reader
+                .t_cache
+                .iter()
+                .copied()
+                .filter(|t| t.is_finite())
+                .fold(f64::INFINITY, f64::min);
+            reader.t0 = if earliest.is_finite() {
+                earliest
+            } else {
+                reader.t_cache[0]
+            };
         }
         Ok(reader)
     }

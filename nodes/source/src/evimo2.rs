@@ -8,8 +8,14 @@ use evseg_evimo2::imu_check::{ImuCheckParams, ImuVerdict, check};
 use evseg_evimo2::{MaskReader, ReadOptions, Sequence};
 use evseg_schemas::{CameraInfo, CameraMotion, ImuSample, ObjectPose, Truth};
 
-use crate::order::sort_by_time;
+use crate::order::{sort_by_time, take_before};
 use crate::{Batch, EventSource, SourceError};
+
+/// Default of [`Evimo2Source::set_reorder_window`], seconds. EVIMO2's own files are sorted; a
+/// folder written by another tool may not be, for example when a simulator writes each render
+/// interval's events pixel by pixel. 50 ms covers a generator that renders at 20 Hz or faster,
+/// and costs a buffer of 50 ms of events (about 100 k at 2 M events/s).
+pub const DEFAULT_REORDER_WINDOW_S: f64 = 0.05;
 
 /// Reads an EVIMO2 v2 folder batch by batch.
 pub struct Evimo2Source {
@@ -26,8 +32,13 @@ pub struct Evimo2Source {
     /// Stop after this many seconds of sensor time.
     seconds: Option<f64>,
     done: bool,
-    /// Events that were out of order inside a batch (sorted, not dropped).
+    /// Events that were out of order in the file and were sorted into place (not dropped).
     pub reordered: u64,
+    /// How far past a batch's end the file is read, seconds, so that events stamped before the
+    /// end but stored after later ones still reach their batch.
+    reorder_window_s: f64,
+    /// Events read ahead of the last batch's end, sorted by time.
+    pending: evseg_schemas::Events,
 }
 
 impl Evimo2Source {
@@ -67,7 +78,43 @@ impl Evimo2Source {
             seconds,
             done: false,
             reordered: 0,
+            reorder_window_s: DEFAULT_REORDER_WINDOW_S,
+            pending: evseg_schemas::Events::default(),
         })
+    }
+
+    /// How far past each batch's end the file is read to sort late-stored events into their
+    /// batch, seconds (default [`DEFAULT_REORDER_WINDOW_S`]; 0 = batches end at the first
+    /// event stored at or after their end). An event stored more than this after later ones
+    /// still arrives late and is dropped and counted by the slicer.
+    pub fn set_reorder_window(&mut self, seconds: f64) -> Result<(), SourceError> {
+        if !(seconds.is_finite() && seconds >= 0.0) {
+            return Err(SourceError::Read(format!(
+                "reorder window {seconds} s: must be finite and >= 0"
+            )));
+        }
+        self.reorder_window_s = seconds;
+        Ok(())
+    }
+
+    /// Reads the file up to `t_read` into the time-sorted pending buffer.
+    fn read_ahead(&mut self, t_read: f64) -> Result<(), SourceError> {
+        let mut fresh = self
+            .events
+            .read_until(t_read)
+            .map_err(|e| SourceError::Read(e.to_string()))?;
+        self.reordered += sort_by_time(&mut fresh) as u64;
+        let in_order = match (self.pending.t.last(), fresh.t.first()) {
+            (Some(&last), Some(&first)) => first >= last,
+            _ => true,
+        };
+        let n = fresh.len();
+        self.pending.extend_from(&fresh, 0..n);
+        if !in_order {
+            // Only for files stored out of order: the two sorted runs are sorted together.
+            self.reordered += sort_by_time(&mut self.pending) as u64;
+        }
+        Ok(())
     }
 }
 
@@ -181,12 +228,10 @@ impl EventSource for Evimo2Source {
         }
         let limit = self.seconds.unwrap_or(f64::INFINITY);
         let t_end_eff = t_end.min(limit);
-        let mut events = self
-            .events
-            .read_until(t_end_eff)
-            .map_err(|e| SourceError::Read(e.to_string()))?;
-        self.reordered += sort_by_time(&mut events) as u64;
-        let exhausted = self.events.position() >= self.events.len() || t_end >= limit;
+        self.read_ahead(t_end_eff + self.reorder_window_s)?;
+        let events = take_before(&mut self.pending, t_end_eff);
+        let exhausted =
+            (self.events.position() >= self.events.len() && self.pending.is_empty()) || t_end >= limit;
         let offset = self.camera.imu_time_offset_s;
         let imu = take_until(&self.imu, &mut self.next_imu, t_end_eff, |s| s.t + offset);
         let camera = take_until(&self.poses, &mut self.next_pose, t_end_eff, |p| p.t);
