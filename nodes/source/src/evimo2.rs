@@ -39,6 +39,8 @@ pub struct Evimo2Source {
     reorder_window_s: f64,
     /// Events read ahead of the last batch's end, sorted by time.
     pending: evseg_schemas::Events,
+    /// Events whose pixel lies outside the sensor of `meta['meta']` (dropped, counted).
+    pub outside_sensor: u64,
 }
 
 impl Evimo2Source {
@@ -80,7 +82,37 @@ impl Evimo2Source {
             reordered: 0,
             reorder_window_s: DEFAULT_REORDER_WINDOW_S,
             pending: evseg_schemas::Events::default(),
+            outside_sensor: 0,
         })
+    }
+
+    /// Drops the events of `events` whose pixel lies outside the camera's sensor (a writer's
+    /// off-by-one at the border, or a resolution in meta that does not match the events), so
+    /// every stage downstream gets pixels it can index; counts them and warns at the first.
+    fn drop_outside_sensor(&mut self, events: evseg_schemas::Events) -> evseg_schemas::Events {
+        let (w, h) = (self.camera.width, self.camera.height);
+        let inside = |i: usize| events.x[i] < w && events.y[i] < h;
+        if (0..events.len()).all(inside) {
+            return events;
+        }
+        let mut kept = evseg_schemas::Events::with_capacity(events.len());
+        for i in 0..events.len() {
+            if inside(i) {
+                kept.push(events.t[i], events.x[i], events.y[i], events.p[i]);
+            } else {
+                if self.outside_sensor == 0 {
+                    tracing::warn!(
+                        "event at pixel ({}, {}), t {:.6} s, is outside the {w}x{h} sensor of meta['meta']; \
+                         such events are dropped (counted: events_outside_sensor)",
+                        events.x[i],
+                        events.y[i],
+                        events.t[i]
+                    );
+                }
+                self.outside_sensor += 1;
+            }
+        }
+        kept
     }
 
     /// How far past each batch's end the file is read to sort late-stored events into their
@@ -211,6 +243,7 @@ impl EventSource for Evimo2Source {
         vec![
             ("events_reordered", self.reordered),
             ("times_not_increasing", self.events.non_monotonic()),
+            ("events_outside_sensor", self.outside_sensor),
             (
                 "masks_read_with_raw_ids",
                 self.masks.as_ref().map_or(0, |m| m.raw_id_masks() as u64),
@@ -230,6 +263,7 @@ impl EventSource for Evimo2Source {
         let t_end_eff = t_end.min(limit);
         self.read_ahead(t_end_eff + self.reorder_window_s)?;
         let events = take_before(&mut self.pending, t_end_eff);
+        let events = self.drop_outside_sensor(events);
         let exhausted =
             (self.events.position() >= self.events.len() && self.pending.is_empty()) || t_end >= limit;
         let offset = self.camera.imu_time_offset_s;

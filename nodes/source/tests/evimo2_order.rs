@@ -1,7 +1,11 @@
-//! An EVIMO2 folder whose events are stored out of time order (as a simulator that writes each
-//! render interval pixel by pixel would) reads back batch by batch as the sorted folder does:
-//! the source's reorder window sorts late-stored events into their batch, and the time origin
-//! is the earliest event, not the first stored one.
+//! EVIMO2 folders written by other tools, read by the source.
+//!
+//! - Events stored out of time order (as a simulator that writes each render interval pixel by
+//!   pixel would) read back batch by batch as the sorted folder does: the source's reorder
+//!   window sorts late-stored events into their batch, and the time origin is the earliest
+//!   event, not the first stored one.
+//! - Events outside the sensor are dropped and counted, so no stage gets a pixel it cannot
+//!   index.
 
 use std::path::Path;
 
@@ -94,4 +98,36 @@ fn events_stored_out_of_order_reach_their_batch() {
     let (_, late) = read_batches(no_window);
     assert!(late > 100, "only {late} late events without the reorder window");
     assert!(open(&shuffled_dir).set_reorder_window(f64::NAN).is_err());
+}
+
+#[test]
+fn events_outside_the_sensor_are_dropped_and_counted() {
+    let dir = tempfile::tempdir().unwrap();
+    let n = write_evimo2("one-object", 2, Some(0.05), 0.25, dir.path()).unwrap();
+    let camera = Sequence::open(dir.path(), &ReadOptions::default())
+        .unwrap()
+        .camera;
+    // Three events one past the last column or row (a writer's off-by-one).
+    let path = dir.path().join("dataset_events_xy.npy");
+    let ev = EventReader::open(dir.path()).unwrap().read_all().unwrap();
+    let mut xy: Vec<[u16; 2]> = (0..ev.len()).map(|i| [ev.x[i], ev.y[i]]).collect();
+    xy[10][0] = camera.width;
+    xy[20][1] = camera.height;
+    xy[30] = [camera.width + 5, 0];
+    let bytes: Vec<u8> = xy
+        .iter()
+        .flat_map(|p| [p[0].to_le_bytes(), p[1].to_le_bytes()].concat())
+        .collect();
+    std::fs::write(&path, encode_array("<u2", &[xy.len(), 2], &bytes)).unwrap();
+
+    let source = Evimo2Source::open(dir.path(), &ReadOptions::default(), None).unwrap();
+    let (got, _) = read_batches(source);
+    assert_eq!(got.len(), n as usize - 3);
+    assert!(
+        (0..got.len()).all(|i| got.x[i] < camera.width && got.y[i] < camera.height),
+        "an event outside the sensor reached a batch"
+    );
+    let mut source = Evimo2Source::open(dir.path(), &ReadOptions::default(), None).unwrap();
+    while source.next_batch(1.0).unwrap().is_some() {}
+    assert!(source.counters().contains(&("events_outside_sensor", 3)));
 }
