@@ -121,8 +121,9 @@ impl Evimo2Source {
     /// still arrives late and is dropped and counted by the slicer.
     pub fn set_reorder_window(&mut self, seconds: f64) -> Result<(), SourceError> {
         if !(seconds.is_finite() && seconds >= 0.0) {
-            return Err(SourceError::Read(format!(
-                "reorder window {seconds} s: must be finite and >= 0"
+            return Err(SourceError::Param(format!(
+                "reorder_window_ms: {} ms must be finite and >= 0",
+                seconds * 1e3
             )));
         }
         self.reorder_window_s = seconds;
