@@ -49,7 +49,10 @@ pub const STANDARD_GRAVITY: f64 = 9.80665;
 /// One batch of decoded data.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Chunk {
-    /// Events in file order (non-decreasing `t`); `t` in seconds relative to the first event.
+    /// Events in file order; `t` in seconds relative to the first event. Non-decreasing, except
+    /// for a text file stored out of time order: its events are passed on as stored, counted
+    /// in [`DecodeStats::times_out_of_order`], for the reader to sort (the binary formats raise
+    /// a decreasing timestamp instead, [`DecodeStats::time_regressions`]).
     pub events: Events,
     /// IMU samples decoded in the same stretch of the file (time-ordered, IMU frame, rad/s and
     /// m/s², `t` in seconds on the events' relative clock). Their times are close to, but not
@@ -166,6 +169,9 @@ pub struct DecodeStats {
     /// Times an event's timestamp was below the previous one's and was raised to it (keeps
     /// [`Events`] sorted; non-zero only for damaged streams).
     pub time_regressions: u64,
+    /// Events stamped before an event stored earlier in the file, passed on as stored for the
+    /// reader to sort (text files, whose writers may store events out of order).
+    pub times_out_of_order: u64,
     /// Prophesee words read before the first time-high word, whose time is unknown and which are
     /// skipped as OpenEB does.
     pub words_before_time_base: u64,

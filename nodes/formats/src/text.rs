@@ -9,7 +9,10 @@
 //!
 //! Fields may be separated by spaces, tabs or commas. Empty lines and lines starting with `#` are
 //! skipped, as is a first line of column names. Any other malformed line is an error naming the
-//! file and the line. Event times must not decrease.
+//! file and the line. Event times may decrease (a tool that writes each render interval pixel by
+//! pixel stores them so): such events are passed on as stored and counted
+//! ([`DecodeStats::times_out_of_order`]); the reader sorts them into place (the source node's
+//! reorder window). Times are relative to the first event's.
 
 use std::fs::File;
 use std::io::{BufRead, BufReader, Read};
@@ -228,7 +231,7 @@ pub(crate) struct TextDecoder {
     policy: OutOfRange,
     /// Time of the first event, s (file clock).
     origin_s: Option<f64>,
-    /// Time of the last event, s (file clock).
+    /// Time of the newest event so far, s (file clock).
     last_t: f64,
     imu: Option<LineReader>,
     /// The next IMU sample read ahead: t (s, file clock), accel, gyro.
@@ -301,12 +304,6 @@ impl FormatDecoder for TextDecoder {
                 return Ok(false);
             };
             let (t, x, y, p) = event_from(&self.events, fields)?;
-            if t < self.last_t {
-                return Err(self.events.error(format!(
-                    "time {t} s is before the previous event's {} s",
-                    self.last_t
-                )));
-            }
             if x >= self.width || y >= self.height {
                 if self.policy == OutOfRange::Error {
                     return Err(self.events.error(format!(
@@ -317,7 +314,10 @@ impl FormatDecoder for TextDecoder {
                 self.stats.out_of_range += 1;
                 continue;
             }
-            self.last_t = t;
+            if t < self.last_t {
+                self.stats.times_out_of_order += 1;
+            }
+            self.last_t = self.last_t.max(t);
             let origin = *self.origin_s.get_or_insert(t);
             // The IMU samples up to this event go first, read per event (not per chunk) so that
             // a bad `imu.txt` line stops the events at the same event whatever the chunk size:

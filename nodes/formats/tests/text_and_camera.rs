@@ -105,6 +105,26 @@ fn text_geometry_is_scanned_and_sidecars_can_be_ignored() {
 }
 
 #[test]
+fn text_events_stored_out_of_time_order_are_passed_on_and_counted() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write(
+        dir.path(),
+        "events.txt",
+        "0.010 1 1 1\n0.030 2 2 0\n0.020 3 3 1\n0.025 4 4 1\n0.040 5 5 0\n",
+    );
+    let options = OpenOptions {
+        geometry: Some((10, 10)),
+        ..Default::default()
+    };
+    let mut decoder = evseg_formats::open(&path, &options).unwrap();
+    let decoded = decode_all(decoder.as_mut(), 100);
+    assert!(decoded.error.is_none(), "{:?}", decoded.error);
+    let xs: Vec<u16> = decoded.events.iter().map(|e| e.1).collect();
+    assert_eq!(xs, vec![1, 2, 3, 4, 5], "events in file order");
+    assert_eq!(decoder.stats().times_out_of_order, 2);
+}
+
+#[test]
 fn malformed_text_lines_name_file_and_line_after_the_good_events() {
     let dir = tempfile::tempdir().unwrap();
     let cases = [
@@ -112,7 +132,6 @@ fn malformed_text_lines_name_file_and_line_after_the_good_events() {
         ("0.1 a 2 1\n", "field 2"),
         ("0.1 2.5 2 1\n", "x = 2.5"),
         ("0.1 1 2 2\n", "polarity 2"),
-        ("0.0001 1 2 1\n", "before the previous"),
         ("0.1 1 500 1\n", "outside the 100x100 sensor"),
         ("0.1 1 2 nan\n", "field 4"),
     ];

@@ -8,14 +8,9 @@ use evseg_evimo2::imu_check::{ImuCheckParams, ImuVerdict, check};
 use evseg_evimo2::{MaskReader, ReadOptions, Sequence};
 use evseg_schemas::{CameraInfo, CameraMotion, ImuSample, ObjectPose, Truth};
 
-use crate::order::{sort_by_time, take_before};
+pub use crate::order::DEFAULT_REORDER_WINDOW_S;
+use crate::order::{ReorderBuffer, check_reorder_window};
 use crate::{Batch, EventSource, SourceError};
-
-/// Default of [`Evimo2Source::set_reorder_window`], seconds. EVIMO2's own files are sorted; a
-/// folder written by another tool may not be, for example when a simulator writes each render
-/// interval's events pixel by pixel. 50 ms covers a generator that renders at 20 Hz or faster,
-/// and costs a buffer of 50 ms of events (about 100 k at 2 M events/s).
-pub const DEFAULT_REORDER_WINDOW_S: f64 = 0.05;
 
 /// Reads an EVIMO2 v2 folder batch by batch.
 pub struct Evimo2Source {
@@ -32,13 +27,11 @@ pub struct Evimo2Source {
     /// Stop after this many seconds of sensor time.
     seconds: Option<f64>,
     done: bool,
-    /// Events that were out of order in the file and were sorted into place (not dropped).
-    pub reordered: u64,
     /// How far past a batch's end the file is read, seconds, so that events stamped before the
     /// end but stored after later ones still reach their batch.
     reorder_window_s: f64,
     /// Events read ahead of the last batch's end, sorted by time.
-    pending: evseg_schemas::Events,
+    pending: ReorderBuffer,
     /// Events whose pixel lies outside the sensor of `meta['meta']` (dropped, counted).
     pub outside_sensor: u64,
 }
@@ -79,9 +72,8 @@ impl Evimo2Source {
             next_object: 0,
             seconds,
             done: false,
-            reordered: 0,
             reorder_window_s: DEFAULT_REORDER_WINDOW_S,
-            pending: evseg_schemas::Events::default(),
+            pending: ReorderBuffer::default(),
             outside_sensor: 0,
         })
     }
@@ -120,33 +112,22 @@ impl Evimo2Source {
     /// event stored at or after their end). An event stored more than this after later ones
     /// still arrives late and is dropped and counted by the slicer.
     pub fn set_reorder_window(&mut self, seconds: f64) -> Result<(), SourceError> {
-        if !(seconds.is_finite() && seconds >= 0.0) {
-            return Err(SourceError::Param(format!(
-                "reorder_window_ms: {} ms must be finite and >= 0",
-                seconds * 1e3
-            )));
-        }
-        self.reorder_window_s = seconds;
+        self.reorder_window_s = check_reorder_window(seconds)?;
         Ok(())
+    }
+
+    /// Events that were out of order in the file and were sorted into place (not dropped).
+    pub fn reordered(&self) -> u64 {
+        self.pending.reordered()
     }
 
     /// Reads the file up to `t_read` into the time-sorted pending buffer.
     fn read_ahead(&mut self, t_read: f64) -> Result<(), SourceError> {
-        let mut fresh = self
+        let fresh = self
             .events
             .read_until(t_read)
             .map_err(|e| SourceError::Read(e.to_string()))?;
-        self.reordered += sort_by_time(&mut fresh) as u64;
-        let in_order = match (self.pending.t.last(), fresh.t.first()) {
-            (Some(&last), Some(&first)) => first >= last,
-            _ => true,
-        };
-        let n = fresh.len();
-        self.pending.extend_from(&fresh, 0..n);
-        if !in_order {
-            // Only for files stored out of order: the two sorted runs are sorted together.
-            self.reordered += sort_by_time(&mut self.pending) as u64;
-        }
+        self.pending.push(fresh);
         Ok(())
     }
 }
@@ -242,7 +223,7 @@ fn take_until<T: Clone>(items: &[T], next: &mut usize, t_end: f64, t: impl Fn(&T
 impl EventSource for Evimo2Source {
     fn counters(&self) -> Vec<(&'static str, u64)> {
         vec![
-            ("events_reordered", self.reordered),
+            ("events_reordered", self.pending.reordered()),
             ("times_not_increasing", self.events.non_monotonic()),
             ("events_outside_sensor", self.outside_sensor),
             (
@@ -263,7 +244,7 @@ impl EventSource for Evimo2Source {
         let limit = self.seconds.unwrap_or(f64::INFINITY);
         let t_end_eff = t_end.min(limit);
         self.read_ahead(t_end_eff + self.reorder_window_s)?;
-        let events = take_before(&mut self.pending, t_end_eff);
+        let events = self.pending.take_before(t_end_eff);
         let events = self.drop_outside_sensor(events);
         let exhausted =
             (self.events.position() >= self.events.len() && self.pending.is_empty()) || t_end >= limit;

@@ -5,9 +5,9 @@
 use std::path::Path;
 
 use evseg_formats::{EventDecoder, OpenOptions};
-use evseg_schemas::{CameraInfo, Events, ImuSample};
+use evseg_schemas::{CameraInfo, ImuSample};
 
-use crate::order::{sort_by_time, take_before};
+use crate::order::{DEFAULT_REORDER_WINDOW_S, ReorderBuffer, check_reorder_window};
 use crate::{Batch, EventSource, SourceError};
 
 /// Events decoded per read from the file.
@@ -23,14 +23,16 @@ pub const MAX_IMU_READ_AHEAD: usize = 1_000_000;
 pub struct FileSource {
     decoder: Box<dyn EventDecoder>,
     camera: CameraInfo,
-    pending: Events,
+    /// Events read ahead of the last batch's end, sorted by time.
+    pending: ReorderBuffer,
+    /// How far past a batch's end the file is read, seconds (see
+    /// [`FileSource::set_reorder_window`]).
+    reorder_window_s: f64,
     imu: Vec<ImuSample>,
     /// Time of the newest IMU sample read so far (sensor clock, s), if any.
     imu_last_t: Option<f64>,
     eof: bool,
     seconds: Option<f64>,
-    /// Events out of order within a read (sorted, not dropped).
-    pub reordered: u64,
 }
 
 impl FileSource {
@@ -43,13 +45,29 @@ impl FileSource {
         Ok(Self {
             decoder,
             camera,
-            pending: Events::default(),
+            pending: ReorderBuffer::default(),
+            reorder_window_s: DEFAULT_REORDER_WINDOW_S,
             imu: Vec::new(),
             imu_last_t: None,
             eof: false,
             seconds,
-            reordered: 0,
         })
+    }
+
+    /// How far past each batch's end the file is read to sort late-stored events into their
+    /// batch, seconds (default [`DEFAULT_REORDER_WINDOW_S`]; 0 = batches end at the first
+    /// event read at or after their end). The vendor decoders' output is sorted (they raise a
+    /// decreasing timestamp and count it); text and Event Stream files are passed on as stored,
+    /// so this is what keeps an event stored after later ones in its batch. An event stored more
+    /// than this after later ones still arrives late and is dropped and counted by the slicer.
+    pub fn set_reorder_window(&mut self, seconds: f64) -> Result<(), SourceError> {
+        self.reorder_window_s = check_reorder_window(seconds)?;
+        Ok(())
+    }
+
+    /// Events that were out of order in the file and were sorted into place (not dropped).
+    pub fn reordered(&self) -> u64 {
+        self.pending.reordered()
     }
 }
 
@@ -61,8 +79,9 @@ impl EventSource for FileSource {
     fn counters(&self) -> Vec<(&'static str, u64)> {
         let s = self.decoder.stats();
         vec![
-            ("events_reordered", self.reordered),
+            ("events_reordered", self.pending.reordered()),
             ("time_regressions_raised", s.time_regressions),
+            ("times_out_of_order_in_file", s.times_out_of_order),
             ("out_of_range_dropped", s.out_of_range),
             ("words_before_time_base_skipped", s.words_before_time_base),
             ("trigger_words_skipped", s.triggers),
@@ -75,10 +94,12 @@ impl EventSource for FileSource {
         let limit = self.seconds.unwrap_or(f64::INFINITY);
         let t_end = t_end.min(limit);
         let offset = self.camera.imu_time_offset_s;
-        // Read until the events have passed t_end and, when the file has an IMU, the IMU too
-        // (bounded read-ahead), so no IMU sample of this batch arrives with the next one.
+        // Read until the events have passed t_end by the reorder window and, when the file has
+        // an IMU, the IMU has passed t_end too (bounded read-ahead), so no event or IMU sample
+        // of this batch arrives with the next one.
+        let t_read = t_end + self.reorder_window_s;
         let short = |s: &Self| {
-            let events_short = s.pending.t.last().is_none_or(|&t| t < t_end);
+            let events_short = s.pending.last_time().is_none_or(|t| t < t_read);
             let imu_short =
                 s.imu_last_t.is_some_and(|t| t + offset < t_end) && s.pending.len() < MAX_IMU_READ_AHEAD;
             events_short || imu_short
@@ -90,10 +111,7 @@ impl EventSource for FileSource {
                 .map_err(|e| SourceError::Read(e.to_string()))?
             {
                 Some(chunk) => {
-                    let mut ev = chunk.events;
-                    self.reordered += sort_by_time(&mut ev) as u64;
-                    let n = ev.len();
-                    self.pending.extend_from(&ev, 0..n);
+                    self.pending.push(chunk.events);
                     if let Some(last) = chunk.imu.last() {
                         self.imu_last_t = Some(self.imu_last_t.map_or(last.t, |t| t.max(last.t)));
                     }
@@ -105,12 +123,12 @@ impl EventSource for FileSource {
         if self.eof && self.pending.is_empty() {
             return Ok(None);
         }
-        let events = take_before(&mut self.pending, t_end);
+        let events = self.pending.take_before(t_end);
         let cut = self.imu.partition_point(|s| s.t + offset < t_end);
         let imu: Vec<ImuSample> = self.imu.drain(..cut).collect();
         if t_end >= limit {
             self.eof = true;
-            self.pending = Events::default();
+            self.pending.clear();
         }
         Ok(Some(Batch {
             events,

@@ -125,11 +125,10 @@ fn open(cfg: &NodeConfig) -> Result<Box<dyn EventSource>, BoxError> {
         "file" => {
             let camera_file: Option<String> = cfg.param_opt("camera_file")?;
             let camera_file = camera_file.map(std::path::PathBuf::from);
-            Ok(Box::new(FileSource::open(
-                &path_param(cfg)?,
-                camera_file.as_deref(),
-                seconds,
-            )?))
+            let mut source = FileSource::open(&path_param(cfg)?, camera_file.as_deref(), seconds)?;
+            let window_ms: f64 = cfg.param("reorder_window_ms")?;
+            source.set_reorder_window(window_ms * 1e-3)?;
+            Ok(Box::new(source))
         }
         "pattern" => Ok(Box::new(Pattern::new(PatternParams {
             rate: cfg.param("rate")?,
@@ -164,7 +163,7 @@ fn main() -> ExitCode {
     .param("imu_topic", serde_json::Value::Null, "evimo2: IMU topic in meta (default: the first)")
     .param("imu_to_camera", serde_json::Value::Null, "evimo2: IMU-to-camera rotation, row-major 9 numbers (default: EVIMO2 convention)")
     .param("imu_time_offset_s", serde_json::Value::Null, "evimo2: IMU time offset, seconds (default: -0.02, EVIMO2 convention)")
-    .param("reorder_window_ms", evseg_source::evimo2::DEFAULT_REORDER_WINDOW_S * 1e3, "evimo2: how far past each packet's end the folder is read, so events stored out of time order still reach their packet, milliseconds (0 = none)")
+    .param("reorder_window_ms", evseg_source::evimo2::DEFAULT_REORDER_WINDOW_S * 1e3, "evimo2, file: how far past each packet's end the input is read, so events stored out of time order still reach their packet, milliseconds (0 = none)")
     .param("imu_check", "auto", "evimo2: check the IMU's axes and time offset against the camera trajectory (off, warn, auto = use the mapping that agrees when it was not set explicitly)")
     .param("batch_ms", 10.0, "sensor time per published packet, milliseconds")
     .param("speed", 0.0, "live mode: real-time factor (1 = sensor time), 0 = as fast as possible")

@@ -61,8 +61,8 @@ pub fn decode_all(decoder: &mut dyn EventDecoder, max_events: usize) -> Decoded 
                 assert!(chunk.events.len() <= max_events.max(1), "chunk larger than asked");
                 assert!(!chunk.is_empty(), "Ok(true) with an empty chunk");
                 assert!(
-                    chunk.events.t.windows(2).all(|w| w[0] <= w[1]),
-                    "chunk times decrease"
+                    decoder.stats().times_out_of_order > 0 || chunk.events.t.windows(2).all(|w| w[0] <= w[1]),
+                    "chunk times decrease and the decoder did not count it"
                 );
                 let origin = decoder
                     .time_origin_us()

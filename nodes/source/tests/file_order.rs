@@ -1,0 +1,101 @@
+//! Text recordings stored out of time order (as a tool that writes each render interval pixel by
+//! pixel stores them), read by the file source: the reorder window sorts late-stored events into
+//! their batch across the decoder's read chunks, and the disorder is counted, not an error.
+
+use std::io::Write;
+use std::path::Path;
+
+use evseg_schemas::Events;
+use evseg_source::EventSource;
+use evseg_source::file::{FileSource, READ_CHUNK};
+
+const BATCH_S: f64 = 0.01;
+
+/// Every batch of `source` (10 ms each); panics if a batch holds an event at or after its end.
+/// Returns the events and how many arrived before their batch's start (late).
+fn read_batches(source: &mut FileSource) -> (Events, usize) {
+    let mut all = Events::default();
+    let mut late = 0;
+    let mut k = 0;
+    while let Some(batch) = source.next_batch((k + 1) as f64 * BATCH_S).unwrap() {
+        let (start, end) = (k as f64 * BATCH_S, (k + 1) as f64 * BATCH_S);
+        for &t in &batch.events.t {
+            assert!(t < end, "batch {k} ends at {end} s but holds an event at {t} s");
+            late += usize::from(t < start);
+        }
+        let n = batch.events.len();
+        all.extend_from(&batch.events, 0..n);
+        k += 1;
+        assert!(k < 10_000);
+    }
+    (all, late)
+}
+
+/// Writes `events.txt` (microsecond times, so the text round-trips exactly) with the events in
+/// `order`, and a pinhole `calib.txt` beside it.
+fn write_text(dir: &Path, name: &str, t_us: &[u64], order: &[usize]) -> std::path::PathBuf {
+    let sub = dir.join(name);
+    std::fs::create_dir_all(&sub).unwrap();
+    std::fs::write(sub.join("calib.txt"), "200 200 50 40\n").unwrap();
+    let path = sub.join("events.txt");
+    let mut f = std::io::BufWriter::new(std::fs::File::create(&path).unwrap());
+    for &i in order {
+        let (x, y) = (i % 101, (i / 101) % 81);
+        writeln!(f, "{:.6} {x} {y} {}", t_us[i] as f64 * 1e-6, i % 2).unwrap();
+    }
+    f.flush().unwrap();
+    path
+}
+
+fn sorted(e: &Events) -> Vec<(u64, u16, u16, u8)> {
+    let mut v: Vec<_> = (0..e.len())
+        .map(|i| (e.t[i].to_bits(), e.x[i], e.y[i], e.p[i]))
+        .collect();
+    v.sort_unstable();
+    v
+}
+
+#[test]
+fn text_events_stored_out_of_order_reach_their_batch() {
+    // An event every 6.7 us over 0.6 s: 90 000 events, more than one read chunk, and the first
+    // chunk ends (event 65 536, 439.1 ms) inside the block that straddles the batch end at
+    // 440 ms, so the events of that batch are split between two reads.
+    let n = 90_000usize;
+    assert!(n > READ_CHUNK);
+    let t_us: Vec<u64> = (0..n as u64).map(|i| i * 67 / 10).collect();
+    let dir = tempfile::tempdir().unwrap();
+    let in_order: Vec<usize> = (0..n).collect();
+    // Reversed within blocks of 5 ms that straddle the batch boundaries (edges at 2.5 ms + k 5
+    // ms), the first event kept first so both files have the same time origin.
+    let block = |i: usize| (t_us[i] + 2_500) / 5_000;
+    let mut shuffled: Vec<usize> = (1..n).collect();
+    shuffled.sort_by_key(|&i| (block(i), std::cmp::Reverse(i)));
+    shuffled.insert(0, 0);
+    let sorted_path = write_text(dir.path(), "sorted", &t_us, &in_order);
+    let shuffled_path = write_text(dir.path(), "shuffled", &t_us, &shuffled);
+    let open = |p: &Path| FileSource::open(p, None, None).unwrap();
+
+    let (want, late) = read_batches(&mut open(&sorted_path));
+    assert_eq!((want.len(), late), (n, 0));
+    let mut source = open(&shuffled_path);
+    let (got, late) = read_batches(&mut source);
+    assert_eq!(late, 0, "events of the shuffled file arrived after their batch");
+    assert_eq!(sorted(&got), sorted(&want), "the shuffled file's events differ");
+    let counters: std::collections::BTreeMap<_, _> = source.counters().into_iter().collect();
+    assert!(counters["times_out_of_order_in_file"] > 1000, "{counters:?}");
+    assert!(source.reordered() > 1000);
+
+    // Without the window the same file hands events to later batches: the test can fail.
+    let mut no_window = open(&shuffled_path);
+    no_window.set_reorder_window(0.0).unwrap();
+    let (_, late) = read_batches(&mut no_window);
+    assert!(late > 100, "only {late} late events without the reorder window");
+    let e = open(&shuffled_path)
+        .set_reorder_window(-0.001)
+        .err()
+        .map(|e| e.to_string());
+    assert_eq!(
+        e.as_deref(),
+        Some("reorder_window_ms: -1 ms must be finite and >= 0")
+    );
+}
