@@ -4,7 +4,7 @@
 
 use std::path::Path;
 
-use evseg_evimo2::imu_check::{ImuCheckParams, ImuVerdict, check};
+use evseg_evimo2::imu_check::{ImuCheckParams, ImuVerdict, check, trajectory_rates};
 use evseg_evimo2::{MaskReader, ReadOptions, Sequence};
 use evseg_schemas::{CameraInfo, CameraMotion, ImuSample, ObjectPose, Truth};
 
@@ -132,6 +132,31 @@ impl Evimo2Source {
     }
 }
 
+/// Where the stages' camera rotation rate comes from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RotationSource {
+    /// The folder's IMU (the method's input, as in the paper).
+    Imu,
+    /// The folder's camera trajectory, differentiated ([`trajectory_rates`]): for folders
+    /// without an IMU. The trajectory is the ground truth, so a run with it is not an IMU run:
+    /// the rotation is then exact and only the translation direction is estimated.
+    Trajectory,
+}
+
+impl std::str::FromStr for RotationSource {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "imu" => Ok(Self::Imu),
+            "trajectory" => Ok(Self::Trajectory),
+            other => Err(format!(
+                "rotation_source must be imu or trajectory, got `{other}`"
+            )),
+        }
+    }
+}
+
 /// What [`Evimo2Source::check_imu`] does when the IMU's mapping disagrees with the trajectory.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum ImuCheckMode {
@@ -158,6 +183,57 @@ impl std::str::FromStr for ImuCheckMode {
 }
 
 impl Evimo2Source {
+    /// Sets where the rotation rate comes from. With [`RotationSource::Trajectory`] the folder's
+    /// IMU samples (if any) are replaced by one sample per interval of the camera trajectory
+    /// (its mean rate, camera frame, at the interval's middle; the accelerometer reads 0, as
+    /// nothing downstream uses it), the IMU-to-camera rotation becomes the identity and its
+    /// offset 0. Returns the number of samples made; an error when the trajectory gives none.
+    /// With [`RotationSource::Imu`] a folder without IMU samples gets a warning naming the
+    /// parameter.
+    pub fn set_rotation_source(
+        &mut self,
+        source: RotationSource,
+        folder: &Path,
+    ) -> Result<usize, SourceError> {
+        match source {
+            RotationSource::Imu => {
+                if self.imu.is_empty() {
+                    tracing::warn!(
+                        "{}: the folder has no IMU samples, so the stages get no rotation rate and fit the flow un-derotated (the egomotion is then poor); `--set <source>.rotation_source=trajectory` takes the rate from the folder's camera trajectory (ground truth)",
+                        folder.display()
+                    );
+                }
+                Ok(self.imu.len())
+            }
+            RotationSource::Trajectory => {
+                let rates = trajectory_rates(&self.poses);
+                if rates.is_empty() {
+                    return Err(SourceError::Param(format!(
+                        "rotation_source: trajectory: {} has no camera trajectory to take the rotation rate from (no `full_trajectory` and no camera pose in `frames` of meta, or poses more than 0.1 s apart)",
+                        folder.display()
+                    )));
+                }
+                self.imu = rates
+                    .iter()
+                    .map(|r| ImuSample {
+                        t: 0.5 * (r.t0 + r.t1),
+                        gyro: r.rate,
+                        accel: [0.0; 3],
+                    })
+                    .collect();
+                self.next_imu = 0;
+                self.camera.imu_to_camera = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0];
+                self.camera.imu_time_offset_s = 0.0;
+                tracing::warn!(
+                    samples = self.imu.len(),
+                    "{}: the rotation rate comes from the folder's camera trajectory (rotation_source: trajectory), not from an IMU: the trajectory is the ground truth, so this run's segmentation and egomotion figures are not those of an IMU run",
+                    folder.display()
+                );
+                Ok(self.imu.len())
+            }
+        }
+    }
+
     /// Checks the IMU's mapping into the camera frame (axes and time offset) against the rotation
     /// rate of the folder's camera trajectory ([`evseg_evimo2::imu_check`]); with
     /// [`ImuCheckMode::Auto`] and `explicit` false (the mapping came from the file or the EVIMO2

@@ -8,7 +8,7 @@ use evseg_runtime::describe::Describe;
 use evseg_runtime::{BoxError, Mode, NodeConfig, Outputs, Source, run_source};
 use evseg_schemas::digest::EventDigest;
 use evseg_schemas::{EventPacket, Truth};
-use evseg_source::evimo2::{Evimo2Source, ImuCheckMode};
+use evseg_source::evimo2::{Evimo2Source, ImuCheckMode, RotationSource};
 use evseg_source::file::FileSource;
 use evseg_source::pattern::{Pattern, PatternParams};
 use evseg_source::synthetic::SyntheticSource;
@@ -117,9 +117,14 @@ fn open(cfg: &NodeConfig) -> Result<Box<dyn EventSource>, BoxError> {
             let mut source = Evimo2Source::open(&path_param(cfg)?, &options, seconds)?;
             let window_ms: f64 = cfg.param("reorder_window_ms")?;
             source.set_reorder_window(window_ms * 1e-3)?;
-            let mode: String = cfg.param("imu_check")?;
-            let explicit = options.imu_to_camera.is_some() || options.imu_time_offset_s.is_some();
-            source.check_imu(mode.parse::<ImuCheckMode>()?, explicit);
+            let rotation: String = cfg.param("rotation_source")?;
+            let rotation = rotation.parse::<RotationSource>()?;
+            if rotation == RotationSource::Imu {
+                let mode: String = cfg.param("imu_check")?;
+                let explicit = options.imu_to_camera.is_some() || options.imu_time_offset_s.is_some();
+                source.check_imu(mode.parse::<ImuCheckMode>()?, explicit);
+            }
+            source.set_rotation_source(rotation, &path_param(cfg)?)?;
             Ok(Box::new(source))
         }
         "file" => {
@@ -164,6 +169,7 @@ fn main() -> ExitCode {
     .param("imu_to_camera", serde_json::Value::Null, "evimo2: IMU-to-camera rotation, row-major 9 numbers (default: EVIMO2 convention)")
     .param("imu_time_offset_s", serde_json::Value::Null, "evimo2: IMU time offset, seconds (default: -0.02, EVIMO2 convention)")
     .param("reorder_window_ms", evseg_source::evimo2::DEFAULT_REORDER_WINDOW_S * 1e3, "evimo2, file: how far past each packet's end the input is read, so events stored out of time order still reach their packet, milliseconds (0 = none)")
+    .param("rotation_source", "imu", "evimo2: where the stages' camera rotation rate comes from: imu (the folder's IMU, the method's input) or trajectory (the folder's camera trajectory, differentiated: for folders without an IMU; it is the ground truth, so the run is not an IMU run)")
     .param("imu_check", "auto", "evimo2: check the IMU's axes and time offset against the camera trajectory (off, warn, auto = use the mapping that agrees when it was not set explicitly)")
     .param("batch_ms", 10.0, "sensor time per published packet, milliseconds")
     .param("speed", 0.0, "live mode: real-time factor (1 = sensor time), 0 = as fast as possible")
