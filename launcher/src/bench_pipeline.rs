@@ -3,7 +3,8 @@
 //! A simulator scene is first written as an EVIMO2 v2 folder (not timed: the simulator is slower
 //! than the pipeline and would be what is measured), then the graph (default
 //! `graphs/evimo2.yaml`, the method's stages) reads it. Reported: events per second over the
-//! run's wall time (process start-up included) and each stage's share of the busy time its node
+//! run's wall time (from the nodes' spawn, so process start-up included; the start-up before the
+//! source's first packet and the rate after it are given too) and each stage's share of the busy time its node
 //! reported (seconds inside its own logic).
 
 use std::path::{Path, PathBuf};
@@ -37,6 +38,14 @@ pub struct PipelineRow {
     pub wall_s: f64,
     /// Events per second over the wall time.
     pub events_per_s: f64,
+    /// Seconds from the nodes' spawn (the start of `wall_s`) to the source's first packet:
+    /// process start-up, the sessions' connection and the first read, paid once per run
+    /// whatever its length (`None` when the
+    /// source's summary lacks its first publication).
+    pub start_up_s: Option<f64>,
+    /// Events per second from the source's first packet to the end of the run (`None` as
+    /// above): the throughput a long run approaches.
+    pub events_per_s_after_start_up: Option<f64>,
     /// Per node, in graph order of the statistics.
     pub stages: Vec<StageTime>,
 }
@@ -91,6 +100,13 @@ pub fn bench(o: &PipelineOptions) -> anyhow::Result<PipelineRow> {
     let events = digest["digest"]["count"]
         .as_u64()
         .with_context(|| format!("{}: no digest.count", digest_path.display()))?;
+    let start_up_s = digest["first_publish_ns"]
+        .as_u64()
+        .map(|first| first.saturating_sub(outcome.started_unix_ns) as f64 * 1e-9);
+    let events_per_s_after_start_up = start_up_s
+        .map(|s| outcome.seconds - s)
+        .filter(|&after| after > 0.0)
+        .map(|after| events as f64 / after);
     let stages = outcome
         .stats
         .values()
@@ -106,6 +122,8 @@ pub fn bench(o: &PipelineOptions) -> anyhow::Result<PipelineRow> {
         events,
         wall_s: outcome.seconds,
         events_per_s: events as f64 / outcome.seconds.max(1e-9),
+        start_up_s,
+        events_per_s_after_start_up,
         stages,
     })
 }
@@ -113,8 +131,15 @@ pub fn bench(o: &PipelineOptions) -> anyhow::Result<PipelineRow> {
 /// The row as Markdown: the headline, then the per-stage shares.
 pub fn markdown(r: &PipelineRow, graph: &Path) -> String {
     let total: f64 = r.stages.iter().map(|s| s.busy_s).sum();
+    let after = match (r.start_up_s, r.events_per_s_after_start_up) {
+        (Some(s), Some(rate)) => format!(
+            " ({s:.2} s of start-up before the first packet; {:.2} M events/s after it)",
+            rate / 1e6
+        ),
+        _ => String::new(),
+    };
     let mut s = format!(
-        "{} on `{}` (seed {}): {} events in {:.2} s wall = **{:.2} M events/s** end to end, lock-step\n\n\
+        "{} on `{}` (seed {}): {} events in {:.2} s wall = **{:.2} M events/s** end to end, lock-step{after}\n\n\
          | node | busy s | share of busy time | slices |\n|---|---:|---:|---:|\n",
         graph.display(),
         r.scene,

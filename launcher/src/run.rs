@@ -60,8 +60,10 @@ pub struct RunOutcome {
     pub dir: PathBuf,
     /// Final statistics per node (as last published).
     pub stats: BTreeMap<String, Stats>,
-    /// Wall time, seconds.
+    /// Wall time, seconds, from the moment every node of this machine was spawned to the end.
     pub seconds: f64,
+    /// Wall clock at the start of `seconds`, nanoseconds since the Unix epoch.
+    pub started_unix_ns: u64,
     /// The MCAP recording written by this machine's recorder, if the run was recorded.
     pub recording: Option<PathBuf>,
 }
@@ -202,6 +204,11 @@ fn open_router(listen: &[String], connect: &[String]) -> anyhow::Result<zenoh::S
     set(&mut config, "connect/exit_on_failure", "false")?;
     set(&mut config, "connect/timeout_ms", "-1")?;
     set(&mut config, "listen/exit_on_failure", "true")?;
+    // A router's open sleeps `scouting/delay` (Zenoh's default 500 ms) after binding, for
+    // multicast scouting, which is off here: the routers of other machines are reached through
+    // the explicit endpoints above, retried in the background, and lock-step producers wait
+    // for their consumers' credit anyway. Without it every run starts 0.5 s sooner.
+    set(&mut config, "scouting/delay", "0")?;
     zenoh::open(config).wait().map_err(|e| {
         anyhow::anyhow!("cannot start the Zenoh router (listen {listen:?}, connect {connect:?}): {e}; is another run using the port? Set zenoh.machines in graph.yaml or --listen")
     })
@@ -391,6 +398,9 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
         drawn: false,
     };
     let start = Instant::now();
+    let started_unix_ns = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_nanos() as u64);
     let policies: BTreeMap<String, evseg_graph::RestartPolicy> =
         nodes.iter().map(|n| (n.id.clone(), n.restart)).collect();
     let mut watchdog = crate::watchdog::Watchdog::new(opts.watchdog, start);
@@ -493,6 +503,7 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
         dir,
         stats: final_stats,
         seconds,
+        started_unix_ns,
         recording: recorder_here,
     })
 }
