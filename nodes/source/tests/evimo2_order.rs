@@ -11,41 +11,12 @@ use std::path::Path;
 
 use evseg_evimo2::npy::encode_array;
 use evseg_evimo2::{EventReader, ReadOptions, Sequence};
-use evseg_schemas::Events;
 use evseg_source::EventSource;
 use evseg_source::evimo2::Evimo2Source;
 use evseg_source::synthetic::write_evimo2;
 
-const BATCH_S: f64 = 0.01;
-
-/// Every batch of `source` (10 ms each); panics if a batch holds an event outside its span.
-/// Returns the events and how many arrived before their batch's start (late).
-fn read_batches(mut source: Evimo2Source) -> (Events, usize) {
-    let mut all = Events::default();
-    let mut late = 0;
-    let mut k = 0;
-    while let Some(batch) = source.next_batch((k + 1) as f64 * BATCH_S).unwrap() {
-        let (start, end) = (k as f64 * BATCH_S, (k + 1) as f64 * BATCH_S);
-        for &t in &batch.events.t {
-            assert!(t < end, "batch {k} ends at {end} s but holds an event at {t} s");
-            late += usize::from(t < start);
-        }
-        let n = batch.events.len();
-        all.extend_from(&batch.events, 0..n);
-        k += 1;
-        assert!(k < 10_000);
-    }
-    (all, late)
-}
-
-/// The events as (t, x, y, p) tuples sorted, to compare sets whatever the order of equal times.
-fn sorted(e: &Events) -> Vec<(u64, u16, u16, u8)> {
-    let mut v: Vec<_> = (0..e.len())
-        .map(|i| (e.t[i].to_bits(), e.x[i], e.y[i], e.p[i]))
-        .collect();
-    v.sort_unstable();
-    v
-}
+mod common;
+use common::{read_batches, sorted};
 
 /// Copies `from` into `to` with the events stored reversed within blocks of 5 ms that straddle
 /// the 10 ms batch boundaries (block edges at 2.5 ms + k 5 ms).
@@ -85,17 +56,16 @@ fn events_stored_out_of_order_reach_their_batch() {
     write_shuffled_copy(&sorted_dir, &shuffled_dir);
     let open = |d: &Path| Evimo2Source::open(d, &ReadOptions::default(), None).unwrap();
 
-    let (want, late) = read_batches(open(&sorted_dir));
+    let (want, late) = read_batches(&mut open(&sorted_dir));
     assert_eq!((want.len(), late), (n as usize, 0));
-    let shuffled = open(&shuffled_dir);
-    let (got, late) = read_batches(shuffled);
+    let (got, late) = read_batches(&mut open(&shuffled_dir));
     assert_eq!(late, 0, "events of the shuffled folder arrived after their batch");
     assert_eq!(sorted(&got), sorted(&want), "the shuffled folder's events differ");
 
     // Without the window the same folder hands events to later batches: the test can fail.
     let mut no_window = open(&shuffled_dir);
     no_window.set_reorder_window(0.0).unwrap();
-    let (_, late) = read_batches(no_window);
+    let (_, late) = read_batches(&mut no_window);
     assert!(late > 100, "only {late} late events without the reorder window");
     assert!(open(&shuffled_dir).set_reorder_window(f64::NAN).is_err());
 }
@@ -120,8 +90,8 @@ fn events_outside_the_sensor_are_dropped_and_counted() {
         .collect();
     std::fs::write(&path, encode_array("<u2", &[xy.len(), 2], &bytes)).unwrap();
 
-    let source = Evimo2Source::open(dir.path(), &ReadOptions::default(), None).unwrap();
-    let (got, _) = read_batches(source);
+    let mut source = Evimo2Source::open(dir.path(), &ReadOptions::default(), None).unwrap();
+    let (got, _) = read_batches(&mut source);
     assert_eq!(got.len(), n as usize - 3);
     assert!(
         (0..got.len()).all(|i| got.x[i] < camera.width && got.y[i] < camera.height),

@@ -1,8 +1,10 @@
 //! `rotation_source`: a folder without an IMU gets its rotation rate from the camera trajectory
 //! when asked, and only then.
 
+mod common;
+
 use evseg_evimo2::{SequenceData, write_sequence};
-use evseg_schemas::{CameraInfo, CameraMotion, Distortion, Events};
+use evseg_schemas::{CameraMotion, Distortion, Events};
 use evseg_source::EventSource;
 use evseg_source::evimo2::{Evimo2Source, RotationSource};
 
@@ -16,19 +18,7 @@ fn sequence(poses: bool) -> SequenceData {
     for i in 0..5000u32 {
         events.push(f64::from(i) * 1e-4, (i % 64) as u16, (i / 64 % 48) as u16, 1);
     }
-    let camera = CameraInfo {
-        width: 64,
-        height: 48,
-        fx: 50.0,
-        fy: 50.0,
-        cx: 31.5,
-        cy: 23.5,
-        distortion: Distortion::None,
-        imu_to_camera: evseg_evimo2::EVIMO2_IMU_TO_CAMERA,
-        imu_time_offset_s: evseg_evimo2::EVIMO2_IMU_TIME_OFFSET_S,
-        time_origin_us: 0,
-        sensor: "test".into(),
-    };
+    let camera = common::camera_64x48(Distortion::None);
     let speed = RATE.iter().map(|r| r * r).sum::<f64>().sqrt();
     let axis = RATE.map(|r| r / speed);
     // Constant body rate: R(t) = exp([RATE] t), camera -> world, as the quaternion [x, y, z, w].

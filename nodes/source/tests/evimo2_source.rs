@@ -1,8 +1,10 @@
 //! The EVIMO2 source on a small folder written by the project's own EVIMO2 writer: every event
 //! once, in order, IMU and masks delivered in the batches whose span holds them.
 
+mod common;
+
 use evseg_evimo2::{FrameTruth, SequenceData, write_sequence};
-use evseg_schemas::{CameraInfo, CameraMotion, Distortion, Events, ImuSample, Mask, ObjectPose};
+use evseg_schemas::{CameraMotion, Distortion, Events, ImuSample, Mask, ObjectPose};
 use evseg_source::EventSource;
 use evseg_source::evimo2::Evimo2Source;
 
@@ -16,25 +18,13 @@ pub fn small_sequence() -> SequenceData {
             (i % 3 == 0) as u8,
         );
     }
-    let camera = CameraInfo {
-        width: 64,
-        height: 48,
-        fx: 50.0,
-        fy: 50.0,
-        cx: 31.5,
-        cy: 23.5,
-        distortion: Distortion::RadTan {
-            k1: -0.1,
-            k2: 0.01,
-            p1: 0.001,
-            p2: -0.001,
-            k3: 0.0,
-        },
-        imu_to_camera: evseg_evimo2::EVIMO2_IMU_TO_CAMERA,
-        imu_time_offset_s: evseg_evimo2::EVIMO2_IMU_TIME_OFFSET_S,
-        time_origin_us: 0,
-        sensor: "test".into(),
-    };
+    let camera = common::camera_64x48(Distortion::RadTan {
+        k1: -0.1,
+        k2: 0.01,
+        p1: 0.001,
+        p2: -0.001,
+        k3: 0.0,
+    });
     let imu = (0..100)
         .map(|i| ImuSample {
             t: f64::from(i) * 0.005,

@@ -5,31 +5,11 @@
 use std::io::Write;
 use std::path::Path;
 
-use evseg_schemas::Events;
 use evseg_source::EventSource;
 use evseg_source::file::{FileSource, READ_CHUNK};
 
-const BATCH_S: f64 = 0.01;
-
-/// Every batch of `source` (10 ms each); panics if a batch holds an event at or after its end.
-/// Returns the events and how many arrived before their batch's start (late).
-fn read_batches(source: &mut FileSource) -> (Events, usize) {
-    let mut all = Events::default();
-    let mut late = 0;
-    let mut k = 0;
-    while let Some(batch) = source.next_batch((k + 1) as f64 * BATCH_S).unwrap() {
-        let (start, end) = (k as f64 * BATCH_S, (k + 1) as f64 * BATCH_S);
-        for &t in &batch.events.t {
-            assert!(t < end, "batch {k} ends at {end} s but holds an event at {t} s");
-            late += usize::from(t < start);
-        }
-        let n = batch.events.len();
-        all.extend_from(&batch.events, 0..n);
-        k += 1;
-        assert!(k < 10_000);
-    }
-    (all, late)
-}
+mod common;
+use common::{read_batches, sorted};
 
 /// Writes `events.txt` (microsecond times, so the text round-trips exactly) with the events in
 /// `order`, and a pinhole `calib.txt` beside it.
@@ -45,14 +25,6 @@ fn write_text(dir: &Path, name: &str, t_us: &[u64], order: &[usize]) -> std::pat
     }
     f.flush().unwrap();
     path
-}
-
-fn sorted(e: &Events) -> Vec<(u64, u16, u16, u8)> {
-    let mut v: Vec<_> = (0..e.len())
-        .map(|i| (e.t[i].to_bits(), e.x[i], e.y[i], e.p[i]))
-        .collect();
-    v.sort_unstable();
-    v
 }
 
 #[test]
