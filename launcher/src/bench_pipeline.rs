@@ -3,9 +3,9 @@
 //! A simulator scene is first written as an EVIMO2 v2 folder (not timed: the simulator is slower
 //! than the pipeline and would be what is measured), then the graph (default
 //! `graphs/evimo2.yaml`, the method's stages) reads it. Reported: events per second over the
-//! run's wall time (from the nodes' spawn, so process start-up included; the start-up before the
-//! source's first packet and the rate after it are given too) and each stage's share of the busy time its node
-//! reported (seconds inside its own logic).
+//! run's wall time (from the nodes' spawn, so process start-up included; the start-up before
+//! the source's first packet and the rate after it are given too) and each stage's share of the
+//! busy time its node reported (seconds inside its own logic).
 
 use std::path::{Path, PathBuf};
 
@@ -40,8 +40,7 @@ pub struct PipelineRow {
     pub events_per_s: f64,
     /// Seconds from the nodes' spawn (the start of `wall_s`) to the source's first packet:
     /// process start-up, the sessions' connection and the first read, paid once per run
-    /// whatever its length (`None` when the
-    /// source's summary lacks its first publication).
+    /// whatever its length (`None` when the source's summary lacks its first publication).
     pub start_up_s: Option<f64>,
     /// Events per second from the source's first packet to the end of the run (`None` as
     /// above): the throughput a long run approaches.
