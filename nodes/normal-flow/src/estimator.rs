@@ -5,7 +5,7 @@ use evseg_geometry::Camera;
 use evseg_geometry::cache::{PREFETCH_AHEAD, prefetch};
 use evseg_schemas::{CameraInfo, Events, NormalFlow};
 
-use crate::fit::{Neighbourhood, PlaneFit, fit_plane};
+use crate::fit::{AgeLimits, Neighbourhood, PlaneFit, RowRun, fit_plane};
 use crate::params::{ParamsError, PlaneFitParams};
 
 /// Refits after outlier rejection of the scale check's larger window (at most; the fit's own
@@ -476,12 +476,21 @@ fn gather(
     window: Window,
     skip: Option<Window>,
 ) {
-    let ages = Ages {
+    let ages = AgeLimits {
         t: at.t,
         dt_min: params.dt_min_s,
         dt_max: params.dt_max_s,
         lookahead: at.lookahead,
     };
+    // The run of `row` starting at column `x0`, `dy` rows from the centre.
+    fn run(row: &[f64], x0: usize, cx: usize, own_x: usize, dy: i32) -> RowRun<'_> {
+        RowRun {
+            row,
+            dx0: x0 as i32 - cx as i32,
+            dy,
+            own: own_x.wrapping_sub(x0),
+        }
+    }
     for yy in window.y0..=window.y1 {
         let row = yy * width;
         let dy = yy as i32 - at.y as i32;
@@ -490,42 +499,15 @@ fn gather(
         match skip {
             Some(s) if (s.y0..=s.y1).contains(&yy) => {
                 let left = &surface[row + window.x0..row + s.x0];
-                gather_run(nb, left, window.x0, at.x, own_x, dy, &ages);
+                nb.push_run(&run(left, window.x0, at.x, own_x, dy), &ages);
                 let right = &surface[row + s.x1 + 1..=row + window.x1];
-                gather_run(nb, right, s.x1 + 1, at.x, own_x, dy, &ages);
+                nb.push_run(&run(right, s.x1 + 1, at.x, own_x, dy), &ages);
             }
             _ => {
                 let all = &surface[row + window.x0..=row + window.x1];
-                gather_run(nb, all, window.x0, at.x, own_x, dy, &ages);
+                nb.push_run(&run(all, window.x0, at.x, own_x, dy), &ages);
             }
         }
-    }
-}
-
-/// The centre event's time and the ages of neighbours a fit takes, seconds.
-struct Ages {
-    t: f64,
-    dt_min: f64,
-    dt_max: f64,
-    lookahead: f64,
-}
-
-/// [`gather`] along one run of a row: `row[k]` is pixel `x0 + k`, `dy` rows from the centre at
-/// column `cx`; the pixel at column `own_x` is the centre's own.
-#[inline(always)]
-fn gather_run(nb: &mut Neighbourhood, row: &[f64], x0: usize, cx: usize, own_x: usize, dy: i32, ages: &Ages) {
-    for (k, &ts) in row.iter().enumerate() {
-        let xx = x0 + k;
-        let age = ages.t - ts;
-        let own_pixel = xx == own_x;
-        let keep =
-            own_pixel || ((age.abs() >= ages.dt_min) & (age <= ages.dt_max) & (age >= -ages.lookahead));
-        nb.push_if(
-            keep,
-            xx as i32 - cx as i32,
-            dy,
-            if own_pixel { 0.0 } else { -age },
-        );
     }
 }
 

@@ -122,6 +122,76 @@ impl Neighbourhood {
     }
 }
 
+/// The neighbours of one run of a row of a surface of active events, as
+/// [`Neighbourhood::push_if`] would add them one by one (same order, same arithmetic, so the
+/// same sums to the bit), with the sums kept in locals for the run instead of in the struct.
+pub(crate) struct RowRun<'a> {
+    /// Latest timestamps of the run's pixels, seconds.
+    pub row: &'a [f64],
+    /// Offset of the run's first pixel from the centre along x, pixels.
+    pub dx0: i32,
+    /// Offset of the row from the centre along y, pixels.
+    pub dy: i32,
+    /// Index in `row` of the centre's own pixel (always kept, at time 0), or `usize::MAX`.
+    pub own: usize,
+}
+
+/// Which neighbours a fit takes: ages `t - t_neighbour` (seconds) within `[-lookahead, dt_max]`
+/// and at least `dt_min` in magnitude.
+pub(crate) struct AgeLimits {
+    /// The centre event's time, seconds.
+    pub t: f64,
+    /// Smallest age magnitude, seconds.
+    pub dt_min: f64,
+    /// Largest age, seconds.
+    pub dt_max: f64,
+    /// Largest negative age (neighbours later than the event), seconds.
+    pub lookahead: f64,
+}
+
+impl Neighbourhood {
+    /// Adds the neighbours of `run` whose age is within `ages` (see [`RowRun`]).
+    #[inline(always)]
+    pub(crate) fn push_run(&mut self, run: &RowRun<'_>, ages: &AgeLimits) {
+        let mut len = self.len;
+        let [mut n, mut sx, mut sy, mut sxx, mut sxy, mut syy] = self.offset_sums;
+        let [mut st, mut sxt, mut syt] = self.time_sums;
+        let dy = run.dy;
+        for (k, &ts) in run.row.iter().enumerate() {
+            let dx = run.dx0 + k as i32;
+            let age = ages.t - ts;
+            let own_pixel = k == run.own;
+            let keep =
+                own_pixel || ((age.abs() >= ages.dt_min) & (age <= ages.dt_max) & (age >= -ages.lookahead));
+            let dt = if own_pixel { 0.0 } else { -age };
+            let at = len.min(MAX_POINTS);
+            self.dx[at] = f64::from(dx);
+            self.dy[at] = f64::from(dy);
+            self.dt[at] = dt;
+            let keep = keep && at < MAX_POINTS;
+            len = at + usize::from(keep);
+            let kk = i32::from(keep);
+            n += kk;
+            sx += kk * dx;
+            sy += kk * dy;
+            sxx += kk * dx * dx;
+            sxy += kk * dx * dy;
+            syy += kk * dy * dy;
+            let (x, y, t) = if keep {
+                (f64::from(dx), f64::from(dy), dt)
+            } else {
+                (0.0, 0.0, 0.0)
+            };
+            st += t;
+            sxt += x * t;
+            syt += y * t;
+        }
+        self.len = len;
+        self.offset_sums = [n, sx, sy, sxx, sxy, syy];
+        self.time_sums = [st, sxt, syt];
+    }
+}
+
 /// A fitted plane `t = gx dx + gy dy + c` (seconds, pixel offsets).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PlaneFit {
@@ -344,6 +414,68 @@ fn plane_fit(sol: [f64; 3], sums: &Sums, kept: usize, points: usize, ss: f64) ->
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_row_run_adds_what_point_by_point_pushes_add_to_the_bit() {
+        // Rows of ages spread over every case (kept, too old, too new, within dt_min, the own
+        // pixel), pushed until past capacity.
+        let ages = AgeLimits {
+            t: 1.0,
+            dt_min: 0.0005,
+            dt_max: 0.1,
+            lookahead: 0.03,
+        };
+        let (mut by_run, mut by_point) = (Neighbourhood::default(), Neighbourhood::default());
+        let mut state = 0x9e37_79b9_7f4a_7c15u64;
+        let mut next = || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        for r in 0..12 {
+            let row: Vec<f64> = (0..9).map(|_| 1.0 - 0.16 * next() + 0.04).collect();
+            let own = if r == 5 { 4 } else { usize::MAX };
+            let (dx0, dy) = (-4, r - 6);
+            by_run.push_run(
+                &RowRun {
+                    row: &row,
+                    dx0,
+                    dy,
+                    own,
+                },
+                &ages,
+            );
+            for (k, &ts) in row.iter().enumerate() {
+                let age = ages.t - ts;
+                let own_pixel = k == own;
+                let keep =
+                    own_pixel || (age.abs() >= ages.dt_min && age <= ages.dt_max && age >= -ages.lookahead);
+                let dt = if own_pixel { 0.0 } else { -age };
+                by_point.push_if(keep, dx0 + k as i32, dy, dt);
+            }
+            assert_eq!(by_run.len, by_point.len, "row {r}");
+            let n = by_run.len;
+            assert_eq!(by_run.offset_sums, by_point.offset_sums, "row {r}");
+            assert_eq!(
+                by_run.time_sums.map(f64::to_bits),
+                by_point.time_sums.map(f64::to_bits)
+            );
+            assert_eq!(by_run.dx[..n], by_point.dx[..n]);
+            assert_eq!(by_run.dy[..n], by_point.dy[..n]);
+            assert!(
+                by_run.dt[..n]
+                    .iter()
+                    .zip(&by_point.dt[..n])
+                    .all(|(a, b)| a.to_bits() == b.to_bits())
+            );
+        }
+        assert!(
+            by_run.len > 40 && by_run.len <= MAX_POINTS,
+            "{} points",
+            by_run.len
+        );
+    }
 
     fn window(r: i32, f: impl Fn(f64, f64) -> f64) -> Neighbourhood {
         let mut nb = Neighbourhood::default();
