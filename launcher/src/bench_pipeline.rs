@@ -158,3 +158,69 @@ pub fn markdown(r: &PipelineRow, graph: &Path) -> String {
     }
     s
 }
+
+/// With two runs or more, a line with the median, lowest and highest end-to-end rate (M
+/// events/s) and the median start-up; `None` for a single run.
+pub fn summary(rows: &[PipelineRow]) -> Option<String> {
+    if rows.len() < 2 {
+        return None;
+    }
+    let median = |mut v: Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        let n = v.len();
+        if n % 2 == 1 {
+            v[n / 2]
+        } else {
+            0.5 * (v[n / 2 - 1] + v[n / 2])
+        }
+    };
+    let rates: Vec<f64> = rows.iter().map(|r| r.events_per_s / 1e6).collect();
+    let (lo, hi) = rates
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &r| {
+            (lo.min(r), hi.max(r))
+        });
+    let start_ups: Vec<f64> = rows.iter().filter_map(|r| r.start_up_s).collect();
+    let start_up = if start_ups.is_empty() {
+        String::new()
+    } else {
+        format!("; median start-up {:.2} s", median(start_ups))
+    };
+    Some(format!(
+        "{} runs: median **{:.2} M events/s** end to end (lowest {lo:.2}, highest {hi:.2}){start_up}",
+        rows.len(),
+        median(rates)
+    ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn row(rate: f64, start_up: Option<f64>) -> PipelineRow {
+        PipelineRow {
+            scene: "two-objects".into(),
+            seed: 7,
+            events: 1,
+            wall_s: 1.0,
+            events_per_s: rate * 1e6,
+            start_up_s: start_up,
+            events_per_s_after_start_up: None,
+            stages: vec![],
+        }
+    }
+
+    #[test]
+    fn the_summary_gives_the_median_and_the_range_of_several_runs() {
+        assert_eq!(summary(&[row(1.0, Some(0.3))]), None);
+        let s = summary(&[row(0.9, Some(0.3)), row(1.1, Some(0.2)), row(0.8, None)]);
+        assert_eq!(
+            s.as_deref(),
+            Some(
+                "3 runs: median **0.90 M events/s** end to end (lowest 0.80, highest 1.10); median start-up 0.25 s"
+            )
+        );
+        let even = summary(&[row(0.9, None), row(1.0, None)]).unwrap_or_default();
+        assert!(even.contains("median **0.95 M events/s**"), "{even}");
+    }
+}

@@ -227,6 +227,10 @@ enum BenchWhat {
         /// Working folder (the sequence and the run folder).
         #[arg(long, default_value = "runs/bench-pipeline")]
         work: PathBuf,
+        /// Runs of the graph, one after the other; with more than one, each run's line and the
+        /// median, lowest and highest rate are printed (a shared machine's speed drifts).
+        #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..))]
+        runs: u32,
     },
     /// Events per second through source -> slicer -> sink: three processes over Zenoh against
     /// the same stages in one process.
@@ -333,22 +337,40 @@ fn main() -> ExitCode {
                     seed,
                     seconds,
                     work,
+                    runs,
                 }),
             ..
-        } => bench_pipeline::bench(&bench_pipeline::PipelineOptions {
-            graph: graph.clone(),
-            scene,
-            seed,
-            seconds,
-            work: work.clone(),
-        })
-        .and_then(|row| {
-            let md = bench_pipeline::markdown(&row, &graph);
-            println!("{md}");
+        } => (|| {
+            let options = bench_pipeline::PipelineOptions {
+                graph: graph.clone(),
+                scene,
+                seed,
+                seconds,
+                work: work.clone(),
+            };
+            let mut rows = Vec::new();
+            let mut md = String::new();
+            for _ in 0..runs {
+                let row = bench_pipeline::bench(&options)?;
+                let run_md = bench_pipeline::markdown(&row, &graph);
+                println!("{run_md}");
+                md.push_str(&run_md);
+                md.push('\n');
+                rows.push(row);
+            }
+            if let Some(summary) = bench_pipeline::summary(&rows) {
+                println!("{summary}");
+                md.push_str(&summary);
+                md.push('\n');
+            }
             std::fs::write(work.join("pipeline.md"), &md)?;
-            std::fs::write(work.join("pipeline.json"), serde_json::to_string_pretty(&row)?)?;
+            let json = match rows.as_slice() {
+                [one] => serde_json::to_string_pretty(one)?,
+                all => serde_json::to_string_pretty(all)?,
+            };
+            std::fs::write(work.join("pipeline.json"), json)?;
             Ok(())
-        }),
+        })(),
         Command::Bench {
             what: Some(BenchWhat::Transport { slices, work, json }),
             ..
