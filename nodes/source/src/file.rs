@@ -33,6 +33,12 @@ pub struct FileSource {
     imu_last_t: Option<f64>,
     eof: bool,
     seconds: Option<f64>,
+    /// Added to every time the decoder gives, seconds: so that the earliest event of the first
+    /// read, not the first one stored, is at 0 (the decoders count time from the first stored
+    /// event, and a text file stored out of order may hold earlier ones after it, which would
+    /// otherwise come before the first packet and be dropped). `None` until the first read
+    /// with events; 0 for every sorted file.
+    time_shift_s: Option<f64>,
 }
 
 impl FileSource {
@@ -51,6 +57,7 @@ impl FileSource {
             imu_last_t: None,
             eof: false,
             seconds,
+            time_shift_s: None,
         })
     }
 
@@ -110,7 +117,19 @@ impl EventSource for FileSource {
                 .next_chunk(READ_CHUNK)
                 .map_err(|e| SourceError::Read(e.to_string()))?
             {
-                Some(chunk) => {
+                Some(mut chunk) => {
+                    let shift = match self.time_shift_s {
+                        Some(s) => s,
+                        None if chunk.events.is_empty() => 0.0,
+                        None => {
+                            let earliest = chunk.events.t.iter().copied().fold(0.0, f64::min);
+                            *self.time_shift_s.insert(-earliest)
+                        }
+                    };
+                    if shift != 0.0 {
+                        chunk.events.t.iter_mut().for_each(|t| *t += shift);
+                        chunk.imu.iter_mut().for_each(|s| s.t += shift);
+                    }
                     self.pending.push(chunk.events);
                     if let Some(last) = chunk.imu.last() {
                         self.imu_last_t = Some(self.imu_last_t.map_or(last.t, |t| t.max(last.t)));
