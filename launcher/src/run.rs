@@ -204,11 +204,14 @@ fn open_router(listen: &[String], connect: &[String]) -> anyhow::Result<zenoh::S
     set(&mut config, "connect/exit_on_failure", "false")?;
     set(&mut config, "connect/timeout_ms", "-1")?;
     set(&mut config, "listen/exit_on_failure", "true")?;
-    // A router's open sleeps `scouting/delay` (Zenoh's default 500 ms) after binding, for
-    // multicast scouting, which is off here: the routers of other machines are reached through
-    // the explicit endpoints above, retried in the background, and lock-step producers wait
-    // for their consumers' credit anyway. Without it every run starts 0.5 s sooner.
-    set(&mut config, "scouting/delay", "0")?;
+    // A router's open sleeps `scouting/delay` (Zenoh's default 500 ms) after binding. A
+    // launcher with no other machine to connect to has nothing to wait for, so its runs start
+    // 0.5 s sooner without it. With other machines the sleep stays: it lets the link to their
+    // routers come up before the nodes start; without it `tests/distributed.rs` took 29 s once
+    // and failed once in seven runs (a consumer on the other machine unseen for 60 s).
+    if settings.connect.is_empty() {
+        set(&mut config, "scouting/delay", "0")?;
+    }
     zenoh::open(config).wait().map_err(|e| {
         anyhow::anyhow!("cannot start the Zenoh router (listen {listen:?}, connect {connect:?}): {e}; is another run using the port? Set zenoh.machines in graph.yaml or --listen")
     })
