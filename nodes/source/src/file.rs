@@ -123,6 +123,8 @@ impl EventSource for FileSource {
                         None if chunk.events.is_empty() => 0.0,
                         None => {
                             let earliest = chunk.events.t.iter().copied().fold(0.0, f64::min);
+                            // The camera's absolute origin moves back with the times.
+                            self.camera.time_origin_us += (earliest * 1e6).round() as i64;
                             *self.time_shift_s.insert(-earliest)
                         }
                     };

@@ -50,7 +50,12 @@ fn text_events_stored_out_of_order_reach_their_batch() {
     let (want, late) = read_batches(&mut open(&sorted_path));
     assert_eq!((want.len(), late), (n, 0));
     let mut source = open(&shuffled_path);
+    let origin_at_open = source.camera().time_origin_us;
     let (got, late) = read_batches(&mut source);
+    // The first stored event is 6.7 us x (its index) after the earliest: the absolute origin
+    // moved back by as much.
+    let first_stored_us = t_us[shuffled[0]] as i64;
+    assert_eq!(origin_at_open - source.camera().time_origin_us, first_stored_us);
     assert_eq!(late, 0, "events of the shuffled file arrived after their batch");
     // The same events at the same times: the shuffled file's times are counted from its first
     // stored event and then shifted to its earliest, so they may differ in the last bits.
