@@ -83,6 +83,12 @@ impl Source for SourceNode {
     }
 }
 
+/// The `reorder_window_ms` parameter in seconds (checked by the source that takes it).
+fn reorder_window_s(cfg: &NodeConfig) -> Result<f64, BoxError> {
+    let ms: f64 = cfg.param("reorder_window_ms")?;
+    Ok(ms * 1e-3)
+}
+
 fn path_param(cfg: &NodeConfig) -> Result<std::path::PathBuf, BoxError> {
     let path: Option<String> = cfg.param_opt("path")?;
     // The runtime prefixes set-up errors with the node's name.
@@ -114,9 +120,9 @@ fn open(cfg: &NodeConfig) -> Result<Box<dyn EventSource>, BoxError> {
                 imu_time_offset_s: cfg.param_opt("imu_time_offset_s")?,
                 sensor: None,
             };
-            let mut source = Evimo2Source::open(&path_param(cfg)?, &options, seconds)?;
-            let window_ms: f64 = cfg.param("reorder_window_ms")?;
-            source.set_reorder_window(window_ms * 1e-3)?;
+            let path = path_param(cfg)?;
+            let mut source = Evimo2Source::open(&path, &options, seconds)?;
+            source.set_reorder_window(reorder_window_s(cfg)?)?;
             let rotation: String = cfg.param("rotation_source")?;
             let rotation = rotation.parse::<RotationSource>()?;
             if rotation == RotationSource::Imu {
@@ -124,15 +130,14 @@ fn open(cfg: &NodeConfig) -> Result<Box<dyn EventSource>, BoxError> {
                 let explicit = options.imu_to_camera.is_some() || options.imu_time_offset_s.is_some();
                 source.check_imu(mode.parse::<ImuCheckMode>()?, explicit);
             }
-            source.set_rotation_source(rotation, &path_param(cfg)?)?;
+            source.set_rotation_source(rotation, &path)?;
             Ok(Box::new(source))
         }
         "file" => {
             let camera_file: Option<String> = cfg.param_opt("camera_file")?;
             let camera_file = camera_file.map(std::path::PathBuf::from);
             let mut source = FileSource::open(&path_param(cfg)?, camera_file.as_deref(), seconds)?;
-            let window_ms: f64 = cfg.param("reorder_window_ms")?;
-            source.set_reorder_window(window_ms * 1e-3)?;
+            source.set_reorder_window(reorder_window_s(cfg)?)?;
             Ok(Box::new(source))
         }
         "pattern" => Ok(Box::new(Pattern::new(PatternParams {
