@@ -159,6 +159,34 @@ pub fn markdown(r: &PipelineRow, graph: &Path) -> String {
     s
 }
 
+/// Runs the benchmark `runs` times, prints each run's table and (with two runs or more) the
+/// [`summary`], and writes them to `pipeline.md` and the rows to `pipeline.json` in the
+/// working folder (one run: its row; several: the list).
+pub fn run_and_write(options: &PipelineOptions, runs: u32) -> anyhow::Result<()> {
+    let mut rows = Vec::new();
+    let mut md = String::new();
+    for _ in 0..runs {
+        let row = bench(options)?;
+        let run_md = markdown(&row, &options.graph);
+        println!("{run_md}");
+        md.push_str(&run_md);
+        md.push('\n');
+        rows.push(row);
+    }
+    if let Some(summary) = summary(&rows) {
+        println!("{summary}");
+        md.push_str(&summary);
+        md.push('\n');
+    }
+    std::fs::write(options.work.join("pipeline.md"), &md)?;
+    let json = match rows.as_slice() {
+        [one] => serde_json::to_string_pretty(one)?,
+        all => serde_json::to_string_pretty(all)?,
+    };
+    std::fs::write(options.work.join("pipeline.json"), json)?;
+    Ok(())
+}
+
 /// With two runs or more, a line with the median, lowest and highest end-to-end rate (M
 /// events/s) and the median start-up; `None` for a single run.
 pub fn summary(rows: &[PipelineRow]) -> Option<String> {

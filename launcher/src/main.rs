@@ -340,37 +340,16 @@ fn main() -> ExitCode {
                     runs,
                 }),
             ..
-        } => (|| {
-            let options = bench_pipeline::PipelineOptions {
-                graph: graph.clone(),
+        } => bench_pipeline::run_and_write(
+            &bench_pipeline::PipelineOptions {
+                graph,
                 scene,
                 seed,
                 seconds,
-                work: work.clone(),
-            };
-            let mut rows = Vec::new();
-            let mut md = String::new();
-            for _ in 0..runs {
-                let row = bench_pipeline::bench(&options)?;
-                let run_md = bench_pipeline::markdown(&row, &graph);
-                println!("{run_md}");
-                md.push_str(&run_md);
-                md.push('\n');
-                rows.push(row);
-            }
-            if let Some(summary) = bench_pipeline::summary(&rows) {
-                println!("{summary}");
-                md.push_str(&summary);
-                md.push('\n');
-            }
-            std::fs::write(work.join("pipeline.md"), &md)?;
-            let json = match rows.as_slice() {
-                [one] => serde_json::to_string_pretty(one)?,
-                all => serde_json::to_string_pretty(all)?,
-            };
-            std::fs::write(work.join("pipeline.json"), json)?;
-            Ok(())
-        })(),
+                work,
+            },
+            runs,
+        ),
         Command::Bench {
             what: Some(BenchWhat::Transport { slices, work, json }),
             ..
