@@ -708,3 +708,49 @@ fn a_benchmark_runs_beside_another_graph_on_the_graphs_port() {
     assert!(row["events"].as_u64().unwrap() > 0, "{row}");
     assert!(run.stdout.contains("M events/s"), "{}", run.stdout);
 }
+
+/// The plane-fit node holds each slice until the next one arrives (its look-ahead reaches into
+/// it) and fits the last one when the stream ends: every slice gets its flow. With a lock-step
+/// window of 1 holding would stall the graph (the slicer waits for consumers that wait for the
+/// held flow), so the node fits each slice on its own and says so.
+#[test]
+fn the_normal_flow_node_looks_into_the_next_slice_and_still_sends_every_slice() {
+    let run_with = |window: Option<u32>| {
+        let dir = tempfile::tempdir().unwrap();
+        let mut graph = repo_graph_on_loopback("graphs/normal-flow.yaml", free_port());
+        if let Some(w) = window {
+            graph = graph.replace("mode: lockstep", &format!("mode: lockstep\nwindow: {w}"));
+        }
+        let (g, out) = graph_file(dir.path(), &graph);
+        let run = Launcher::start(
+            dir.path(),
+            &[
+                "run",
+                g.to_str().unwrap(),
+                "--out",
+                out.to_str().unwrap(),
+                "--set",
+                "source.seconds=0.3",
+                "-q",
+            ],
+            "a",
+        )
+        .wait(Duration::from_secs(240));
+        assert!(run.status.success(), "window {window:?}: run failed:\n{}", run.stderr);
+        let score = read_json(&out.join("normal-flow-score-flow.json"));
+        let log = std::fs::read_to_string(out.join("logs/flow.log")).unwrap_or_default();
+        (score, log, dir)
+    };
+    let (held, held_log, _a) = run_with(None);
+    let (alone, alone_log, _b) = run_with(Some(1));
+    // 0.3 s in 30 ms slices (ten, and the slicer's last, partial one), each with its flow,
+    // whether the node held them or not.
+    assert!(held["slices"].as_u64().unwrap() >= 10, "{held}");
+    assert_eq!(held["slices"], alone["slices"]);
+    assert_eq!(held["events"], alone["events"]);
+    assert!(!held_log.contains("lookahead_across_slices needs"), "{held_log}");
+    assert!(alone_log.contains("lookahead_across_slices needs"), "{alone_log}");
+    // Looking into the next slice changes the fits of each slice's last events.
+    let coverage = |v: &serde_json::Value| v["score"]["all"]["coverage"].as_f64().unwrap();
+    assert_ne!(coverage(&held), coverage(&alone));
+}

@@ -8,7 +8,8 @@
 //! planar parameters, several variants separated by ';'), VERBOSE (per-slice cluster reports:
 //! `[B][*]events:planar/warp/relres/angle`, B = merged into the background, * = most of its
 //! events on a true object), DIRS (per-slice direction error of the merger and of the final,
-//! and the angle the true and the estimated direction turned since the previous slice), SEGS
+//! and the angle the true and the estimated direction turned since the previous slice), DIRVEC
+//! (per slice: span, estimated and true direction and the slice's IMU rate, for filter studies), SEGS
 //! (per slice: each true object's clustered events in clusters it is the majority of (pure) or
 //! not (mixed), and each final segment's events per true object id),
 //! FLOW_MIN_CONF (the plane-fit estimator's min_confidence; default 0 as in graph.yaml),
@@ -25,6 +26,9 @@
 //! or DROPTAIL=-x (only those take the true length).
 //! DEBUG_FIT: per slice, how many of the object's and of the background's events lie inside the
 //! planar segmenter's previous-foreground mask (whether the mask keeps the object out of the fit).
+//! XLA=0: the plane fit's look-ahead stops at the slice's end (the node's
+//! `lookahead_across_slices: false`).
+//! TQ_MS: event times floored to multiples of this many ms (frame-stamped simulators).
 //! SLICE_MS: the slice length (default 30 ms, as graph.yaml). SIM_SET: the simulator's sensor,
 //! IMU and texture settings (see `sim_override`).
 //! OVERSEG_K / OVERSEG_LAMBDA: the over-segmentation's cluster count and flow weight.
@@ -405,10 +409,18 @@ fn main() -> anyhow::Result<()> {
             ..SlicerParams::default()
         })?;
         let mut slices: Vec<(Slice, Truth, (f64, f64))> = Vec::new();
+        let tq: f64 = env_or("TQ_MS", 0.0f64)? * 1e-3;
         let mut t = 0.0;
         loop {
             t += 0.01;
-            let Some(b) = src.next_batch(t)? else { break };
+            let Some(mut b) = src.next_batch(t)? else { break };
+            // TQ_MS: event times floored to multiples of this (a simulator that stamps events
+            // at frame times).
+            if tq > 0.0 {
+                for t in &mut b.events.t {
+                    *t = (*t / tq).floor() * tq;
+                }
+            }
             let packet = evseg_schemas::EventPacket {
                 camera: camera.clone(),
                 events: b.events,
@@ -450,9 +462,20 @@ fn main() -> anyhow::Result<()> {
                 f64::from(truth.flow_y[i]),
             )
         };
+        // The look-ahead reaches into the next slice as the node's default does
+        // (`lookahead_across_slices`); XLA=0 fits each slice on its own.
+        let across = env_or("XLA", u8::from(est.params().lookahead_across_slices))? != 0;
         let flows: Vec<NormalFlow> = slices
             .iter()
-            .map(|(s, truth, _)| {
+            .enumerate()
+            .map(|(k, (s, truth, _))| {
+                let fit_slice =
+                    |est: &mut PlaneFitEstimator| -> Result<NormalFlow, evseg_normal_flow::EstimatorError> {
+                        let next = slices.get(k + 1).filter(|_| across).map(|(n, _, _)| &n.events);
+                        let mut f = NormalFlow::default();
+                        est.process_with_next_into(&s.events, next, &mut f)?;
+                        Ok(f)
+                    };
                 if ideal {
                     let mut f = NormalFlow::default();
                     for i in 0..s.events.len() {
@@ -463,7 +486,7 @@ fn main() -> anyhow::Result<()> {
                     }
                     Ok(f)
                 } else if truemag {
-                    let mut f = est.process(&s.events)?;
+                    let mut f = fit_slice(&mut est)?;
                     for i in 0..s.events.len() {
                         let (nx, ny) = (f64::from(f.nx[i]), f64::from(f.ny[i]));
                         let len = (nx * nx + ny * ny).sqrt();
@@ -499,14 +522,14 @@ fn main() -> anyhow::Result<()> {
                     }
                     Ok(f)
                 } else if let Some(cp) = cons {
-                    let mut f = est.process(&s.events)?;
+                    let mut f = fit_slice(&mut est)?;
                     let st =
                         evseg_normal_flow::consensus(&s.events, &mut f, s.camera.width, s.camera.height, &cp);
                     cstat.0 += st.valid;
                     cstat.1 += st.replaced;
                     Ok(f)
                 } else {
-                    est.process(&s.events)
+                    fit_slice(&mut est)
                 }
             })
             .collect::<Result<_, _>>()?;
@@ -1031,6 +1054,13 @@ fn main() -> anyhow::Result<()> {
                                 angle_deg(est, v),
                                 turn_true,
                                 turn_est
+                            );
+                        }
+                        if std::env::var("DIRVEC").is_ok() {
+                            let w = rate.map_or([f64::NAN; 3], |r| r.mean);
+                            println!(
+                                "  dirvec {:.4} {:.4} est {:.6} {:.6} {:.6} true {:.6} {:.6} {:.6} w {:.6} {:.6} {:.6}",
+                                span.0, span.1, est[0], est[1], est[2], v[0], v[1], v[2], w[0], w[1], w[2]
                             );
                         }
                         prev_dirs = Some((v, est));

@@ -3,7 +3,8 @@
 //! (so that a speed change can be shown to leave every estimate bit-identical).
 //!
 //! `cargo run --release -p evseg-normal-flow --example flow_speed -- [scene] [seed] [seconds]`
-//! (default `two-objects 7 3`, as `evseg bench pipeline`). The simulated events are cached in
+//! (default `two-objects 7 3`, as `evseg bench pipeline`); `XLA=0` fits each slice on its own
+//! instead of letting the look-ahead reach into the next slice as the node does. The simulated events are cached in
 //! `/tmp/flow_speed-<scene>-<seed>-<seconds>.bin` so that a second run counts the estimator only.
 //! Prints the events, the estimator's time (s) and an FNV-1a digest of `nx`, `ny`, `confidence`.
 
@@ -32,12 +33,16 @@ fn main() -> anyhow::Result<()> {
         ..PlaneFitParams::default()
     };
     let mut est = PlaneFitEstimator::new(&camera, params)?;
+    // XLA=0: each slice fitted on its own (the node's `lookahead_across_slices: false`).
+    let across = params.lookahead_across_slices && std::env::var("XLA").map_or(true, |v| v != "0");
     let mut out = NormalFlow::default();
     let mut digest = 0xcbf2_9ce4_8422_2325u64;
     let mut n = 0usize;
     let start = Instant::now();
-    for events in &slices {
-        est.process_into(events, &mut out)?;
+    for (k, events) in slices.iter().enumerate() {
+        // As the node: the look-ahead reaches into the next slice (`lookahead_across_slices`).
+        let next = slices.get(k + 1).filter(|_| across);
+        est.process_with_next_into(events, next, &mut out)?;
         n += events.len();
         for v in out.nx.iter().chain(&out.ny).chain(&out.confidence) {
             for b in v.to_bits().to_le_bytes() {

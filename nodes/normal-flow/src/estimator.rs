@@ -173,7 +173,27 @@ impl PlaneFitEstimator {
 
     /// As [`process`](Self::process), writing into `out` (cleared first; reuses its buffers).
     pub fn process_into(&mut self, events: &Events, out: &mut NormalFlow) -> Result<(), EstimatorError> {
+        self.process_with_next_into(events, None, out)
+    }
+
+    /// As [`process_into`](Self::process_into), with the look-ahead reaching into `next` (the
+    /// following slice's events, or any prefix of them): its events up to
+    /// [`PlaneFitParams::lookahead_s`] after the last event of `events` are written to the
+    /// surfaces before the last fits, so that the events at the end of the slice see as much of
+    /// the future as those in its middle. They are neither fitted nor counted here; give them
+    /// again with their own slice, whose fits then read the same surfaces. Without it the last
+    /// `lookahead_s` of each slice is fitted on a shorter look-ahead, and those lengths come out
+    /// too long (normal-flow README, "Look-ahead across slices").
+    pub fn process_with_next_into(
+        &mut self,
+        events: &Events,
+        next: Option<&Events>,
+        out: &mut NormalFlow,
+    ) -> Result<(), EstimatorError> {
         check_columns(events)?;
+        if let Some(next) = next {
+            check_columns(next)?;
+        }
         let n = events.len();
         out.nx.clear();
         out.ny.clear();
@@ -183,7 +203,7 @@ impl PlaneFitEstimator {
         out.confidence.resize(n, 0.0);
         let width = self.width;
         let jacobian = std::mem::take(&mut self.jacobian);
-        self.run(events, |i, est, _| {
+        self.run(events, next, |i, est, _| {
             let ahead = i + PREFETCH_AHEAD;
             if let (Some(&x), Some(&y)) = (events.x.get(ahead), events.y.get(ahead))
                 && let Some(j) = jacobian.get(y as usize * width + x as usize)
@@ -207,7 +227,7 @@ impl PlaneFitEstimator {
     pub fn process_pixels(&mut self, events: &Events) -> Result<Vec<PixelEstimate>, EstimatorError> {
         check_columns(events)?;
         let mut out = vec![PixelEstimate::INVALID; events.len()];
-        self.run(events, |i, est, _| out[i] = est);
+        self.run(events, None, |i, est, _| out[i] = est);
         Ok(out)
     }
 
@@ -220,7 +240,7 @@ impl PlaneFitEstimator {
     ) -> Result<Vec<(PixelEstimate, Option<PlaneFit>)>, EstimatorError> {
         check_columns(events)?;
         let mut out = vec![(PixelEstimate::INVALID, None); events.len()];
-        self.run(events, |i, est, fit| out[i] = (est, fit));
+        self.run(events, None, |i, est, fit| out[i] = (est, fit));
         Ok(out)
     }
 
@@ -228,8 +248,15 @@ impl PlaneFitEstimator {
     /// plane)`
     /// to `sink`. Causal (each event fitted right after it is written) when `lookahead_s` is 0;
     /// otherwise an event is fitted once the first event later than `t + lookahead_s` arrives
-    /// (or at the end of the slice), with the neighbours written up to then.
-    fn run(&mut self, events: &Events, mut sink: impl FnMut(usize, PixelEstimate, Option<PlaneFit>)) {
+    /// (or at the end of the slice), with the neighbours written up to then. The events of
+    /// `next` within `lookahead_s` of the slice's last event are written (not fitted) after the
+    /// slice's own, so that its last events get the whole look-ahead too.
+    fn run(
+        &mut self,
+        events: &Events,
+        next_slice: Option<&Events>,
+        mut sink: impl FnMut(usize, PixelEstimate, Option<PlaneFit>),
+    ) {
         let n = events.len();
         let la = self.params.lookahead_s;
         if la <= 0.0 {
@@ -252,6 +279,22 @@ impl PlaneFitEstimator {
             }
             self.prefetch_pixel(events, j + PREFETCH_AHEAD);
             written[j] = self.write_event(events.t[j], events.x[j], events.y[j], events.p[j]);
+        }
+        if let (Some(ahead), Some(&t_last)) = (next_slice, events.t.last()) {
+            for j in 0..ahead.len() {
+                let t = ahead.t[j];
+                if t.is_nan() || t > t_last + la {
+                    // Past the look-ahead of the slice's last event (or not a time at all).
+                    break;
+                }
+                while next < n && (!written[next] || events.t[next] + la < t) {
+                    self.prefetch_window(events, next + PREFETCH_AHEAD);
+                    let est = self.fit_written(written[next], events, next, la);
+                    sink(next, est, self.last_fit);
+                    next += 1;
+                }
+                self.write_ahead(t, ahead.x[j], ahead.y[j], ahead.p[j]);
+            }
         }
         while next < n {
             self.prefetch_window(events, next + PREFETCH_AHEAD);
@@ -315,6 +358,17 @@ impl PlaneFitEstimator {
     }
 
     /// Counts the event and writes it to its surface; false when it is ignored.
+    /// Writes an event of the next slice to its surface for the look-ahead of this slice's last
+    /// fits: no counters and no clock (the event is counted when its own slice comes); events
+    /// outside the sensor or without a finite time are skipped.
+    fn write_ahead(&mut self, t: f64, x: u16, y: u16, p: u8) {
+        let (xu, yu) = (x as usize, y as usize);
+        if xu < self.width && yu < self.height && t.is_finite() {
+            let own = &mut self.surface[usize::from(p != 0)][yu * self.width + xu];
+            *own = own.max(t);
+        }
+    }
+
     fn write_event(&mut self, t: f64, x: u16, y: u16, p: u8) -> bool {
         self.stats.events += 1;
         let (xu, yu) = (x as usize, y as usize);

@@ -10,8 +10,8 @@ use evseg_normal_flow::{
     ConsensusParams, NodeScore, PlaneFitEstimator, PlaneFitParams, Score, write_run_score,
 };
 use evseg_runtime::describe::Describe;
-use evseg_runtime::{BoxError, Inputs, NodeConfig, Outputs, Stage, run_stage};
-use evseg_schemas::{NormalFlow, Slice, Truth};
+use evseg_runtime::{BoxError, Inputs, Mode, NodeConfig, Outputs, Stage, run_stage};
+use evseg_schemas::{Events, NormalFlow, Slice, Truth};
 use serde::Serialize;
 
 struct NormalFlowNode {
@@ -23,6 +23,20 @@ struct NormalFlowNode {
     estimator: Option<PlaneFitEstimator>,
     score: NodeScore,
     slices: u64,
+    /// Whether each slice waits for the next one ([`PlaneFitParams::lookahead_across_slices`],
+    /// off when the lock-step window is too small for it).
+    across_slices: bool,
+    /// The slice waiting for the next one's first events.
+    held: Option<Held>,
+}
+
+/// A slice the node has received but not yet fitted: it waits for the next slice, whose first
+/// events its look-ahead reads.
+struct Held {
+    seq: u64,
+    span: (f64, f64),
+    slice: Slice,
+    truth: Option<Truth>,
 }
 
 /// What the node writes at the end of a run with truth.
@@ -56,20 +70,22 @@ struct RunReport<'a> {
     score: Score,
 }
 
-impl Stage for NormalFlowNode {
-    fn process(&mut self, input: &Inputs, out: &mut Outputs) -> Result<(), BoxError> {
-        let slice: Slice = input.get("slices")?;
-        let (t_start, t_end) = input.span_of("slices").unwrap_or(input.span());
+impl NormalFlowNode {
+    /// Fits `held`, with the look-ahead reaching into `next` when given, and sends its flow.
+    fn fit_and_send(&mut self, held: Held, next: Option<&Events>, out: &mut Outputs) -> Result<(), BoxError> {
+        let Held {
+            seq,
+            span: (t_start, t_end),
+            slice,
+            truth,
+        } = held;
         let rebuild = match &self.estimator {
             Some(e) => e.camera() != &slice.camera,
             None => true,
         };
         if rebuild {
             if self.estimator.is_some() {
-                tracing::warn!(
-                    seq = input.seq(),
-                    "camera changed: surfaces of active events restarted"
-                );
+                tracing::warn!(seq, "camera changed: surfaces of active events restarted");
             }
             self.estimator = Some(PlaneFitEstimator::new(&slice.camera, self.params)?);
         }
@@ -77,27 +93,54 @@ impl Stage for NormalFlowNode {
             return Ok(());
         };
         let before = estimator.stats();
-        let mut flow: NormalFlow = estimator.process(&slice.events)?;
+        let mut flow = NormalFlow::default();
+        estimator.process_with_next_into(&slice.events, next, &mut flow)?;
         let after = estimator.stats();
         self.replaced += consensus_on_slice(&slice, &mut flow, &self.consensus).replaced as u64;
         let ignored = (after.out_of_sensor - before.out_of_sensor) + (after.bad_time - before.bad_time);
         if ignored > 0 {
             tracing::warn!(
-                seq = input.seq(),
+                seq,
                 ignored,
                 "events outside the sensor or with a bad time ignored"
             );
         }
-        out.send("flow", input.seq(), t_start, t_end, &flow)?;
+        out.send("flow", seq, t_start, t_end, &flow)?;
         self.slices += 1;
-        if let Some(truth) = input.get_opt::<Truth>("truth")? {
+        if let Some(truth) = truth {
             self.score
-                .add_slice(&slice.camera, rebuild, input.seq(), &slice.events, &flow, &truth)?;
+                .add_slice(&slice.camera, rebuild, seq, &slice.events, &flow, &truth)?;
         }
         Ok(())
     }
+}
 
-    fn finish(&mut self, _out: &mut Outputs) -> Result<(), BoxError> {
+impl Stage for NormalFlowNode {
+    fn process(&mut self, input: &Inputs, out: &mut Outputs) -> Result<(), BoxError> {
+        let slice: Slice = input.get("slices")?;
+        let current = Held {
+            seq: input.seq(),
+            span: input.span_of("slices").unwrap_or(input.span()),
+            truth: input.get_opt::<Truth>("truth")?,
+            slice,
+        };
+        if !self.across_slices {
+            return self.fit_and_send(current, None, out);
+        }
+        if let Some(held) = self.held.take() {
+            // The next slice's events only help a slice of the same camera.
+            let next = (held.slice.camera == current.slice.camera).then_some(&current.slice.events);
+            self.fit_and_send(held, next, out)?;
+        }
+        self.held = Some(current);
+        Ok(())
+    }
+
+    fn finish(&mut self, out: &mut Outputs) -> Result<(), BoxError> {
+        // The last slice has no next one to look into.
+        if let Some(held) = self.held.take() {
+            self.fit_and_send(held, None, out)?;
+        }
         let Some(score) = self.score.summary() else {
             return Ok(());
         };
@@ -189,6 +232,11 @@ fn main() -> ExitCode {
         "non-causal fit: neighbours up to this after the event (within the slice), ms; 0 = causal",
     )
     .param(
+        "lookahead_across_slices",
+        d.lookahead_across_slices,
+        "the look-ahead reaches into the next slice: each slice's flow is sent when the next slice arrives (one slice of latency; needs a lock-step window of at least 2)",
+    )
+    .param(
         "max_direction_sd_deg",
         if d.max_direction_sd_rad.is_finite() {
             serde_json::Value::from(d.max_direction_sd_rad.to_degrees())
@@ -239,6 +287,7 @@ fn main() -> ExitCode {
             max_speed_px_s: cfg.param::<f64>("max_speed_px_s")?,
             min_confidence: cfg.param::<f64>("min_confidence")?,
             lookahead_s: cfg.param::<f64>("lookahead_ms")? * 1e-3,
+            lookahead_across_slices: cfg.param::<bool>("lookahead_across_slices")?,
             max_direction_sd_rad: cfg
                 .param_opt::<f64>("max_direction_sd_deg")?
                 .map_or(f64::INFINITY, f64::to_radians),
@@ -249,6 +298,19 @@ fn main() -> ExitCode {
             check_skip_direction_sd_rad: cfg.param::<f64>("check_skip_direction_sd_deg")?.to_radians(),
         };
         params.validate()?;
+        // In lock-step mode a held slice is sent only when the next one arrives, and the
+        // slicer sends the next one only while fewer than `window` slices wait for their
+        // consumers, some of which wait for this node's flow: a window of 1 would stall.
+        let across_slices = params.lookahead_across_slices
+            && params.lookahead_s > 0.0
+            && !(cfg.mode == Mode::Lockstep && cfg.window < 2);
+        if params.lookahead_across_slices && !across_slices && params.lookahead_s > 0.0 {
+            tracing::warn!(
+                node = %cfg.node,
+                window = cfg.window,
+                "lookahead_across_slices needs a lock-step window of at least 2; each slice is fitted on its own"
+            );
+        }
         let consensus = consensus_from_config(cfg)?;
         Ok(NormalFlowNode {
             node: cfg.node.clone(),
@@ -259,6 +321,8 @@ fn main() -> ExitCode {
             estimator: None,
             score: NodeScore::default(),
             slices: 0,
+            across_slices,
+            held: None,
         })
     })
 }

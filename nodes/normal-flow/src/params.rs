@@ -63,6 +63,18 @@ pub struct PlaneFitParams {
     /// both, IoU mask 25.25 -> 29.62 %, direction error 45.5 -> 26.7 deg (clearance alone
     /// 29.93 %, 35.5 deg). No latency beyond the slice: the look-ahead stays inside the slice.
     pub lookahead_s: f64,
+    /// Let the look-ahead reach into the next slice: the node holds each slice until the next
+    /// one arrives and writes that slice's first `lookahead_s` to the surfaces before fitting the
+    /// held slice's last events ([`crate::PlaneFitEstimator::process_with_next_into`]), so every
+    /// event gets the whole look-ahead, not only those more than `lookahead_s` before the slice's
+    /// end. The flow of a slice then leaves the node one slice later (30 ms of latency in live
+    /// runs); the last slice of a run is fitted without it. The estimator itself does not read
+    /// this field; it tells its callers whether to wait for the next slice. Default true:
+    /// the lengths fitted near a slice's end came out too long (median +1.5 to +3.2 % with less
+    /// than 2 px of travel left, crate README, "Length noise and the egomotion"), an error shared
+    /// by every slice's tail; measured on the method (`method_on_sim`, three sets of fourteen
+    /// sequences; crate README, "Look-ahead across slices").
+    pub lookahead_across_slices: bool,
     /// Fits whose gradient direction is this uncertain (radians, [`PlaneFit::direction_sd_rad`](
     /// crate::PlaneFit::direction_sd_rad)) or more are invalid: the length of a normal flow
     /// measured along a wrong direction is off by the flow along the edge times the sine of the
@@ -127,6 +139,7 @@ impl Default for PlaneFitParams {
             max_speed_px_s: 20_000.0,
             min_confidence: 0.5,
             lookahead_s: 0.03,
+            lookahead_across_slices: true,
             max_direction_sd_rad: f64::INFINITY,
             check_radius: 3,
             check_max_angle_rad: 10f64.to_radians(),

@@ -476,3 +476,105 @@ fn a_surface_that_bends_outside_the_window_fails_the_scale_check() {
         .count();
     assert_eq!(kept, centre.len());
 }
+
+/// `events` split at time `t_split`: (before, from then on).
+fn split_at(events: &Events, t_split: f64) -> (Events, Events) {
+    let (mut a, mut b) = (Events::default(), Events::default());
+    for i in 0..events.len() {
+        let part = if events.t[i] < t_split { &mut a } else { &mut b };
+        part.push(events.t[i], events.x[i], events.y[i], events.p[i]);
+    }
+    (a, b)
+}
+
+#[test]
+fn lookahead_across_slices_fits_a_slice_end_like_its_middle() {
+    // The jittered edge of the look-ahead test, cut into two slices while it crosses the sensor.
+    let speed = 150.0;
+    let events = jittered_edge_events(speed, 0.4);
+    let t_split = 0.2;
+    let (first, second) = split_at(&events, t_split);
+    assert!(first.len() > 1000 && second.len() > 1000);
+    let params = PlaneFitParams::default();
+    let la = params.lookahead_s;
+
+    // Each slice on its own: the first slice's last events see less of the future.
+    let mut alone = PlaneFitEstimator::new(&camera(), params).expect("valid");
+    let mut flow_alone = evseg_schemas::NormalFlow::default();
+    alone.process_into(&first, &mut flow_alone).expect("consistent");
+    let mut second_alone = evseg_schemas::NormalFlow::default();
+    alone
+        .process_into(&second, &mut second_alone)
+        .expect("consistent");
+
+    // The first slice fitted with the second's first events on the surfaces.
+    let mut across = PlaneFitEstimator::new(&camera(), params).expect("valid");
+    let mut flow_across = evseg_schemas::NormalFlow::default();
+    across
+        .process_with_next_into(&first, Some(&second), &mut flow_across)
+        .expect("consistent");
+    assert_eq!(
+        across.stats().events,
+        first.len() as u64,
+        "the next slice's events are not counted yet"
+    );
+    let mut second_across = evseg_schemas::NormalFlow::default();
+    across
+        .process_into(&second, &mut second_across)
+        .expect("consistent");
+    assert_eq!(across.stats().events, events.len() as u64);
+    assert_eq!(across.stats().out_of_order, 0, "{:?}", across.stats());
+
+    // The tail of the first slice: biased alone, like the middle across slices.
+    let tail_from = t_split - 0.5 * la;
+    let (ratio_alone, n_alone) = median_ratio_between(&first, &flow_alone, speed, tail_from, f64::INFINITY);
+    let (ratio_across, n_across) =
+        median_ratio_between(&first, &flow_across, speed, tail_from, f64::INFINITY);
+    let (ratio_middle, _) = median_ratio_between(&first, &flow_across, speed, 0.05, t_split - la);
+    println!(
+        "tail of the first slice: median speed ratio alone {ratio_alone:.4} ({n_alone}), across {ratio_across:.4} ({n_across}); middle {ratio_middle:.4}"
+    );
+    assert!(n_alone > 100 && n_across > 100);
+    assert!(ratio_alone > 1.01, "alone {ratio_alone}");
+    assert!(
+        (ratio_across - ratio_middle).abs() < 0.5 * (ratio_alone - ratio_middle).abs(),
+        "across {ratio_across}, alone {ratio_alone}, middle {ratio_middle}"
+    );
+
+    // The first slice across slices is exactly the two slices fitted as one, cut back.
+    let mut whole = PlaneFitEstimator::new(&camera(), params).expect("valid");
+    let both = whole.process(&events).expect("consistent");
+    let n = first.len();
+    assert_eq!(flow_across.nx[..], both.nx[..n]);
+    assert_eq!(flow_across.ny[..], both.ny[..n]);
+    assert_eq!(flow_across.confidence[..], both.confidence[..n]);
+    // And the second slice comes out the same either way: its own look-ahead covers what the
+    // first slice's fits wrote ahead.
+    assert_eq!(second_across.nx, second_alone.nx);
+    assert_eq!(second_across.confidence, second_alone.confidence);
+}
+
+/// Median of `|p| / speed` over the valid, checkable events with times in `[t0, t1)` (the
+/// flow's normalized lengths back to pixels through the pinhole camera), and their count.
+fn median_ratio_between(
+    events: &Events,
+    flow: &evseg_schemas::NormalFlow,
+    speed: f64,
+    t0: f64,
+    t1: f64,
+) -> (f64, usize) {
+    let mut ratios: Vec<f64> = (0..events.len())
+        .filter(|&i| {
+            flow.confidence[i] > 0.0
+                && events.t[i] >= t0
+                && events.t[i] < t1
+                && checkable(events.x[i], events.y[i], 2, 0.0)
+        })
+        .map(|i| F * f64::from(flow.nx[i]).hypot(f64::from(flow.ny[i])) / speed)
+        .collect();
+    ratios.sort_by(f64::total_cmp);
+    (
+        ratios.get(ratios.len() / 2).copied().unwrap_or(f64::NAN),
+        ratios.len(),
+    )
+}
