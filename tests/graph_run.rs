@@ -736,7 +736,11 @@ fn the_normal_flow_node_looks_into_the_next_slice_and_still_sends_every_slice() 
             "a",
         )
         .wait(Duration::from_secs(240));
-        assert!(run.status.success(), "window {window:?}: run failed:\n{}", run.stderr);
+        assert!(
+            run.status.success(),
+            "window {window:?}: run failed:\n{}",
+            run.stderr
+        );
         let score = read_json(&out.join("normal-flow-score-flow.json"));
         let log = std::fs::read_to_string(out.join("logs/flow.log")).unwrap_or_default();
         (score, log, dir)
