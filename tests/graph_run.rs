@@ -39,6 +39,28 @@ fn launch(dir: &Path, graph: &Path, out: &Path) -> Launcher {
     )
 }
 
+/// Runs the graph text `graph` (written as `dir/graph.yaml`) with `source.seconds` set, into
+/// `dir/run`; returns the finished launcher and the run folder.
+fn run_for_seconds(dir: &Path, graph: &str, seconds: f64) -> (Finished, PathBuf) {
+    let (g, out) = graph_file(dir, graph);
+    let seconds = format!("source.seconds={seconds}");
+    let run = Launcher::start(
+        dir,
+        &[
+            "run",
+            g.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--set",
+            &seconds,
+            "-q",
+        ],
+        "a",
+    )
+    .wait(Duration::from_secs(240));
+    (run, out)
+}
+
 fn graph(port: u16, mode: &str, rate: u64, seconds: f64, delay_ms: f64, extra_slicer: &str) -> String {
     format!(
         r#"name: t{port}
@@ -638,21 +660,7 @@ fn the_normal_flow_compare_graph_scores_both_estimators_on_the_same_slices() {
     let dir = tempfile::tempdir().unwrap();
     let port = free_port();
     let graph = repo_graph_on_loopback("graphs/normal-flow-compare.yaml", port);
-    let (g, out) = graph_file(dir.path(), &graph);
-    let run = Launcher::start(
-        dir.path(),
-        &[
-            "run",
-            g.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-            "--set",
-            "source.seconds=0.2",
-            "-q",
-        ],
-        "a",
-    )
-    .wait(Duration::from_secs(240));
+    let (run, out) = run_for_seconds(dir.path(), &graph, 0.2);
     assert!(run.status.success(), "run failed:\n{}", run.stderr);
     let plane = read_json(&out.join("normal-flow-score-plane_fit.json"));
     let learned = read_json(&out.join("normal-flow-score-learned.json"));
@@ -721,21 +729,7 @@ fn the_normal_flow_node_looks_into_the_next_slice_and_still_sends_every_slice() 
         if let Some(w) = window {
             graph = graph.replace("mode: lockstep", &format!("mode: lockstep\nwindow: {w}"));
         }
-        let (g, out) = graph_file(dir.path(), &graph);
-        let run = Launcher::start(
-            dir.path(),
-            &[
-                "run",
-                g.to_str().unwrap(),
-                "--out",
-                out.to_str().unwrap(),
-                "--set",
-                "source.seconds=0.3",
-                "-q",
-            ],
-            "a",
-        )
-        .wait(Duration::from_secs(240));
+        let (run, out) = run_for_seconds(dir.path(), &graph, 0.3);
         assert!(
             run.status.success(),
             "window {window:?}: run failed:\n{}",
