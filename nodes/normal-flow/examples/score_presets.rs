@@ -6,7 +6,9 @@
 //! (default 1), `--radius R`, `--dt-min-ms X`, `--dt-max-ms X`, `--min-confidence C` (plane
 //! fit's, default 0.5), `--learned FILE` (default nodes/normal-flow/weights/learned.bin; `none`
 //! for the plane fit only), `--ensemble K` (learned, default 1), `--learned-min-confidence C`
-//! (learned, default 0.7), `--json` (one JSON line per preset and estimator).
+//! (learned, default 0.7), `--lookahead-across-slices B` (plane fit, `true` by default as in
+//! the node: each slice's look-ahead reaches into the next slice; `false` fits each slice on its
+//! own), `--json` (one JSON line per preset and estimator).
 //! Default presets: one-object, two-objects, fast-rotation.
 
 use evseg_normal_flow::{
@@ -40,6 +42,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             }
             "--lookahead-ms" => params.lookahead_s = value::<f64>(&mut args, &a)? * 1e-3,
             "--outlier-ms" => params.outlier_s = value::<f64>(&mut args, &a)? * 1e-3,
+            "--lookahead-across-slices" => params.lookahead_across_slices = value(&mut args, &a)?,
             "--json" => json = true,
             "--seed" => seed = value(&mut args, &a)?,
             "--learned" => learned_path = value(&mut args, &a)?,
@@ -74,20 +77,39 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let mut scorer_l = Scorer::new(&camera, score_params);
         let mut t = 0.0;
         let (mut time_p, mut time_l) = (0.0, 0.0);
+        // The plane fit's slice waiting for the next one (as the node holds it).
+        let mut held: Option<evseg_sim::SimChunk> = None;
+        let mut flow = evseg_schemas::NormalFlow::default();
         while t < seconds - 1e-9 {
             let t0 = t;
             t = (t + slice_s).min(seconds);
             let chunk = sim.next_chunk(t);
             let clock = std::time::Instant::now();
-            let flow = est.process(&chunk.events)?;
+            if params.lookahead_across_slices {
+                if let Some(h) = held.take() {
+                    est.process_with_next_into(&h.events, Some(&chunk.events), &mut flow)?;
+                    scorer.add_slice(&h.events, &flow, &h.truth)?;
+                }
+            } else {
+                est.process_into(&chunk.events, &mut flow)?;
+                scorer.add_slice(&chunk.events, &flow, &chunk.truth)?;
+            }
             time_p += clock.elapsed().as_secs_f64();
-            scorer.add_slice(&chunk.events, &flow, &chunk.truth)?;
             if let Some(l) = learned.as_mut() {
                 let clock = std::time::Instant::now();
                 let flow = l.process(&chunk.events, t0, t)?;
                 time_l += clock.elapsed().as_secs_f64();
                 scorer_l.add_slice(&chunk.events, &flow, &chunk.truth)?;
             }
+            if params.lookahead_across_slices {
+                held = Some(chunk);
+            }
+        }
+        if let Some(h) = held.take() {
+            let clock = std::time::Instant::now();
+            est.process_with_next_into(&h.events, None, &mut flow)?;
+            time_p += clock.elapsed().as_secs_f64();
+            scorer.add_slice(&h.events, &flow, &h.truth)?;
         }
         let mut rows = vec![("plane-fit", scorer.summary(), time_p)];
         if learned.is_some() {
