@@ -357,7 +357,6 @@ impl PlaneFitEstimator {
         self.fit_event(t, x, y, p, 0.0)
     }
 
-    /// Counts the event and writes it to its surface; false when it is ignored.
     /// Writes an event of the next slice to its surface for the look-ahead of this slice's last
     /// fits: no counters and no clock (the event is counted when its own slice comes); events
     /// outside the sensor or without a finite time are skipped.
@@ -369,6 +368,7 @@ impl PlaneFitEstimator {
         }
     }
 
+    /// Counts the event and writes it to its surface; false when it is ignored.
     fn write_event(&mut self, t: f64, x: u16, y: u16, p: u8) -> bool {
         self.stats.events += 1;
         let (xu, yu) = (x as usize, y as usize);

@@ -94,7 +94,11 @@ impl NormalFlowNode {
         };
         let before = estimator.stats();
         let mut flow = NormalFlow::default();
-        estimator.process_with_next_into(&slice.events, next, &mut flow)?;
+        // Named by its own sequence number: a held slice is fitted while the next one is the
+        // runtime's current slice.
+        estimator
+            .process_with_next_into(&slice.events, next, &mut flow)
+            .map_err(|e| format!("slice {seq}: {e}"))?;
         let after = estimator.stats();
         self.replaced += consensus_on_slice(&slice, &mut flow, &self.consensus).replaced as u64;
         let ignored = (after.out_of_sensor - before.out_of_sensor) + (after.bad_time - before.bad_time);
@@ -127,13 +131,19 @@ impl Stage for NormalFlowNode {
         if !self.across_slices {
             return self.fit_and_send(current, None, out);
         }
-        if let Some(held) = self.held.take() {
-            // The next slice's events only help a slice of the same camera.
-            let next = (held.slice.camera == current.slice.camera).then_some(&current.slice.events);
-            self.fit_and_send(held, next, out)?;
-        }
+        let result = match self.held.take() {
+            Some(held) => {
+                // The next slice's events only help a slice of the same camera, and only when
+                // their columns agree (if not, that slice's own fit reports it).
+                let usable =
+                    held.slice.camera == current.slice.camera && current.slice.events.is_consistent();
+                self.fit_and_send(held, usable.then_some(&current.slice.events), out)
+            }
+            None => Ok(()),
+        };
+        // Held whatever became of the previous slice, so that one bad slice costs only itself.
         self.held = Some(current);
-        Ok(())
+        result
     }
 
     fn finish(&mut self, out: &mut Outputs) -> Result<(), BoxError> {
@@ -229,7 +239,7 @@ fn main() -> ExitCode {
     .param(
         "lookahead_ms",
         d.lookahead_s * 1e3,
-        "non-causal fit: neighbours up to this after the event (within the slice), ms; 0 = causal",
+        "non-causal fit: neighbours up to this after the event (within the slice, or into the next one with lookahead_across_slices), ms; 0 = causal",
     )
     .param(
         "lookahead_across_slices",
