@@ -283,8 +283,12 @@ impl PlaneFitEstimator {
         if let (Some(ahead), Some(&t_last)) = (next_slice, events.t.last()) {
             for j in 0..ahead.len() {
                 let t = ahead.t[j];
-                if t.is_nan() || t > t_last + la {
-                    // Past the look-ahead of the slice's last event (or not a time at all).
+                if !t.is_finite() {
+                    // Not a time: skipped (the event is counted with its own slice).
+                    continue;
+                }
+                if t > t_last + la {
+                    // Past the look-ahead of the slice's last event.
                     break;
                 }
                 while next < n && (!written[next] || events.t[next] + la < t) {

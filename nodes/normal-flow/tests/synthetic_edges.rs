@@ -252,6 +252,44 @@ fn malformed_events_are_counted_and_ignored() {
 }
 
 #[test]
+fn a_malformed_next_slice_is_skipped_or_refused_never_a_panic() {
+    let events = jittered_edge_events(150.0, 0.4);
+    let (first, second) = split_at(&events, 0.2);
+    let t = first.t[first.len() - 1];
+    // Events outside the sensor and without a time in the next slice are not written ahead and
+    // not counted: the same flow as with the clean next slice.
+    let mut bad = Events::default();
+    bad.push(t + 0.001, W, 3, 1);
+    bad.push(t + 0.001, 3, u16::MAX, 1);
+    bad.push(f64::NAN, 3, 3, 1);
+    for i in 0..second.len() {
+        bad.push(second.t[i], second.x[i], second.y[i], second.p[i]);
+    }
+    let mut clean_est = PlaneFitEstimator::new(&camera(), PlaneFitParams::default()).expect("valid");
+    let mut clean = evseg_schemas::NormalFlow::default();
+    clean_est
+        .process_with_next_into(&first, Some(&second), &mut clean)
+        .expect("consistent");
+    let mut est = PlaneFitEstimator::new(&camera(), PlaneFitParams::default()).expect("valid");
+    let mut out = evseg_schemas::NormalFlow::default();
+    est.process_with_next_into(&first, Some(&bad), &mut out)
+        .expect("consistent");
+    let s = est.stats();
+    assert_eq!(
+        (s.events, s.out_of_sensor, s.bad_time),
+        (first.len() as u64, 0, 0)
+    );
+    assert!(out.nx == clean.nx && out.confidence == clean.confidence);
+    // And the next slice did change the fits (so the comparison above says something).
+    let mut alone = PlaneFitEstimator::new(&camera(), PlaneFitParams::default()).expect("valid");
+    let alone_flow = alone.process(&first).expect("consistent");
+    assert!(clean.nx != alone_flow.nx, "the clean next slice changed nothing");
+    // A next slice whose columns disagree is an error, not a panic.
+    bad.p.pop();
+    assert!(est.process_with_next_into(&first, Some(&bad), &mut out).is_err());
+}
+
+#[test]
 fn bad_parameters_are_refused() {
     let cam = camera();
     for params in [
