@@ -26,17 +26,15 @@ fn repo_graph_on_loopback(name: &str, port: u16) -> String {
 
 /// Starts `evseg run graph --out run -q` in `dir`.
 fn launch(dir: &Path, graph: &Path, out: &Path) -> Launcher {
-    Launcher::start(
-        dir,
-        &[
-            "run",
-            graph.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-            "-q",
-        ],
-        "a",
-    )
+    launch_with(dir, graph, out, &[])
+}
+
+/// [`launch`] with `extra` arguments (e.g. `--set node.param=value`) before `-q`.
+fn launch_with(dir: &Path, graph: &Path, out: &Path, extra: &[&str]) -> Launcher {
+    let mut args = vec!["run", graph.to_str().unwrap(), "--out", out.to_str().unwrap()];
+    args.extend_from_slice(extra);
+    args.push("-q");
+    Launcher::start(dir, &args, "a")
 }
 
 /// Runs the graph text `graph` (written as `dir/graph.yaml`) with `source.seconds` set, into
@@ -44,20 +42,7 @@ fn launch(dir: &Path, graph: &Path, out: &Path) -> Launcher {
 fn run_for_seconds(dir: &Path, graph: &str, seconds: f64) -> (Finished, PathBuf) {
     let (g, out) = graph_file(dir, graph);
     let seconds = format!("source.seconds={seconds}");
-    let run = Launcher::start(
-        dir,
-        &[
-            "run",
-            g.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-            "--set",
-            &seconds,
-            "-q",
-        ],
-        "a",
-    )
-    .wait(Duration::from_secs(240));
+    let run = launch_with(dir, &g, &out, &["--set", &seconds]).wait(Duration::from_secs(240));
     (run, out)
 }
 
