@@ -48,7 +48,13 @@ impl FileSource {
             .map_err(|e| SourceError::Read(e.to_string()))?;
         let camera = evseg_formats::build_camera_info(decoder.as_ref(), camera_file)
             .map_err(|e| SourceError::Param(format!("{}: {e}", path.display())))?;
-        Ok(Self {
+        Ok(Self::from_decoder(decoder, camera, seconds))
+    }
+
+    /// A source reading `decoder` (already opened), with `camera` describing it; stops after
+    /// `seconds` of sensor time when given.
+    pub fn from_decoder(decoder: Box<dyn EventDecoder>, camera: CameraInfo, seconds: Option<f64>) -> Self {
+        Self {
             decoder,
             camera,
             pending: ReorderBuffer::default(),
@@ -58,7 +64,7 @@ impl FileSource {
             eof: false,
             seconds,
             time_shift_s: None,
-        })
+        }
     }
 
     /// How far past each batch's end the file is read to sort late-stored events into their
@@ -125,6 +131,11 @@ impl EventSource for FileSource {
                             let earliest = chunk.events.t.iter().copied().fold(0.0, f64::min);
                             // The camera's absolute origin moves back with the times.
                             self.camera.time_origin_us += (earliest * 1e6).round() as i64;
+                            // IMU samples read before the first events (a file that starts
+                            // with an IMU packet) move with them, or they would sit `earliest`
+                            // off the events' clock.
+                            self.imu.iter_mut().for_each(|s| s.t -= earliest);
+                            self.imu_last_t = self.imu_last_t.map(|t| t - earliest);
                             *self.time_shift_s.insert(-earliest)
                         }
                     };
@@ -160,5 +171,67 @@ impl EventSource for FileSource {
 
     fn has_truth(&self) -> bool {
         false
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use evseg_formats::{Chunk, DecodeError, DecodeStats, Format};
+
+    /// A decoder giving fixed chunks: `(event times, IMU times)` each, relative seconds.
+    struct Chunks(std::collections::VecDeque<(Vec<f64>, Vec<f64>)>);
+
+    impl EventDecoder for Chunks {
+        fn decode_into(&mut self, out: &mut Chunk, _max_events: usize) -> Result<bool, DecodeError> {
+            *out = Chunk::with_capacity(4);
+            let Some((events, imu)) = self.0.pop_front() else {
+                return Ok(false);
+            };
+            for t in events {
+                out.events.push(t, 1, 1, 1);
+            }
+            out.imu = imu
+                .into_iter()
+                .map(|t| ImuSample {
+                    t,
+                    accel: [0.0; 3],
+                    gyro: [0.0; 3],
+                })
+                .collect();
+            Ok(true)
+        }
+        fn geometry(&self) -> (u16, u16) {
+            (4, 4)
+        }
+        fn time_origin_us(&self) -> Option<i64> {
+            Some(0)
+        }
+        fn format(&self) -> Format {
+            Format::Text
+        }
+        fn stats(&self) -> DecodeStats {
+            DecodeStats::default()
+        }
+    }
+
+    #[test]
+    fn imu_samples_read_before_the_first_events_move_with_the_events_clock() {
+        // The file starts with an IMU packet; the first events hold one stored 4 ms before the
+        // first stored event, so every time moves by +4 ms, the early IMU samples included.
+        let chunks = vec![
+            (vec![], vec![0.000, 0.005]),
+            (vec![0.000, -0.004, 0.002, 0.012], vec![0.010, 0.015]),
+        ];
+        let mut camera = CameraInfo::pinhole(4, 4, 2.0, "test");
+        camera.imu_time_offset_s = 0.0;
+        let mut source = FileSource::from_decoder(Box::new(Chunks(chunks.into())), camera, None);
+        source.set_reorder_window(0.0).unwrap();
+        let batch = source.next_batch(0.1).unwrap().unwrap();
+        let events: Vec<f64> = batch.events.t.iter().map(|t| (t * 1e3).round()).collect();
+        let imu: Vec<f64> = batch.imu.iter().map(|s| (s.t * 1e3).round()).collect();
+        assert_eq!(events, [0.0, 4.0, 6.0, 16.0]);
+        assert_eq!(imu, [4.0, 9.0, 14.0, 19.0]);
+        assert_eq!(source.camera().time_origin_us, -4000);
     }
 }

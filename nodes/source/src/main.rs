@@ -6,6 +6,7 @@ use std::time::Instant;
 
 use evseg_runtime::describe::Describe;
 use evseg_runtime::{BoxError, Mode, NodeConfig, Outputs, Source, run_source};
+use evseg_schemas::describe::{NodeDescription, Param};
 use evseg_schemas::digest::EventDigest;
 use evseg_schemas::{EventPacket, Truth};
 use evseg_source::evimo2::{Evimo2Source, ImuCheckMode, RotationSource};
@@ -153,8 +154,57 @@ fn open(cfg: &NodeConfig) -> Result<Box<dyn EventSource>, BoxError> {
     }
 }
 
-fn main() -> ExitCode {
-    let description = Describe::new(
+/// Source parameters that only some kinds read. A value other than the default given to any
+/// other kind would be ignored, so the node names it in a warning instead (for example
+/// `rotation_source: trajectory` on a `file` recording, whose rotation still comes from its IMU).
+const KIND_PARAMS: &[(&str, &[&str])] = &[
+    ("path", &["evimo2", "file"]),
+    ("scene", &["synthetic"]),
+    ("seed", &["synthetic", "pattern"]),
+    ("camera_file", &["file"]),
+    ("imu_topic", &["evimo2"]),
+    ("imu_to_camera", &["evimo2"]),
+    ("imu_time_offset_s", &["evimo2"]),
+    ("rotation_source", &["evimo2"]),
+    ("imu_check", &["evimo2"]),
+    ("reorder_window_ms", &["evimo2", "file"]),
+    ("rate", &["pattern"]),
+    ("width", &["pattern"]),
+    ("height", &["pattern"]),
+];
+
+/// The parameters of `params` that source kind `kind` does not read although they differ from
+/// their defaults (`defaults`, from the node's description), each with the kinds that read it.
+/// Numbers compare by value (`50` equals `50.0`).
+fn ignored_params(
+    kind: &str,
+    params: &serde_json::Map<String, serde_json::Value>,
+    defaults: &[Param],
+) -> Vec<(&'static str, &'static [&'static str])> {
+    let same = |a: &serde_json::Value, b: &serde_json::Value| match (a.as_f64(), b.as_f64()) {
+        (Some(x), Some(y)) => x == y,
+        _ => a == b,
+    };
+    KIND_PARAMS
+        .iter()
+        .filter(|(_, kinds)| !kinds.contains(&kind))
+        .filter(|(name, _)| {
+            let Some(value) = params.get(*name) else {
+                return false;
+            };
+            let default = defaults
+                .iter()
+                .find(|p| p.name == *name)
+                .map_or(&serde_json::Value::Null, |p| &p.default);
+            !same(value, default)
+        })
+        .copied()
+        .collect()
+}
+
+/// The node's description: ports and parameters with their defaults.
+fn description() -> NodeDescription {
+    Describe::new(
         "evseg-source",
         "Publishes event packets and ground truth from a recording, the simulator or a test pattern",
     )
@@ -183,8 +233,23 @@ fn main() -> ExitCode {
     .param("width", 640, "pattern: sensor width, pixels")
     .param("height", 480, "pattern: sensor height, pixels")
     .param("seed", 7, "seed (pattern, simulator)")
-    .build();
-    run_source(description, |cfg: &NodeConfig| {
+    .build()
+}
+
+fn main() -> ExitCode {
+    let description = description();
+    let defaults = description.params.clone();
+    run_source(description, move |cfg: &NodeConfig| {
+        let kind: String = cfg.param("kind")?;
+        for (name, kinds) in ignored_params(&kind, &cfg.params, &defaults) {
+            tracing::warn!(
+                node = %cfg.node,
+                param = name,
+                value = %cfg.params.get(name).unwrap_or(&serde_json::Value::Null),
+                "parameter `{name}` is read by source kind {} only; ignored for kind `{kind}`",
+                kinds.join(" and ")
+            );
+        }
         let batch_ms: f64 = cfg.param("batch_ms")?;
         if !(batch_ms.is_finite() && batch_ms > 0.0) {
             return Err(format!("batch_ms must be > 0, got {batch_ms}").into());
@@ -208,4 +273,76 @@ fn main() -> ExitCode {
             summary_path: cfg.run_dir.join(format!("source-{}.json", cfg.node)),
         })
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use serde_json::json;
+
+    fn params(pairs: &[(&str, serde_json::Value)]) -> serde_json::Map<String, serde_json::Value> {
+        pairs.iter().map(|(k, v)| (k.to_string(), v.clone())).collect()
+    }
+
+    #[test]
+    fn every_kind_specific_parameter_is_one_the_node_describes() {
+        let d = description();
+        for (name, kinds) in KIND_PARAMS {
+            assert!(
+                d.params.iter().any(|p| p.name == *name),
+                "{name} is not described"
+            );
+            assert!(!kinds.is_empty(), "{name} names no kind");
+        }
+    }
+
+    #[test]
+    fn a_parameter_of_another_source_kind_is_reported_unless_it_keeps_its_default() {
+        let d = description();
+        // The default graph switched to a file recording on the command line: its simulator
+        // settings keep their defaults, so nothing is reported.
+        let p = params(&[
+            ("kind", json!("file")),
+            ("path", json!("x.raw")),
+            ("scene", json!("two-objects")),
+            ("seed", json!(7)),
+            ("reorder_window_ms", json!(50)),
+            ("rotation_source", json!("imu")),
+        ]);
+        assert!(ignored_params("file", &p, &d.params).is_empty());
+        // The ground-truth rotation asked of a file recording, and a simulator scene: both named.
+        let p = params(&[
+            ("kind", json!("file")),
+            ("rotation_source", json!("trajectory")),
+            ("scene", json!("fast-rotation")),
+            ("camera_file", json!("cam.json")),
+        ]);
+        let names: Vec<&str> = ignored_params("file", &p, &d.params)
+            .iter()
+            .map(|(n, _)| *n)
+            .collect();
+        assert_eq!(names, ["scene", "rotation_source"]);
+        // The same settings on the kinds that read them are not reported.
+        assert!(
+            ignored_params(
+                "evimo2",
+                &params(&[("rotation_source", json!("trajectory"))]),
+                &d.params
+            )
+            .is_empty()
+        );
+        assert!(
+            ignored_params(
+                "synthetic",
+                &params(&[("scene", json!("fast-rotation"))]),
+                &d.params
+            )
+            .is_empty()
+        );
+        // An optional parameter (default null) given to a kind that does not read it.
+        let p = params(&[("imu_time_offset_s", json!(-0.01))]);
+        let found = ignored_params("synthetic", &p, &d.params);
+        assert_eq!(found.len(), 1);
+        assert_eq!(found[0], ("imu_time_offset_s", &["evimo2"][..]));
+    }
 }
