@@ -11,6 +11,7 @@ mod replay;
 mod resolve;
 mod run;
 mod rundir;
+mod shm_limit;
 mod supervise;
 mod view;
 mod watchdog;

@@ -31,6 +31,10 @@ pub const STARTUP_TIMEOUT: Duration = Duration::from_secs(60);
 /// and an idle consumer repeats its last progress this often (a lost message must not stop
 /// the graph). Long against a normal slice (tens of ms), short against a test's patience.
 pub const RESEND_AFTER: Duration = Duration::from_secs(1);
+/// Lock-step: resends of the same unconsumed frames after which a producer also says what
+/// commonly makes consumers lose every frame (not only a slow consumer: a slice takes tens of
+/// milliseconds, ten resends are ten seconds).
+pub const STALL_HINT_AFTER_RESENDS: u32 = 10;
 /// A finished node repeats its final progress this often while its producers are still there.
 pub const DONE_REPEAT: Duration = Duration::from_millis(200);
 /// How long a finished node waits at most for its producers to leave (see `Running::finish`).
@@ -313,11 +317,28 @@ impl Outputs {
             // credit comes for RESEND_AFTER, the frames the slowest consumer has not consumed
             // are published again (consumers drop the duplicates, and repeat their progress
             // while idle, see `stage_loop`).
+            let mut resends_without_progress = 0u32;
+            let mut last_from = None;
             while !book.wait_until(&node, &watch, Some(RESEND_AFTER), |consumed, _| {
                 has_credit(consumed, &consumers, seq, window)
             })? {
                 let from = book.check_min(&consumers);
+                resends_without_progress = if last_from == Some(from) {
+                    resends_without_progress + 1
+                } else {
+                    0
+                };
+                last_from = Some(from);
                 let frames = p.publish_recent_again(from)?;
+                if frames > 0 && resends_without_progress + 1 == STALL_HINT_AFTER_RESENDS {
+                    tracing::warn!(
+                        node = %node,
+                        port,
+                        from,
+                        "the consumers of this port are alive but have taken none of these frames in {} resends; if that lasts, their transport drops the frames: shared memory that a consumer cannot map (its locked-memory limit, `ulimit -l`) does so without an error. `zenoh: {{ shared_memory: {{ enabled: false }} }}` in graph.yaml tells",
+                        STALL_HINT_AFTER_RESENDS
+                    );
+                }
                 if frames > 0 {
                     let consumed: Vec<String> = consumers
                         .iter()

@@ -1,0 +1,158 @@
+//! Whether Zenoh's shared memory can work for the nodes this launcher starts.
+//!
+//! Zenoh 1.x locks (`mlock`) the whole of every shared-memory segment it maps: a node's own
+//! pool, which it creates at start-up, and the pool of every producer whose frames it reads.
+//! Locked memory counts against `RLIMIT_MEMLOCK` (`ulimit -l`, 8 MiB for a normal user on
+//! common Linux distributions) unless the process has `CAP_IPC_LOCK`. Where a node cannot
+//! create its pool, Zenoh logs an error and the node sends over the socket (it works, slower).
+//! Where it created its pool but a consumer cannot map it, Zenoh drops the frames at the
+//! consumer without an error, and a lock-step graph stalls for good (measured as a normal user
+//! with 4 MiB pools: the slicer never got the source's first packet). So the launcher checks the
+//! limit before it starts the nodes and turns shared memory off for all of them when any node
+//! would pass it.
+
+use evseg_graph::NodeSpec;
+
+/// Bytes Zenoh locks per process whose shared memory a node maps (its own and each producer's)
+/// besides the pool itself: its watchdog and metadata segments. Measured with Zenoh 1.10
+/// (`VmLck` of the default graph's nodes, as root, pools of 1 and 4 MiB): 1.44 MiB for a node's
+/// own, 1.27-1.32 MiB per producer mapped; 1.5 MiB keeps a margin.
+pub const ZENOH_SEGMENT_OVERHEAD_BYTES: u64 = 3 << 19;
+
+/// The memory one node would lock with shared memory on.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct NodeLock {
+    /// Node id.
+    pub node: String,
+    /// Distinct producers of its inputs among the nodes started here (their pools it maps).
+    pub producers: usize,
+    /// Bytes locked: its pool and one pool per such producer, each with
+    /// [`ZENOH_SEGMENT_OVERHEAD_BYTES`].
+    pub bytes: u64,
+}
+
+/// Per node of `nodes` (the nodes this launcher starts), what it would lock with pools of
+/// `pool_bytes`. A producer started by another machine's launcher is reached over the network,
+/// so only producers in `nodes` count.
+pub fn locked_per_node(nodes: &[NodeSpec], pool_bytes: u64) -> Vec<NodeLock> {
+    nodes
+        .iter()
+        .map(|n| {
+            let mut producers: Vec<&str> = n
+                .inputs
+                .iter()
+                .map(|i| i.from_node.as_str())
+                .filter(|p| *p != n.id && nodes.iter().any(|m| m.id == *p))
+                .collect();
+            producers.sort_unstable();
+            producers.dedup();
+            NodeLock {
+                node: n.id.clone(),
+                producers: producers.len(),
+                bytes: (pool_bytes + ZENOH_SEGMENT_OVERHEAD_BYTES) * (1 + producers.len() as u64),
+            }
+        })
+        .collect()
+}
+
+/// How much memory this process (and the nodes it starts, which inherit its limits) may lock,
+/// bytes; `None` when there is no limit (`RLIMIT_MEMLOCK` infinite, or `CAP_IPC_LOCK` in the
+/// effective capabilities, which root has outside containers).
+pub fn memlock_allowance() -> Option<u64> {
+    if has_cap_ipc_lock() {
+        return None;
+    }
+    let mut lim = libc::rlimit {
+        rlim_cur: 0,
+        rlim_max: 0,
+    };
+    // SAFETY: getrlimit writes into the struct it is given and reads nothing else.
+    if unsafe { libc::getrlimit(libc::RLIMIT_MEMLOCK, &mut lim) } != 0 {
+        // Unknown: assume no limit, as before this check (Zenoh then reports what fails).
+        return None;
+    }
+    (lim.rlim_cur != libc::RLIM_INFINITY).then_some(lim.rlim_cur)
+}
+
+/// Bit of `CAP_IPC_LOCK` in the capability sets of `/proc/<pid>/status`.
+const CAP_IPC_LOCK_BIT: u32 = 14;
+
+fn has_cap_ipc_lock() -> bool {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| cap_eff(&s))
+        .is_some_and(|caps| caps >> CAP_IPC_LOCK_BIT & 1 == 1)
+}
+
+/// The effective capability set (`CapEff:` line, hexadecimal) of a `/proc/<pid>/status` text.
+fn cap_eff(status: &str) -> Option<u64> {
+    let line = status.lines().find(|l| l.starts_with("CapEff:"))?;
+    u64::from_str_radix(line["CapEff:".len()..].trim(), 16).ok()
+}
+
+/// The node that would lock the most, when that is more than `allowance` (`None`: no limit).
+pub fn over_allowance(locks: &[NodeLock], allowance: Option<u64>) -> Option<&NodeLock> {
+    let limit = allowance?;
+    locks.iter().filter(|l| l.bytes > limit).max_by_key(|l| l.bytes)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn graph(text: &str) -> evseg_graph::Graph {
+        let describe = |binary: &str| -> Result<evseg_schemas::describe::NodeDescription, String> {
+            let mut d = evseg_runtime::describe::Describe::new(binary, "test");
+            d = match binary {
+                "src" => d.output::<evseg_schemas::EventPacket>("out", "o"),
+                "mid" => d
+                    .input::<evseg_schemas::EventPacket>("a", "i")
+                    .output::<evseg_schemas::EventPacket>("out", "o"),
+                _ => d
+                    .input::<evseg_schemas::EventPacket>("a", "i")
+                    .input::<evseg_schemas::EventPacket>("b", "i")
+                    .input::<evseg_schemas::EventPacket>("c", "i"),
+            };
+            Ok(d.build())
+        };
+        evseg_graph::check_str("g.yaml", text, &describe).unwrap()
+    }
+
+    #[test]
+    fn a_node_locks_its_pool_and_one_pool_per_distinct_local_producer() {
+        let g = graph(
+            "name: g\nnodes:\n  - { id: s, run: src }\n  - { id: m, run: mid, inputs: { a: s/out } }\n  - { id: k, run: sink, inputs: { a: s/out, b: m/out, c: s/out } }\n",
+        );
+        let mib = 1u64 << 20;
+        let locks = locked_per_node(&g.nodes, 8 * mib);
+        let by = |id: &str| locks.iter().find(|l| l.node == id).unwrap().clone();
+        assert_eq!(by("s").producers, 0);
+        assert_eq!(by("s").bytes, 8 * mib + ZENOH_SEGMENT_OVERHEAD_BYTES);
+        assert_eq!(by("m").producers, 1);
+        // `s` read twice is one segment.
+        assert_eq!(by("k").producers, 2);
+        assert_eq!(by("k").bytes, 3 * (8 * mib + ZENOH_SEGMENT_OVERHEAD_BYTES));
+        // On a machine without `s`, its frames come over the network.
+        let here: Vec<_> = g.nodes.iter().filter(|n| n.id != "s").cloned().collect();
+        assert_eq!(
+            locked_per_node(&here, 8 * mib).iter().map(|l| l.producers).max(),
+            Some(1)
+        );
+        // The node over the limit that locks the most is named; no limit, nothing.
+        assert_eq!(
+            over_allowance(&locks, Some(16 * mib)).map(|l| l.node.as_str()),
+            Some("k")
+        );
+        assert_eq!(over_allowance(&locks, Some(32 * mib)), None);
+        assert_eq!(over_allowance(&locks, None), None);
+    }
+
+    #[test]
+    fn the_effective_capabilities_are_read_from_the_status_text() {
+        let root = "Name:\tevseg\nCapInh:\t0000000000000000\nCapEff:\t000001ffffffffff\n";
+        let user = "Name:\tevseg\nCapEff:\t0000000000000000\n";
+        assert_eq!(cap_eff(root).map(|c| c >> CAP_IPC_LOCK_BIT & 1), Some(1));
+        assert_eq!(cap_eff(user), Some(0));
+        assert_eq!(cap_eff("Name:\tx\n"), None);
+    }
+}
