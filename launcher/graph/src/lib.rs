@@ -108,7 +108,7 @@ pub fn load(path: &Path, resolver: Resolver<'_>) -> Result<Graph, GraphError> {
 ///   machines:              # default: one machine `local` listening on tcp/127.0.0.1:7447
 ///     robot: { listen: ["tcp/127.0.0.1:7447"] }
 ///     base:  { listen: ["tcp/127.0.0.1:7448"], connect: ["tcp/127.0.0.1:7447"] }
-///   shared_memory: { enabled: true, pool_mib: 64 }   # local links (the defaults)
+///   shared_memory: { enabled: true, pool_mib: 32 }   # local links (the defaults)
 /// nodes:
 ///   - id: slicer           # unique, a key chunk
 ///     run: evseg-slicer    # binary

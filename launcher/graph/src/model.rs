@@ -76,14 +76,21 @@ pub struct SharedMemory {
     /// Size of each node's pool, MiB (default [`SharedMemory::DEFAULT_POOL_MIB`]). A message
     /// stays in the pool until every local consumer has released it, so the pool should hold
     /// `window` messages of the largest output: 100k-event slices are 1.3 MB, 1M-event slices
-    /// 13 MB.
+    /// 13 MB (with the simulator's ground truth, about 2.4 MB per 40k-event slice). Zenoh locks
+    /// every pool in memory, in the node that creates it and in every node that reads from it.
     pub pool_mib: u32,
 }
 
 impl SharedMemory {
-    /// Default pool size, MiB: four in-flight 1M-event slices (13 MB each) with room to spare.
-    /// Pages are touched only as they are used.
-    pub const DEFAULT_POOL_MIB: u32 = 64;
+    /// Default pool size, MiB: the lock-step window (4) of the largest slices of a 3 M events/s
+    /// camera in 30 ms slices, with their ground truth (about 6 MB each). Zenoh 1.x locks
+    /// (`mlock`) the whole pool when it creates it, and each consumer locks the pools it reads
+    /// too; so a pool costs start-up time and memory whether it is used or not. 64 MiB (the
+    /// default until 2026-12-06) locked 1.8 GiB over the default graph's nine nodes (0.9 at 32) and
+    /// took 0.28-0.33 s of start-up against 0.18-0.20 s at 32 (`evseg bench pipeline`, 2-core
+    /// AMD EPYC VM; throughput 0.87-0.88 -> 0.90-0.93 M events/s, medians of 3 runs). Larger
+    /// slices still arrive when the pool is full, through the heap and the socket.
+    pub const DEFAULT_POOL_MIB: u32 = 32;
 
     /// True for the defaults (left out of the canonical form, so graphs that do not mention
     /// shared memory hash as before).

@@ -189,7 +189,7 @@ fn read_machines(machines: Option<&Node>, p: &mut Problems) -> Vec<RawMachine> {
     entries.iter().map(|e| read_machine(e, p)).collect()
 }
 
-/// `zenoh.shared_memory: { enabled: true, pool_mib: 64 }`, defaults for what is left out.
+/// `zenoh.shared_memory: { enabled: true, pool_mib: 32 }`, defaults for what is left out.
 fn read_shared_memory(section: &Node, p: &mut Problems) -> SharedMemory {
     let mut shm = SharedMemory::default();
     let Some(fields) = shape::mapping(section, "`zenoh.shared_memory`", SHARED_MEMORY_KEYS, p) else {

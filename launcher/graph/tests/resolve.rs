@@ -175,7 +175,7 @@ fn shared_memory_defaults_and_settings() {
     assert_eq!(graph.shared_memory.pool_mib, SharedMemory::DEFAULT_POOL_MIB);
     assert_eq!(graph.machines, [Machine::default_local()]);
     let json = serde_json::to_value(&graph).unwrap();
-    assert_eq!(json["shared_memory"], json!({"enabled": false, "pool_mib": 64}));
+    assert_eq!(json["shared_memory"], json!({"enabled": false, "pool_mib": 32}));
 
     let lines = [
         "name: z",

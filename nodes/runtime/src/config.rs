@@ -46,11 +46,12 @@ pub struct ShmSettings {
 }
 
 impl Default for ShmSettings {
-    /// Enabled, 64 MiB (the graph's default, see `evseg_graph::SharedMemory`).
+    /// Enabled, 32 MiB (the graph's default, `evseg_graph::SharedMemory::DEFAULT_POOL_MIB`,
+    /// which the launcher passes to every node; this one serves configs made without a graph).
     fn default() -> Self {
         Self {
             enabled: true,
-            pool_bytes: 64 << 20,
+            pool_bytes: 32 << 20,
         }
     }
 }
