@@ -138,6 +138,11 @@ fn over_zenoh(
         quiet: true,
         ..RunOptions::default()
     })?;
+    if shared_memory && !outcome.shared_memory {
+        bail!(
+            "shared memory was turned off for the run (the locked-memory limit, see its warning), so the shared-memory column would measure the sockets; raise `ulimit -l` and run again"
+        );
+    }
     let read = |name: &str| -> anyhow::Result<serde_json::Value> {
         let p = outcome.dir.join(name);
         let text = std::fs::read_to_string(&p).with_context(|| format!("cannot read {}", p.display()))?;

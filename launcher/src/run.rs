@@ -66,6 +66,9 @@ pub struct RunOutcome {
     pub started_unix_ns: u64,
     /// The MCAP recording written by this machine's recorder, if the run was recorded.
     pub recording: Option<PathBuf>,
+    /// Whether this machine's nodes ran with shared memory (the graph's setting, unless the
+    /// locked-memory limit turned it off; see [`crate::shm_limit`]).
+    pub shared_memory: bool,
 }
 
 /// Loads and checks `path`, asking each binary for its description.
@@ -368,11 +371,15 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
         if let Some(over) = crate::shm_limit::over_allowance(&locks, crate::shm_limit::memlock_allowance()) {
             let limit = crate::shm_limit::memlock_allowance().unwrap_or(u64::MAX);
             tracing::warn!(
-                "shared memory is off for this run: node `{}` would lock {:.1} MiB (its {} MiB pool and the pools of the {} nodes it reads, which Zenoh locks in memory), above this user's locked-memory limit of {:.1} MiB (`ulimit -l`); frames go over the loopback sockets instead. Raise the limit (`memlock` in /etc/security/limits.conf, or CAP_IPC_LOCK) or lower `zenoh.shared_memory.pool_mib` in {}",
+                "shared memory is off for this run: node `{}` would lock {:.1} MiB (its {} MiB pool and those of the {} it reads, which Zenoh locks in memory), above this user's locked-memory limit of {:.1} MiB (`ulimit -l`); frames go over the loopback sockets instead. Raise the limit (`memlock` in /etc/security/limits.conf, or CAP_IPC_LOCK) or lower `zenoh.shared_memory.pool_mib` in {}",
                 over.node,
                 over.bytes as f64 / (1u64 << 20) as f64,
                 graph.shared_memory.pool_mib,
-                over.producers,
+                if over.producers == 1 {
+                    "1 node".to_string()
+                } else {
+                    format!("{} nodes", over.producers)
+                },
                 limit as f64 / (1u64 << 20) as f64,
                 opts.graph.display()
             );
@@ -526,6 +533,7 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
         seconds,
         started_unix_ns,
         recording: recorder_here,
+        shared_memory: graph.shared_memory.enabled,
     })
 }
 
