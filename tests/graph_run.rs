@@ -737,3 +737,84 @@ fn the_normal_flow_node_looks_into_the_next_slice_and_still_sends_every_slice() 
     let coverage = |v: &serde_json::Value| v["score"]["all"]["coverage"].as_f64().unwrap();
     assert_ne!(coverage(&held), coverage(&alone));
 }
+
+/// Runs `graph` (text) from a folder a normal user can write, as user `nobody` with a locked-
+/// memory limit of 8 MiB (`setpriv` and `prlimit`, util-linux), the usual limit of a normal
+/// user. `None` (the test then says why it did not run) when this process is not root or the
+/// tools are missing.
+fn run_as_normal_user(graph: &str) -> Option<(Finished, PathBuf, tempfile::TempDir)> {
+    // SAFETY: geteuid reads the process's credentials and has no preconditions.
+    if unsafe { libc::geteuid() } != 0 {
+        eprintln!("not run: running as a normal user needs root (setpriv)");
+        return None;
+    }
+    for tool in ["setpriv", "prlimit"] {
+        let found = std::process::Command::new(tool)
+            .arg("--version")
+            .output()
+            .is_ok_and(|o| o.status.success());
+        if !found {
+            eprintln!("not run: `{tool}` (util-linux) is missing");
+            return None;
+        }
+    }
+    let dir = tempfile::tempdir().unwrap();
+    use std::os::unix::fs::PermissionsExt;
+    std::fs::set_permissions(dir.path(), std::fs::Permissions::from_mode(0o777)).unwrap();
+    let (g, out) = graph_file(dir.path(), graph);
+    std::fs::set_permissions(&g, std::fs::Permissions::from_mode(0o644)).unwrap();
+    let limit = (8u64 << 20).to_string();
+    let memlock = format!("--memlock={limit}:{limit}");
+    let wrapper = [
+        "setpriv",
+        "--reuid=65534",
+        "--regid=65534",
+        "--clear-groups",
+        "--",
+        "prlimit",
+        &memlock,
+    ];
+    let args = ["run", g.to_str().unwrap(), "--out", out.to_str().unwrap(), "-q"];
+    let run = Launcher::start_wrapped(dir.path(), &wrapper, &args, "a", &[]).wait(Duration::from_secs(120));
+    Some((run, out, dir))
+}
+
+/// Zenoh locks every shared-memory pool it creates or maps. As a normal user (8 MiB of locked
+/// memory) with 4 MiB pools, the source could create its pool but the slicer could not map it,
+/// and Zenoh dropped the frames at the slicer without an error: the lock-step graph stalled for
+/// good. The launcher now turns shared memory off when a node would pass the limit, says so,
+/// and the run completes over the sockets. A graph whose nodes fit keeps shared memory on and
+/// completes too (this checks the launcher's estimate of what Zenoh locks).
+#[test]
+fn shared_memory_beyond_the_users_locked_memory_limit_is_turned_off_not_a_stall() {
+    let port = free_port();
+    let four_mib = repo_graph_on_loopback("graph.yaml", port)
+        .replace(
+            "zenoh:\n",
+            "zenoh:\n  shared_memory: { enabled: true, pool_mib: 4 }\n",
+        )
+        .replace("seconds: 1.0", "seconds: 0.3");
+    let Some((run, out, _dir)) = run_as_normal_user(&four_mib) else {
+        return;
+    };
+    assert!(run.status.success(), "run failed:\n{}", run.stderr);
+    assert!(
+        run.stderr
+            .contains("shared memory is off for this run: node `background` would lock"),
+        "{}",
+        run.stderr
+    );
+    assert!(read_json(&out.join("report").join("report.json"))["sequence"]["windows"].as_u64() >= Some(9));
+
+    let port = free_port();
+    let fits = repo_graph_on_loopback("graphs/normal-flow.yaml", port)
+        .replace(
+            "zenoh:\n",
+            "zenoh:\n  shared_memory: { enabled: true, pool_mib: 1 }\n",
+        )
+        .replace("seconds: 0.5", "seconds: 0.3");
+    let (run, out, _dir) = run_as_normal_user(&fits).unwrap();
+    assert!(run.status.success(), "run failed:\n{}", run.stderr);
+    assert!(!run.stderr.contains("shared memory is off"), "{}", run.stderr);
+    assert_no_error_logged(&out);
+}

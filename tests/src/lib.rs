@@ -169,9 +169,31 @@ impl Launcher {
 
     /// [`Launcher::start`] with extra environment variables (inherited by the nodes).
     pub fn start_with_env(cwd: &Path, args: &[&str], tag: &str, env: &[(&str, &str)]) -> Self {
+        Self::start_wrapped(cwd, &[], args, tag, env)
+    }
+
+    /// [`Launcher::start_with_env`] through `wrapper` (a command and its arguments that end by
+    /// executing `evseg <args>` in their own process, as `setpriv ... --` does, so that the
+    /// child killed on drop is the launcher itself); no wrapper when it is empty.
+    pub fn start_wrapped(
+        cwd: &Path,
+        wrapper: &[&str],
+        args: &[&str],
+        tag: &str,
+        env: &[(&str, &str)],
+    ) -> Self {
         let stdout = cwd.join(format!("{tag}.stdout"));
         let stderr = cwd.join(format!("{tag}.stderr"));
-        let child = Command::new(bin("evseg"))
+        let evseg = bin("evseg");
+        let mut command = match wrapper.split_first() {
+            Some((first, rest)) => {
+                let mut c = Command::new(first);
+                c.args(rest).arg(&evseg);
+                c
+            }
+            None => Command::new(&evseg),
+        };
+        let child = command
             .args(args)
             .envs(env.iter().copied())
             .current_dir(cwd)
