@@ -9,7 +9,8 @@
 //! `[B][*]events:planar/warp/relres/angle`, B = merged into the background, * = most of its
 //! events on a true object), DIRS (per-slice direction error of the merger and of the final,
 //! and the angle the true and the estimated direction turned since the previous slice), DIRVEC
-//! (per slice: span, estimated and true direction and the slice's IMU rate, for filter studies), SEGS
+//! (per slice: span, estimated and true direction, the slice's IMU rate, and the final background's
+//! median derotated and rotational normal-flow lengths and sample count, for filter studies), SEGS
 //! (per slice: each true object's clustered events in clusters it is the majority of (pure) or
 //! not (mixed), and each final segment's events per true object id),
 //! FLOW_MIN_CONF (the plane-fit estimator's min_confidence; default 0 as in graph.yaml),
@@ -1058,9 +1059,44 @@ fn main() -> anyhow::Result<()> {
                         }
                         if std::env::var("DIRVEC").is_ok() {
                             let w = rate.map_or([f64::NAN; 3], |r| r.mean);
+                            // The final background's median derotated and rotational normal-flow
+                            // lengths (normalized units/s) and its sample count: how much of its
+                            // flow the translation explains.
+                            let mut table = evseg_geometry::TableCache::default();
+                            let samples = evseg_geometry::flow_samples(
+                                table.get(&s.camera),
+                                &s.events,
+                                f,
+                                rate.as_ref(),
+                                0.0,
+                            )?;
+                            let bg: Vec<&evseg_geometry::FlowSample> =
+                                samples.iter().filter(|sm| label[sm.index] == 0).collect();
+                            let median = |mut v: Vec<f64>| {
+                                if v.is_empty() {
+                                    return f64::NAN;
+                                }
+                                let mid = v.len() / 2;
+                                *v.select_nth_unstable_by(mid, f64::total_cmp).1
+                            };
+                            let derot = median(bg.iter().map(|sm| sm.n_derot.abs()).collect());
+                            let rot = median(bg.iter().map(|sm| (sm.n - sm.n_derot).abs()).collect());
                             println!(
-                                "  dirvec {:.4} {:.4} est {:.6} {:.6} {:.6} true {:.6} {:.6} {:.6} w {:.6} {:.6} {:.6}",
-                                span.0, span.1, est[0], est[1], est[2], v[0], v[1], v[2], w[0], w[1], w[2]
+                                "  dirvec {:.4} {:.4} est {:.6} {:.6} {:.6} true {:.6} {:.6} {:.6} w {:.6} {:.6} {:.6} bg {:.6} {:.6} {}",
+                                span.0,
+                                span.1,
+                                est[0],
+                                est[1],
+                                est[2],
+                                v[0],
+                                v[1],
+                                v[2],
+                                w[0],
+                                w[1],
+                                w[2],
+                                derot,
+                                rot,
+                                bg.len()
                             );
                         }
                         prev_dirs = Some((v, est));
