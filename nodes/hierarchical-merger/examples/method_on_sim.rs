@@ -149,6 +149,8 @@ fn apply(
                 hier.egomotion.grid_cols = f as usize;
             }
             "prior_floor" => bg.prior_floor = f,
+            "hypothesis_max_samples" => bg.hypothesis_max_samples = f as usize,
+            "hypothesis_refine_iterations" => bg.hypothesis_refine_iterations = f as usize,
             "alpha_max" => bg.alpha_max = f,
             "merge_threshold" => hier.merge_threshold = f,
             "fill_cell_px" => hier.fill_cell_px = f as u16,
