@@ -75,7 +75,7 @@ pub struct EgomotionParams {
     pub clear_px: u16,
     /// Most samples of an estimate; more are thinned by a regular stride in the order given (0 =
     /// all). Default 8000: the 3-parameter direction is set by far fewer (the
-    /// background merger's hypotheses use 3000), and the SVM and the depth refinement cost
+    /// background merger's hypotheses use 600), and the SVM and the depth refinement cost
     /// grows with the count; with the repaired normal flow a 30 ms slice of a 640 x 480 scene
     /// keeps up to ~20000 background samples, which put both mergers on the pipeline's
     /// critical path (`evseg bench pipeline`).
