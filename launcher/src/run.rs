@@ -368,8 +368,9 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
     if graph.shared_memory.enabled {
         let pool = u64::from(graph.shared_memory.pool_mib) << 20;
         let locks = crate::shm_limit::locked_per_node(&nodes, pool);
-        if let Some(over) = crate::shm_limit::over_allowance(&locks, crate::shm_limit::memlock_allowance()) {
-            let limit = crate::shm_limit::memlock_allowance().unwrap_or(u64::MAX);
+        let allowance = crate::shm_limit::memlock_allowance();
+        if let Some(over) = crate::shm_limit::over_allowance(&locks, allowance) {
+            let limit = allowance.unwrap_or(u64::MAX);
             tracing::warn!(
                 "shared memory is off for this run: node `{}` would lock {:.1} MiB (its {} MiB pool and those of the {} it reads, which Zenoh locks in memory), above this user's locked-memory limit of {:.1} MiB (`ulimit -l`); frames go over the loopback sockets instead. Raise the limit (`memlock` in /etc/security/limits.conf, or CAP_IPC_LOCK) or lower `zenoh.shared_memory.pool_mib` in {}",
                 over.node,

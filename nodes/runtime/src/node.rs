@@ -317,20 +317,21 @@ impl Outputs {
             // credit comes for RESEND_AFTER, the frames the slowest consumer has not consumed
             // are published again (consumers drop the duplicates, and repeat their progress
             // while idle, see `stage_loop`).
-            let mut resends_without_progress = 0u32;
+            // Resends in a row of frames from the same one on (no consumer progress between).
+            let mut resends_from_same = 0u32;
             let mut last_from = None;
             while !book.wait_until(&node, &watch, Some(RESEND_AFTER), |consumed, _| {
                 has_credit(consumed, &consumers, seq, window)
             })? {
                 let from = book.check_min(&consumers);
-                resends_without_progress = if last_from == Some(from) {
-                    resends_without_progress + 1
+                resends_from_same = if last_from == Some(from) {
+                    resends_from_same + 1
                 } else {
-                    0
+                    1
                 };
                 last_from = Some(from);
                 let frames = p.publish_recent_again(from)?;
-                if frames > 0 && resends_without_progress + 1 == STALL_HINT_AFTER_RESENDS {
+                if frames > 0 && resends_from_same == STALL_HINT_AFTER_RESENDS {
                     tracing::warn!(
                         node = %node,
                         port,
