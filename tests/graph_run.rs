@@ -738,11 +738,11 @@ fn the_normal_flow_node_looks_into_the_next_slice_and_still_sends_every_slice() 
     assert_ne!(coverage(&held), coverage(&alone));
 }
 
-/// Runs `graph` (text) from a folder a normal user can write, as user `nobody` with a locked-
-/// memory limit of 8 MiB (`setpriv` and `prlimit`, util-linux), the usual limit of a normal
-/// user. `None` (the test then says why it did not run) when this process is not root or the
-/// tools are missing.
-fn run_as_normal_user(graph: &str) -> Option<(Finished, PathBuf, tempfile::TempDir)> {
+/// Checks (`evseg check`), then runs `graph` (text) from a folder a normal user can write, as
+/// user `nobody` with a locked-memory limit of 8 MiB (`setpriv` and `prlimit`, util-linux), the
+/// usual limit of a normal user. `None` (the test then says why it did not run) when this
+/// process is not root or the tools are missing.
+fn check_and_run_as_normal_user(graph: &str) -> Option<(Finished, Finished, PathBuf, tempfile::TempDir)> {
     // SAFETY: geteuid reads the process's credentials and has no preconditions.
     if unsafe { libc::geteuid() } != 0 {
         eprintln!("not run: running as a normal user needs root (setpriv)");
@@ -774,9 +774,11 @@ fn run_as_normal_user(graph: &str) -> Option<(Finished, PathBuf, tempfile::TempD
         "prlimit",
         &memlock,
     ];
+    let check = Launcher::start_wrapped(dir.path(), &wrapper, &["check", g.to_str().unwrap()], "c", &[])
+        .wait(Duration::from_secs(60));
     let args = ["run", g.to_str().unwrap(), "--out", out.to_str().unwrap(), "-q"];
     let run = Launcher::start_wrapped(dir.path(), &wrapper, &args, "a", &[]).wait(Duration::from_secs(120));
-    Some((run, out, dir))
+    Some((check, run, out, dir))
 }
 
 /// Zenoh locks every shared-memory pool it creates or maps. As a normal user (8 MiB of locked
@@ -794,9 +796,18 @@ fn shared_memory_beyond_the_users_locked_memory_limit_is_turned_off_not_a_stall(
             "zenoh:\n  shared_memory: { enabled: true, pool_mib: 4 }\n",
         )
         .replace("seconds: 1.0", "seconds: 0.3");
-    let Some((run, out, _dir)) = run_as_normal_user(&four_mib) else {
+    let Some((check, run, out, _dir)) = check_and_run_as_normal_user(&four_mib) else {
         return;
     };
+    // `evseg check` says beforehand what the run will do.
+    assert!(check.status.success(), "{}", check.stderr);
+    assert!(
+        check
+            .stdout
+            .contains("on machine `local` as this user, `evseg run` turns shared memory off: node `background` would lock"),
+        "{}",
+        check.stdout
+    );
     assert!(run.status.success(), "run failed:\n{}", run.stderr);
     assert!(
         run.stderr
@@ -813,7 +824,12 @@ fn shared_memory_beyond_the_users_locked_memory_limit_is_turned_off_not_a_stall(
             "zenoh:\n  shared_memory: { enabled: true, pool_mib: 1 }\n",
         )
         .replace("seconds: 0.5", "seconds: 0.3");
-    let (run, out, _dir) = run_as_normal_user(&fits).unwrap();
+    let (check, run, out, _dir) = check_and_run_as_normal_user(&fits).unwrap();
+    assert!(
+        check.status.success() && !check.stdout.contains("warning"),
+        "{}",
+        check.stdout
+    );
     assert!(run.status.success(), "run failed:\n{}", run.stderr);
     assert!(!run.stderr.contains("shared memory is off"), "{}", run.stderr);
     assert_no_error_logged(&out);

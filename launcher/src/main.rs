@@ -270,6 +270,17 @@ fn check(graph: &Path) -> anyhow::Result<()> {
         g.mode.as_str(),
         g.machines.iter().map(|m| m.name.as_str()).collect::<Vec<_>>()
     );
+    // What `evseg run` would do about shared memory on this machine, for each machine's nodes
+    // (run there as this user).
+    for m in &g.machines {
+        let nodes: Vec<_> = g.nodes_on(&m.name).into_iter().cloned().collect();
+        if let Some(why) = shm_limit::over_limit(&nodes, &g.shared_memory, graph) {
+            println!(
+                "warning: on machine `{}` as this user, `evseg run` turns shared memory off: {why}",
+                m.name
+            );
+        }
+    }
     Ok(())
 }
 

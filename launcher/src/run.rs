@@ -365,27 +365,11 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
         None => graph.nodes.clone(),
     };
 
-    if graph.shared_memory.enabled {
-        let pool = u64::from(graph.shared_memory.pool_mib) << 20;
-        let locks = crate::shm_limit::locked_per_node(&nodes, pool);
-        let allowance = crate::shm_limit::memlock_allowance();
-        if let Some(over) = crate::shm_limit::over_allowance(&locks, allowance) {
-            let limit = allowance.unwrap_or(u64::MAX);
-            tracing::warn!(
-                "shared memory is off for this run: node `{}` would lock {:.1} MiB (its {} MiB pool and those of the {} it reads, which Zenoh locks in memory), above this user's locked-memory limit of {:.1} MiB (`ulimit -l`); frames go over the loopback sockets instead. Raise the limit (`memlock` in /etc/security/limits.conf, or CAP_IPC_LOCK) or lower `zenoh.shared_memory.pool_mib` in {}",
-                over.node,
-                over.bytes as f64 / (1u64 << 20) as f64,
-                graph.shared_memory.pool_mib,
-                if over.producers == 1 {
-                    "1 node".to_string()
-                } else {
-                    format!("{} nodes", over.producers)
-                },
-                limit as f64 / (1u64 << 20) as f64,
-                opts.graph.display()
-            );
-            graph.shared_memory.enabled = false;
-        }
+    if let Some(why) = crate::shm_limit::over_limit(&nodes, &graph.shared_memory, &opts.graph) {
+        tracing::warn!(
+            "shared memory is off for this run: {why}; frames go over the loopback sockets instead"
+        );
+        graph.shared_memory.enabled = false;
     }
 
     let session = open_router(&listen, &connect)?;

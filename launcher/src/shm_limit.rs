@@ -11,7 +11,9 @@
 //! limit before it starts the nodes and turns shared memory off for all of them when any node
 //! would pass it.
 
-use evseg_graph::NodeSpec;
+use std::path::Path;
+
+use evseg_graph::{NodeSpec, SharedMemory};
 
 /// Bytes Zenoh locks per process whose shared memory a node maps (its own and each producer's)
 /// besides the pool itself: its watchdog and metadata segments. Measured with Zenoh 1.10
@@ -94,6 +96,31 @@ fn cap_eff(status: &str) -> Option<u64> {
 pub fn over_allowance(locks: &[NodeLock], allowance: Option<u64>) -> Option<&NodeLock> {
     let limit = allowance?;
     locks.iter().filter(|l| l.bytes > limit).max_by_key(|l| l.bytes)
+}
+
+/// Why shared memory as set in `shm` cannot work for `nodes` (the nodes one launcher starts,
+/// from the graph file `graph_file`) under this user's locked-memory limit: the node that would
+/// lock the most, how much, the limit and how to change it. `None` when it is off or fits.
+pub fn over_limit(nodes: &[NodeSpec], shm: &SharedMemory, graph_file: &Path) -> Option<String> {
+    if !shm.enabled {
+        return None;
+    }
+    let locks = locked_per_node(nodes, u64::from(shm.pool_mib) << 20);
+    let allowance = memlock_allowance();
+    let over = over_allowance(&locks, allowance)?;
+    let mib = |b: u64| b as f64 / (1u64 << 20) as f64;
+    let producers = match over.producers {
+        1 => "1 node".to_string(),
+        n => format!("{n} nodes"),
+    };
+    Some(format!(
+        "node `{}` would lock {:.1} MiB (its {} MiB pool and those of the {producers} it reads, which Zenoh locks in memory), above this user's locked-memory limit of {:.1} MiB (`ulimit -l`). Raise the limit (`memlock` in /etc/security/limits.conf, or CAP_IPC_LOCK) or lower `zenoh.shared_memory.pool_mib` in {}",
+        over.node,
+        mib(over.bytes),
+        shm.pool_mib,
+        mib(allowance.unwrap_or(u64::MAX)),
+        graph_file.display()
+    ))
 }
 
 #[cfg(test)]
