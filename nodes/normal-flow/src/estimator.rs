@@ -271,12 +271,7 @@ impl PlaneFitEstimator {
         written.resize(n, false);
         let mut next = 0;
         for j in 0..n {
-            while next < j && (!written[next] || events.t[next] + la < events.t[j]) {
-                self.prefetch_window(events, next + PREFETCH_AHEAD);
-                let est = self.fit_written(written[next], events, next, la);
-                sink(next, est, self.last_fit);
-                next += 1;
-            }
+            self.fit_pending(events, &written, &mut next, j, events.t[j], &mut sink);
             self.prefetch_pixel(events, j + PREFETCH_AHEAD);
             written[j] = self.write_event(events.t[j], events.x[j], events.y[j], events.p[j]);
         }
@@ -291,22 +286,35 @@ impl PlaneFitEstimator {
                     // Past the look-ahead of the slice's last event.
                     break;
                 }
-                while next < n && (!written[next] || events.t[next] + la < t) {
-                    self.prefetch_window(events, next + PREFETCH_AHEAD);
-                    let est = self.fit_written(written[next], events, next, la);
-                    sink(next, est, self.last_fit);
-                    next += 1;
-                }
+                self.fit_pending(events, &written, &mut next, n, t, &mut sink);
                 self.write_ahead(t, ahead.x[j], ahead.y[j], ahead.p[j]);
             }
         }
-        while next < n {
-            self.prefetch_window(events, next + PREFETCH_AHEAD);
-            let est = self.fit_written(written[next], events, next, la);
-            sink(next, est, self.last_fit);
-            next += 1;
-        }
+        // Every written event has a finite time, so nothing stays pending at an infinite one.
+        self.fit_pending(events, &written, &mut next, n, f64::INFINITY, &mut sink);
         self.written = written;
+    }
+
+    /// Fits, in order from `*next` up to (not including) `end`, the events of the slice whose
+    /// look-ahead has passed: an event whose time plus `lookahead_s` is before `until`
+    /// (seconds, the time of the event about to be written), or one that was not written
+    /// (`written`), which needs no neighbours. Leaves `*next` at the first event not fitted.
+    fn fit_pending(
+        &mut self,
+        events: &Events,
+        written: &[bool],
+        next: &mut usize,
+        end: usize,
+        until: f64,
+        sink: &mut impl FnMut(usize, PixelEstimate, Option<PlaneFit>),
+    ) {
+        let la = self.params.lookahead_s;
+        while *next < end && (!written[*next] || events.t[*next] + la < until) {
+            self.prefetch_window(events, *next + PREFETCH_AHEAD);
+            let est = self.fit_written(written[*next], events, *next, la);
+            sink(*next, est, self.last_fit);
+            *next += 1;
+        }
     }
 
     /// Asks the cache for the surface pixel of event `i` (if any), which its write will read.
