@@ -781,6 +781,15 @@ fn check_and_run_as_normal_user(graph: &str) -> Option<(Finished, Finished, Path
     Some((check, run, out, dir))
 }
 
+/// The repository's graph file `name` on a free loopback port, with shared-memory pools of
+/// `pool_mib` MiB.
+fn repo_graph_with_pool(name: &str, pool_mib: u32) -> String {
+    repo_graph_on_loopback(name, free_port()).replace(
+        "zenoh:\n",
+        &format!("zenoh:\n  shared_memory: {{ enabled: true, pool_mib: {pool_mib} }}\n"),
+    )
+}
+
 /// Zenoh locks every shared-memory pool it creates or maps. As a normal user (8 MiB of locked
 /// memory) with 4 MiB pools, the source could create its pool but the slicer could not map it,
 /// and Zenoh dropped the frames at the slicer without an error: the lock-step graph stalled for
@@ -789,13 +798,7 @@ fn check_and_run_as_normal_user(graph: &str) -> Option<(Finished, Finished, Path
 /// completes too (this checks the launcher's estimate of what Zenoh locks).
 #[test]
 fn shared_memory_beyond_the_users_locked_memory_limit_is_turned_off_not_a_stall() {
-    let port = free_port();
-    let four_mib = repo_graph_on_loopback("graph.yaml", port)
-        .replace(
-            "zenoh:\n",
-            "zenoh:\n  shared_memory: { enabled: true, pool_mib: 4 }\n",
-        )
-        .replace("seconds: 1.0", "seconds: 0.3");
+    let four_mib = repo_graph_with_pool("graph.yaml", 4).replace("seconds: 1.0", "seconds: 0.3");
     let Some((check, run, out, _dir)) = check_and_run_as_normal_user(&four_mib) else {
         return;
     };
@@ -817,13 +820,7 @@ fn shared_memory_beyond_the_users_locked_memory_limit_is_turned_off_not_a_stall(
     );
     assert!(read_json(&out.join("report").join("report.json"))["sequence"]["windows"].as_u64() >= Some(9));
 
-    let port = free_port();
-    let fits = repo_graph_on_loopback("graphs/normal-flow.yaml", port)
-        .replace(
-            "zenoh:\n",
-            "zenoh:\n  shared_memory: { enabled: true, pool_mib: 1 }\n",
-        )
-        .replace("seconds: 0.5", "seconds: 0.3");
+    let fits = repo_graph_with_pool("graphs/normal-flow.yaml", 1).replace("seconds: 0.5", "seconds: 0.3");
     let (check, run, out, _dir) = check_and_run_as_normal_user(&fits).unwrap();
     assert!(
         check.status.success() && !check.stdout.contains("warning"),

@@ -311,10 +311,10 @@ fn main() -> ExitCode {
         // In lock-step mode a held slice is sent only when the next one arrives, and the
         // slicer sends the next one only while fewer than `window` slices wait for their
         // consumers, some of which wait for this node's flow: a window of 1 would stall.
-        let across_slices = params.lookahead_across_slices
-            && params.lookahead_s > 0.0
-            && !(cfg.mode == Mode::Lockstep && cfg.window < 2);
-        if params.lookahead_across_slices && !across_slices && params.lookahead_s > 0.0 {
+        let wanted = params.lookahead_across_slices && params.lookahead_s > 0.0;
+        let window_allows = !(cfg.mode == Mode::Lockstep && cfg.window < 2);
+        let across_slices = wanted && window_allows;
+        if wanted && !window_allows {
             tracing::warn!(
                 node = %cfg.node,
                 window = cfg.window,
