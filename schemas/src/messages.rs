@@ -344,7 +344,7 @@ pub struct Egomotion {
 /// One tracked object.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Track {
-    /// Stable track id (0 is never used for an object; 0 = background).
+    /// Stable track id (never 0, which is background, nor [`Tracks::UNCONFIRMED`]).
     pub id: u32,
     /// Filtered centroid, pixels.
     pub centroid: [f64; 2],
@@ -363,13 +363,21 @@ pub struct Track {
 /// The final output of a slice: per-event track ids, the tracks and the egomotion.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct Tracks {
-    /// Track id per event (0 = background), aligned with the slice's events.
+    /// Track id per event (0 = background, [`Tracks::UNCONFIRMED`] = moving, but its track is
+    /// not confirmed yet), aligned with the slice's events. Any non-zero label is moving.
     #[serde(with = "crate::columns::u32s")]
     pub label: Vec<u32>,
     /// Tracks alive in this slice.
     pub tracks: Vec<Track>,
     /// Camera egomotion.
     pub egomotion: Egomotion,
+}
+
+impl Tracks {
+    /// Label of an event that is moving but whose track has not yet been matched often enough
+    /// to be confirmed (a tracker's tentative track, as SORT's): it counts as moving (the
+    /// segmentation), but names no object (no identity is claimed). Never a track id.
+    pub const UNCONFIRMED: u32 = u32::MAX;
 }
 
 impl Message for Tracks {

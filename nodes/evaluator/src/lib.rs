@@ -84,11 +84,11 @@ impl Evaluator {
         params.validate()?;
         Ok(Self {
             frames: FrameReservoir::new(params.frames_in_plot),
+            accumulator: SequenceAccumulator::new(params.switch_min_iou),
             params,
             history: Default::default(),
             pending: VecDeque::new(),
             last_end: None,
-            accumulator: SequenceAccumulator::default(),
             reports: Vec::new(),
         })
     }

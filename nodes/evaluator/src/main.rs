@@ -102,6 +102,11 @@ fn description() -> NodeDescription {
         d.default_mask_period_s * 1e3,
         "mask period (ms) assumed until two masks are seen; EVIMO2 masks are 60 Hz",
     )
+    .param(
+        "switch_min_iou",
+        d.switch_min_iou,
+        "IoU above which a matched track id is the object's identity for the id switches (0.5 as MOTS; 0 = every match)",
+    )
     .build()
 }
 
@@ -113,6 +118,7 @@ fn make(cfg: &NodeConfig) -> Result<EvaluatorNode, BoxError> {
         max_gap_s: cfg.param::<f64>("max_gap_ms")? * 1e-3,
         lookahead_s: cfg.param::<f64>("lookahead_ms")? * 1e-3,
         default_mask_period_s: cfg.param::<f64>("default_mask_period_ms")? * 1e-3,
+        switch_min_iou: cfg.param("switch_min_iou")?,
         ..EvalParams::default()
     };
     let report_dir = match cfg.param_opt::<PathBuf>("report_dir")? {

@@ -3,11 +3,14 @@
 //! Matching is **Hungarian** (optimal one-to-one assignment maximising the summed IoU over all
 //! pairs, [`evseg_geometry::assignment::assign_max`]); a pair with IoU 0 is not a match. Each
 //! ground-truth object's IoU is then the IoU of its events with the events of the matched label
-//! (0 when unmatched).
+//! (0 when unmatched). Events labelled [`Tracks::UNCONFIRMED`] (moving, but their track is not
+//! confirmed) are moving for the IoU per event and per mask, but name no object, so they are
+//! never matched.
 
 use std::collections::BTreeMap;
 
 use evseg_geometry::assignment::assign_max;
+use evseg_schemas::Tracks;
 use serde::Serialize;
 
 /// One ground-truth object of a slice and the predicted label matched to it.
@@ -28,12 +31,14 @@ pub struct ObjectMatch {
     /// Events of the object labelled background (0): what the segmentation missed.
     pub as_background: u64,
     /// Events of the object under other non-zero labels than the matched one: the object
-    /// split into pieces, or joined to a label matched to another object (or to none).
+    /// split into pieces, joined to a label matched to another object (or to none), or
+    /// [`Tracks::UNCONFIRMED`].
     pub in_other_labels: u64,
 }
 
 /// Matches labels to objects over `(predicted label, ground-truth id)` pairs, one per event.
-/// Label 0 and id 0 are background and never matched. Objects come out in id order.
+/// Label 0 and id 0 are background and never matched, nor is label [`Tracks::UNCONFIRMED`].
+/// Objects come out in id order.
 pub fn match_objects(pairs: impl Iterator<Item = (u32, u16)>) -> Vec<ObjectMatch> {
     let mut joint: BTreeMap<(u16, u32), u64> = BTreeMap::new();
     let mut per_object: BTreeMap<u16, u64> = BTreeMap::new();
@@ -45,6 +50,9 @@ pub fn match_objects(pairs: impl Iterator<Item = (u32, u16)>) -> Vec<ObjectMatch
             if label == 0 {
                 *background.entry(id).or_default() += 1;
             }
+        }
+        if label == Tracks::UNCONFIRMED {
+            continue;
         }
         if label != 0 {
             *per_label.entry(label).or_default() += 1;
@@ -146,5 +154,21 @@ mod tests {
             (m[0].intersection, m[0].in_other_labels, m[0].as_background),
             (3, 1, 1)
         );
+    }
+
+    #[test]
+    fn unconfirmed_events_are_never_matched_but_count_outside_the_match() {
+        let u = Tracks::UNCONFIRMED;
+        // Object 1 wholly unconfirmed: unmatched, its events neither background nor matched.
+        let m = match_objects([u, u, u].into_iter().zip([1u16, 1, 1]));
+        assert_eq!((m[0].label, m[0].iou), (None, 0.0));
+        assert_eq!((m[0].as_background, m[0].in_other_labels), (0, 3));
+        // Partly unconfirmed: the unconfirmed events do not enter the matched label's union.
+        let ids = [1u16, 1, 1, 1, 0];
+        let labels = [3u32, 3, u, u, u];
+        let m = match_objects(labels.into_iter().zip(ids));
+        assert_eq!(m[0].label, Some(3));
+        assert!((m[0].iou - 0.5).abs() < 1e-12);
+        assert_eq!((m[0].intersection, m[0].in_other_labels), (2, 2));
     }
 }

@@ -22,6 +22,13 @@ pub struct EvalParams {
     /// is skipped, m/s. Default 0.05 m/s: a 1 mm Vicon position noise over a 30 ms window is
     /// already 0.03 m/s of apparent velocity.
     pub min_speed_mps: f64,
+    /// IoU above which a matched label counts as the object's identity for the id switches
+    /// ([`crate::sequence::ObjectIouSummary::id_switches`]). Default 0.5, as MOTS (Voigtlaender
+    /// et al., CVPR 2019): above it a label can match only one object and an object only one
+    /// label, so a switch is a change of a confident match; a small piece that the assignment
+    /// matches for want of anything better is a miss of the identity, not a new one. 0 counts
+    /// every match (the summary's `id_switches_any_overlap` always does).
+    pub switch_min_iou: f64,
     /// Frames kept for the report's frame plot. Default 4 (the `frames_in_plot` node parameter).
     pub frames_in_plot: usize,
     /// Largest sensor (width x height, pixels) for which frame snapshots are kept. Default
@@ -37,6 +44,7 @@ impl Default for EvalParams {
             max_gap_s: 0.1,
             lookahead_s: 0.1,
             min_speed_mps: 0.05,
+            switch_min_iou: 0.5,
             frames_in_plot: 4,
             max_snapshot_pixels: 4 << 20,
         }
@@ -74,6 +82,12 @@ impl EvalParams {
             return Err(EvalError::Param {
                 name: "min_speed_mps",
                 reason: format!("must be >= 0 m/s, got {}", self.min_speed_mps),
+            });
+        }
+        if !(0.0..1.0).contains(&self.switch_min_iou) {
+            return Err(EvalError::Param {
+                name: "switch_min_iou",
+                reason: format!("must be in [0, 1), got {}", self.switch_min_iou),
             });
         }
         Ok(())

@@ -37,9 +37,15 @@ pub struct ObjectIouSummary {
     pub windows: u64,
     /// Of those, windows where a predicted label was matched to it.
     pub matched_windows: u64,
-    /// Times the matched label (track id) changed from one matched window to the next (the
-    /// issue's "id switches"; unmatched windows in between do not count as a switch).
+    /// Times the object's identity changed: the matched label (track id) of a window whose
+    /// match has an IoU above the evaluator's `switch_min_iou` (0.5, MOTS) differs from the
+    /// label of the previous such window (the "id switches"; windows without such a
+    /// match in between do not count as a switch).
     pub id_switches: u64,
+    /// Times the matched label changed from one matched window to the next, whatever the
+    /// match's IoU (a small piece matched for want of a better one counts): the stricter count
+    /// the evaluator reported as `id_switches` before 2026-12-06.
+    pub id_switches_any_overlap: u64,
     /// Where the object's events went, over all its windows (shares of its events; the three
     /// shares sum to 1): labelled background.
     pub share_as_background: f64,
@@ -163,7 +169,10 @@ struct ObjectAcc {
     matched_windows: u64,
     /// The label matched in the last matched window.
     last_label: Option<u32>,
+    /// The label matched in the last window whose match passed `switch_min_iou`.
+    last_identity: Option<u32>,
     id_switches: u64,
+    id_switches_any_overlap: u64,
     /// The object's events, and of those: under the matched label, background, other labels.
     events: u64,
     in_match: u64,
@@ -172,16 +181,23 @@ struct ObjectAcc {
 }
 
 impl ObjectAcc {
-    /// Adds the object's match in one window.
-    fn add(&mut self, m: &ObjectMatch) {
+    /// Adds the object's match in one window; a match with an IoU above `switch_min_iou` is
+    /// the object's identity.
+    fn add(&mut self, m: &ObjectMatch, switch_min_iou: f64) {
         self.iou_sum += m.iou;
         self.windows += 1;
         self.matched_windows += u64::from(m.label.is_some());
         if let Some(l) = m.label {
             if self.last_label.is_some_and(|prev| prev != l) {
-                self.id_switches += 1;
+                self.id_switches_any_overlap += 1;
             }
             self.last_label = Some(l);
+            if m.iou > switch_min_iou {
+                if self.last_identity.is_some_and(|prev| prev != l) {
+                    self.id_switches += 1;
+                }
+                self.last_identity = Some(l);
+            }
         }
         self.events += m.truth_events;
         self.in_match += m.intersection;
@@ -193,6 +209,8 @@ impl ObjectAcc {
 /// Adds slice reports one at a time.
 #[derive(Debug, Default)]
 pub struct SequenceAccumulator {
+    /// IoU above which a match is the object's identity (`EvalParams::switch_min_iou`).
+    switch_min_iou: f64,
     windows: u64,
     moving: u64,
     iou_events: MeanAcc,
@@ -213,6 +231,15 @@ pub struct SequenceAccumulator {
 }
 
 impl SequenceAccumulator {
+    /// An empty accumulator; a match with an IoU above `switch_min_iou` is the object's identity
+    /// for the id switches (`EvalParams::switch_min_iou`).
+    pub fn new(switch_min_iou: f64) -> Self {
+        Self {
+            switch_min_iou,
+            ..Self::default()
+        }
+    }
+
     /// Adds one slice.
     pub fn add(&mut self, r: &SliceReport) {
         self.windows += 1;
@@ -223,7 +250,10 @@ impl SequenceAccumulator {
             .add(&r.static_scene, |s| s.share_labelled_moving);
         if let Outcome::Scored(o) = &r.objects {
             for m in &o.matches {
-                self.per_object.entry(m.object as u32).or_default().add(m);
+                self.per_object
+                    .entry(m.object as u32)
+                    .or_default()
+                    .add(m, self.switch_min_iou);
             }
         }
         match &r.egomotion {
@@ -276,6 +306,7 @@ impl SequenceAccumulator {
                     windows: a.windows,
                     matched_windows: a.matched_windows,
                     id_switches: a.id_switches,
+                    id_switches_any_overlap: a.id_switches_any_overlap,
                     share_in_match: share(a.in_match),
                     share_as_background: share(a.as_background),
                     share_in_other_labels: share(a.in_other_labels),

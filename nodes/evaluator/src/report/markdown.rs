@@ -92,19 +92,21 @@ pub fn report_markdown(s: &SequenceSummary, images: &[&str]) -> String {
     if !s.iou_per_object.is_empty() {
         m.push_str(
             "## Per-object IoU\n\nWhere each object's events went (shares of its events over its windows): under the label \
-             matched to it, labelled background (missed), under other labels (pieces, or joined to another \
-             object).\n\n| Object | IoU (%) | Windows | Matched | Id switches | In match (%) | Background (%) | Other labels (%) |\n\
+             matched to it, labelled background (missed), under other labels (pieces, joined to another \
+             object, or moving without an id yet). Id switches count the matches above IoU `switch_min_iou` (MOTS); \
+             in brackets, every match.\n\n| Object | IoU (%) | Windows | Matched | Id switches | In match (%) | Background (%) | Other labels (%) |\n\
              |---:|---:|---:|---:|---:|---:|---:|---:|\n",
         );
         for o in &s.iou_per_object {
             let _ = writeln!(
                 m,
-                "| {} | {:.2} | {} | {} | {} | {:.1} | {:.1} | {:.1} |",
+                "| {} | {:.2} | {} | {} | {} ({}) | {:.1} | {:.1} | {:.1} |",
                 o.object,
                 100.0 * o.mean_iou,
                 o.windows,
                 o.matched_windows,
                 o.id_switches,
+                o.id_switches_any_overlap,
                 100.0 * o.share_in_match,
                 100.0 * o.share_as_background,
                 100.0 * o.share_in_other_labels
