@@ -2,8 +2,8 @@
 //!
 //! Per recorded output (file prefix = topic with `/` replaced by `.`, e.g. `segmenter.tracks`):
 //! - `evseg.Slice`: `<prefix>.events.npy`, float64 (N, 5): slice, t (s), x (px), y (px), polarity;
-//! - `evseg.Tracks`: `<prefix>.labels.npy`, int64 (N, 2): slice, label (0 = background), per
-//!   event in slice order; `<prefix>.egomotion.npy`, float64 (S, 10): slice, t_start, t_end (s),
+//! - `evseg.Tracks`: `<prefix>.labels.npy`, int64 (N, 2): slice, label (0 = background, -1 =
+//!   moving but its track not yet confirmed, `Tracks::UNCONFIRMED`), per event in slice order; `<prefix>.egomotion.npy`, float64 (S, 10): slice, t_start, t_end (s),
 //!   direction x y z (unit, camera frame), omega x y z (rad/s, camera frame), valid (0/1);
 //!   `<prefix>.tracks.npy`, float64 (T, 15): slice, id, centroid x y (px), velocity x y (px/s),
 //!   bbox x_min y_min x_max y_max (px), translation x y z (1/s at depth 1, camera frame), age (slices),
@@ -213,9 +213,14 @@ impl Collector {
                 let Some((seq, t0, t1, tr)) = self.decode::<Tracks>(&m) else {
                     return;
                 };
-                let labels = self.table(&topic, "labels", Tracks::SCHEMA, LABELS, true);
+                let labels = self.table(&topic, "labels", Tracks::SCHEMA, TRACK_LABELS, true);
                 for &l in &tr.label {
-                    labels.i64_rows.extend([seq as i64, i64::from(l)]);
+                    let l = if l == Tracks::UNCONFIRMED {
+                        -1
+                    } else {
+                        i64::from(l)
+                    };
+                    labels.i64_rows.extend([seq as i64, l]);
                 }
                 self.egomotion(&topic, Tracks::SCHEMA, (seq, t0, t1), &tr.egomotion);
                 let tracks = self.table(&topic, "tracks", Tracks::SCHEMA, TRACKS, false);
@@ -352,6 +357,13 @@ const EVENTS: &[(&str, &str)] = &[
     ("polarity", "0/1"),
 ];
 const LABELS: &[(&str, &str)] = &[("slice", "index"), ("label", "segment id, 0 = background")];
+const TRACK_LABELS: &[(&str, &str)] = &[
+    ("slice", "index"),
+    (
+        "label",
+        "track id, 0 = background, -1 = moving, track not yet confirmed",
+    ),
+];
 const EGOMOTION: &[(&str, &str)] = &[
     ("slice", "index"),
     ("t_start", "s"),

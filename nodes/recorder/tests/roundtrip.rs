@@ -25,7 +25,13 @@ fn channel(topic: &str, schema: &str) -> ChannelSpec {
 
 fn tracks(seq: u64, n: usize) -> Tracks {
     Tracks {
-        label: (0..n as u32).map(|i| (i + seq as u32) % 3).collect(),
+        // Background, two tracks, and moving events of a track not yet confirmed.
+        label: (0..n as u32)
+            .map(|i| match (i + seq as u32) % 4 {
+                3 => Tracks::UNCONFIRMED,
+                l => l,
+            })
+            .collect(),
         tracks: vec![Track {
             id: 7,
             centroid: [10.0 + seq as f64, 20.0],
@@ -296,6 +302,20 @@ fn export_writes_labels_flow_egomotion_tracks_and_metrics() {
         (v[2 * k], v[2 * k + 1]),
         (3, i64::from(tracks(3, EVENTS_PER_SLICE).label[10]))
     );
+    // Unconfirmed events (u32::MAX in the message) are -1, as the other exports' "no id".
+    let expected: Vec<i64> = (0..SLICES)
+        .flat_map(|s| tracks(s, EVENTS_PER_SLICE).label)
+        .map(|l| {
+            if l == Tracks::UNCONFIRMED {
+                -1
+            } else {
+                i64::from(l)
+            }
+        })
+        .collect();
+    let got: Vec<i64> = v.chunks_exact(2).map(|r| r[1]).collect();
+    assert_eq!(got, expected);
+    assert!(got.contains(&-1));
     // Flow.
     let (shape, f) = load_f64(&out.join("flow.flow.flow.npy"));
     assert_eq!(shape, [n, 4]);

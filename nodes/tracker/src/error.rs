@@ -15,6 +15,16 @@ pub enum TrackerError {
         /// What it must be.
         reason: &'static str,
     },
+    /// A parameter that names one of a few choices names none of them.
+    #[error("parameter {name} = `{value}` is invalid: expected one of {expected:?}")]
+    InvalidChoice {
+        /// Parameter name (as in [`crate::TrackerParams`] and the node config).
+        name: &'static str,
+        /// The value given.
+        value: String,
+        /// The valid values.
+        expected: &'static [&'static str],
+    },
     /// The per-event label vector does not have one entry per event of the slice.
     #[error("segmentation has {labels} per-event labels but the slice has {events} events")]
     LabelCount {

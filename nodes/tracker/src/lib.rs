@@ -21,7 +21,7 @@ pub mod params;
 pub mod tracker;
 
 pub use error::TrackerError;
-pub use params::TrackerParams;
+pub use params::{TentativeEvents, TrackerParams};
 pub use tracker::Tracker;
 
 #[cfg(test)]

@@ -98,12 +98,12 @@ fn description() -> NodeDescription {
     .param(
         "min_hits",
         d.min_hits,
-        "matches before a track is listed in `tracks` (its events carry its id from the start unless label_tentative is off)",
+        "matches before a track is confirmed: listed in `tracks` and its events labelled with its id (SORT's 3)",
     )
     .param(
-        "label_tentative",
-        d.label_tentative,
-        "label the events of tracks with fewer than min_hits matches with their id (off: background until confirmed)",
+        "tentative_events",
+        d.tentative_events.name(),
+        "label of the events of a track with fewer than min_hits matches: unconfirmed (moving, no id yet: Tracks::UNCONFIRMED), id (the track's id), background",
     )
     .param(
         "absorb_overlap",
@@ -193,7 +193,7 @@ fn main() -> ExitCode {
             min_events: cfg.param("min_events")?,
             max_missing_s: cfg.param("max_missing_s")?,
             min_hits: cfg.param("min_hits")?,
-            label_tentative: cfg.param("label_tentative")?,
+            tentative_events: cfg.param::<String>("tentative_events")?.parse()?,
             absorb_overlap: cfg.param("absorb_overlap")?,
             merge_velocity_px_s: cfg.param("merge_velocity_px_s")?,
             merge_gap_px: cfg.param("merge_gap_px")?,
@@ -244,7 +244,7 @@ mod tests {
                 "min_events",
                 "max_missing_s",
                 "min_hits",
-                "label_tentative",
+                "tentative_events",
                 "absorb_overlap",
                 "merge_velocity_px_s",
                 "merge_gap_px",
@@ -263,7 +263,7 @@ mod tests {
         );
         let default_of = |n: &str| d.params.iter().find(|p| p.name == n).map(|p| p.default.clone());
         assert_eq!(default_of("gate_chi2"), Some(13.82.into()));
-        assert_eq!(default_of("min_hits"), Some(1.into()));
-        assert_eq!(default_of("label_tentative"), Some(true.into()));
+        assert_eq!(default_of("min_hits"), Some(3.into()));
+        assert_eq!(default_of("tentative_events"), Some("unconfirmed".into()));
     }
 }

@@ -3,6 +3,57 @@
 
 use crate::error::TrackerError;
 
+/// How a tracker labels the events of a tentative track (one not yet matched `min_hits` times).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TentativeEvents {
+    /// [`evseg_schemas::Tracks::UNCONFIRMED`]: moving, no identity claimed yet (the default).
+    Unconfirmed,
+    /// The track's id from its first slice (the id does not change on confirmation), so a
+    /// piece that opens a track for a slice or two shows, and is scored, as an object of its
+    /// own.
+    Id,
+    /// Background until the track is confirmed: the usual suppression of short-lived
+    /// detections, at the cost of the objects' first slices. Measured on `evseg bench`
+    /// (evseg-bench-v3, 2026-11-28; IoU mask / events / per object %, worst object's id
+    /// switches over any overlap, false alarms in static windows % for enter-leave 104,
+    /// camera-only 105, enter-leave 204, camera-only 205): `id` with min_hits 1 72.56 / 81.95 /
+    /// 76.98, 4.3, 7.3 / 6.3 / 13.5 / 9.2; background, min_hits 2 72.01 / 80.99 / 75.81, 2.6,
+    /// 2.0 / 2.2 / 2.4 / 7.5; background, min_hits 3 70.99 / 79.68 / 74.54, 1.8, 0.8-6.3. For
+    /// a robot that must not react to phantoms.
+    Background,
+}
+
+impl TentativeEvents {
+    /// The parameter's values, as written in a graph.
+    pub const NAMES: [&'static str; 3] = ["unconfirmed", "id", "background"];
+
+    /// The value's name, as written in a graph.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Unconfirmed => "unconfirmed",
+            Self::Id => "id",
+            Self::Background => "background",
+        }
+    }
+}
+
+impl std::str::FromStr for TentativeEvents {
+    type Err = TrackerError;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "unconfirmed" => Ok(Self::Unconfirmed),
+            "id" => Ok(Self::Id),
+            "background" => Ok(Self::Background),
+            other => Err(TrackerError::InvalidChoice {
+                name: "tentative_events",
+                value: other.to_string(),
+                expected: &Self::NAMES,
+            }),
+        }
+    }
+}
+
 /// Parameters of [`crate::Tracker`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct TrackerParams {
@@ -50,25 +101,23 @@ pub struct TrackerParams {
     /// produces no events and vanishes from the segmentation; half a second (~17 slices of
     /// 30 ms) bridges short stops and occlusions without keeping stale tracks for long.
     pub max_missing_s: f64,
-    /// Matches (slices) a track needs before it is confirmed and listed in `Tracks::tracks`.
-    /// A tentative track's events still carry its id (the evaluator scores per-event labels,
-    /// and the id stays the same after confirmation); a tentative track missed in a slice is
-    /// dropped at once. Default 1 (confirmed at creation, so every foreground label has its
-    /// `Track`, which the evaluator's object-motion score looks up); SORT (Bewley et al.,
-    /// ICIP 2016) uses 3.
+    /// Matches (slices) a track needs before it is confirmed and listed in `Tracks::tracks`;
+    /// a tentative track missed in a slice is dropped at once, and its events are labelled as
+    /// `tentative_events` says. Default 3, as SORT (Bewley et al., ICIP 2016): a piece of an
+    /// object, or of the static scene, that the segmentation calls moving for a slice or two
+    /// gets no identity. Measured on 2026-12-06 with the tentative events `unconfirmed` (mean
+    /// of the worst object's id switches counted as MOTS, over any overlap in brackets, the
+    /// largest; mean per-object IoU %): `evseg bench` (evseg-bench-v3) min_hits 1 0.8 (2.8),
+    /// 4, 79.12; 2 0.4 (1.8), 1, 78.16; 3 0.2 (1.4), 1, 77.28. Seeds 301-307 and 401-407 (3 s):
+    /// 1 0.58 (1.33), 5, 79.68; 2 0.58 (1.17), 5, 78.40; 3 0.33 (1.08), 2, 77.05. Seeds
+    /// 501-507 and 601-607: 1 1.67 (3.50), 14, 77.93; 3 1.58 (2.33), 13, 75.77. The IoU mask
+    /// and per event do not change (the tentative events stay moving); the per-object IoU loses
+    /// each object's first two slices.
     pub min_hits: u32,
-    /// Label the events of tentative tracks (fewer than `min_hits` matches) with their id
-    /// (true) or as background until the track is confirmed (false). Default true (the paper
-    /// scores every event). Off with `min_hits` 2 or 3 it is the usual suppression of
-    /// one-slice detections: pieces of the static scene called moving for a slice, and object
-    /// pieces that open a new track each slice. Measured on `evseg bench` (evseg-bench-v3; IoU
-    /// mask / events / per object %, worst object's id switches, false alarms in static windows
-    /// % for enter-leave 104, camera-only 105, enter-leave 204, camera-only 205): on, min_hits 1
-    /// 72.56 / 81.95 / 76.98, 4.3, 7.3 / 6.3 / 13.5 / 9.2; off, min_hits 2 72.01 / 80.99 /
-    /// 75.81, 2.6, 2.0 / 2.2 / 2.4 / 7.5; off, min_hits 3 70.99 / 79.68 / 74.54, 1.8, false
-    /// alarms down to 0.8-6.3. A trade of about one point of IoU for far fewer id switches and
-    /// false alarms, left to the user (tracking, or a robot that must not react to phantoms).
-    pub label_tentative: bool,
+    /// How the events of a tentative track (fewer than `min_hits` matches) are labelled.
+    /// Default [`TentativeEvents::Unconfirmed`]: they are moving (the paper scores every event's
+    /// segmentation) but name no object until the track is confirmed.
+    pub tentative_events: TentativeEvents,
     /// A segment left unmatched by the one-to-one association whose box lies at least this
     /// fraction (intersection over the segment box's area) inside a live track's predicted box
     /// is a fragment of that object and takes its id instead of opening a new track (the
@@ -252,8 +301,8 @@ impl Default for TrackerParams {
             bbox_weight: 1.0,
             min_events: 30,
             max_missing_s: 0.5,
-            min_hits: 1,
-            label_tentative: true,
+            min_hits: 3,
+            tentative_events: TentativeEvents::Unconfirmed,
             absorb_overlap: 0.1,
             merge_velocity_px_s: 120.0,
             merge_gap_px: 4.0,

@@ -1,8 +1,17 @@
 //! Scenario tests of the tracker with known answers.
 
-use evseg_schemas::{Egomotion, Segment, Segmentation};
+use evseg_schemas::{Egomotion, Segment, Segmentation, Tracks};
 
-use crate::{Tracker, TrackerError, TrackerParams};
+use crate::{TentativeEvents, Tracker, TrackerError, TrackerParams};
+
+/// The default parameters but `min_hits` 1: a track is confirmed, and its events carry its id,
+/// from its first slice, for the tests of matching, merging and splitting.
+fn confirmed_at_once() -> TrackerParams {
+    TrackerParams {
+        min_hits: 1,
+        ..TrackerParams::default()
+    }
+}
 
 /// Slice length used by the scenarios, seconds (the slicer's default).
 const DT: f64 = 0.03;
@@ -114,7 +123,7 @@ fn obj(k: usize) -> Obj {
 
 #[test]
 fn two_objects_on_straight_lines_keep_their_ids() -> Result<(), TrackerError> {
-    let mut tracker = Tracker::new(TrackerParams::default())?;
+    let mut tracker = Tracker::new(confirmed_at_once())?;
     let (va, vb) = ([300.0, 0.0], [-200.0, 100.0]);
     let (mut id_a, mut id_b) = (0, 0);
     for k in 0..20 {
@@ -197,7 +206,7 @@ fn crossing_objects_with_different_velocities_do_not_swap() -> Result<(), Tracke
     // A moves right and B left at 400 px/s on rows 8 px apart: 12 px per slice each. At the
     // crossing, each object's new centroid is nearer to the *other* object's previous centroid,
     // so matching to last positions would swap them; the velocity prediction must not.
-    let mut tracker = Tracker::new(TrackerParams::default())?;
+    let mut tracker = Tracker::new(confirmed_at_once())?;
     let (va, vb) = ([400.0, 0.0], [-400.0, 0.0]);
     let (a0, b0) = ([-2.0, 100.0], [202.0, 108.0]);
     let mut swapped_for_nearest_neighbour = false;
@@ -269,7 +278,7 @@ fn ids_around_gap(gap: usize, params: TrackerParams) -> Result<(u32, u32), Track
 fn a_short_gap_keeps_the_id_and_a_long_one_gives_a_new_id() -> Result<(), TrackerError> {
     // 30 ms slices, max_missing_s 0.5 s. Gap of 10 slices: 0.33 s since the last match when the
     // object reappears -> same id. Gap of 20 slices: 0.63 s -> dropped, new id 2 (1 is not reused).
-    let params = TrackerParams::default();
+    let params = confirmed_at_once();
     assert_eq!(ids_around_gap(10, params.clone())?, (1, 1));
     assert_eq!(ids_around_gap(20, params.clone())?, (1, 2));
     // The limit is the parameter: with 1 s, a 20-slice gap is bridged.
@@ -285,7 +294,7 @@ fn a_short_gap_keeps_the_id_and_a_long_one_gives_a_new_id() -> Result<(), Tracke
 fn small_segments_are_background_unless_they_continue_a_track() -> Result<(), TrackerError> {
     let params = TrackerParams {
         min_events: 30,
-        ..TrackerParams::default()
+        ..confirmed_at_once()
     };
     let mut tracker = Tracker::new(params)?;
     // Slice 0: a big object (label 1) and a small blob (label 2, 10 events) far away.
@@ -328,9 +337,11 @@ fn small_segments_are_background_unless_they_continue_a_track() -> Result<(), Tr
 }
 
 #[test]
-fn tentative_tracks_label_their_events_but_are_listed_only_when_confirmed() -> Result<(), TrackerError> {
+fn tentative_tracks_can_label_their_events_with_their_id_but_are_listed_only_when_confirmed()
+-> Result<(), TrackerError> {
     let params = TrackerParams {
         min_hits: 3,
+        tentative_events: TentativeEvents::Id,
         ..TrackerParams::default()
     };
     let mut tracker = Tracker::new(params)?;
@@ -358,13 +369,13 @@ fn tentative_tracks_label_their_events_but_are_listed_only_when_confirmed() -> R
     Ok(())
 }
 
-/// With `label_tentative` off a track's events are background until it is confirmed, and a
-/// segment seen in one slice only (a phantom) never labels anything.
+/// With `tentative_events: background` a track's events are background until it is
+/// confirmed, and a segment seen in one slice only (a phantom) never labels anything.
 #[test]
 fn tentative_tracks_can_leave_their_events_background_until_confirmed() -> Result<(), TrackerError> {
     let params = TrackerParams {
         min_hits: 2,
-        label_tentative: false,
+        tentative_events: TentativeEvents::Background,
         ..TrackerParams::default()
     };
     let mut tracker = Tracker::new(params)?;
@@ -386,9 +397,54 @@ fn tentative_tracks_can_leave_their_events_background_until_confirmed() -> Resul
     Ok(())
 }
 
+/// By default a tentative track's events are moving without an id ([`Tracks::UNCONFIRMED`])
+/// until its `min_hits`-th match, then carry the id the track had from its first slice; a
+/// phantom seen in one slice only is moving in that slice and never gets an id. With
+/// `tentative_events: id` the events carry the id from the first slice.
+#[test]
+fn tentative_tracks_label_their_events_unconfirmed_until_confirmed() -> Result<(), TrackerError> {
+    let phantom = Obj {
+        label: 2,
+        centroid: [50.0, 50.0],
+        events: 60,
+    };
+    let run = |tentative_events| -> Result<Vec<(u32, u32, Vec<u32>)>, TrackerError> {
+        let params = TrackerParams {
+            min_hits: 3,
+            tentative_events,
+            ..TrackerParams::default()
+        };
+        let mut tracker = Tracker::new(params)?;
+        let mut seen = Vec::new();
+        for k in 0..4 {
+            let objs: Vec<Obj> = if k == 0 {
+                vec![obj(0), phantom]
+            } else {
+                vec![obj(k)]
+            };
+            let (n, seg) = frame(&objs, 10);
+            let out = tracker.update(span(k), n, &seg)?;
+            let listed = out.tracks.iter().map(|t| t.id).collect();
+            let phantom_label = if k == 0 { id_of(&seg, &out, 2) } else { 0 };
+            seen.push((id_of(&seg, &out, 1), phantom_label, listed));
+        }
+        Ok(seen)
+    };
+    let u = Tracks::UNCONFIRMED;
+    assert_eq!(
+        run(TentativeEvents::Unconfirmed)?,
+        vec![(u, u, vec![]), (u, 0, vec![]), (1, 0, vec![1]), (1, 0, vec![1])]
+    );
+    assert_eq!(
+        run(TentativeEvents::Id)?,
+        vec![(1, 2, vec![]), (1, 0, vec![]), (1, 0, vec![1]), (1, 0, vec![1])]
+    );
+    Ok(())
+}
+
 #[test]
 fn egomotion_is_passed_through_and_an_empty_slice_is_fine() -> Result<(), TrackerError> {
-    let mut tracker = Tracker::new(TrackerParams::default())?;
+    let mut tracker = Tracker::new(confirmed_at_once())?;
     let (n, mut seg) = frame(&[], 0);
     seg.egomotion = Egomotion {
         direction: [0.0, 0.6, 0.8],
@@ -403,7 +459,7 @@ fn egomotion_is_passed_through_and_an_empty_slice_is_fine() -> Result<(), Tracke
 
 #[test]
 fn malformed_input_gives_errors_and_leaves_the_tracker_unchanged() -> Result<(), TrackerError> {
-    let mut tracker = Tracker::new(TrackerParams::default())?;
+    let mut tracker = Tracker::new(confirmed_at_once())?;
     let obj = |k| Obj {
         label: 1,
         centroid: position([100.0, 100.0], [100.0, 0.0], k),
@@ -493,7 +549,7 @@ fn malformed_input_gives_errors_and_leaves_the_tracker_unchanged() -> Result<(),
 fn background_segment_entries_are_ignored_even_if_malformed() -> Result<(), TrackerError> {
     // A segment with label 0 describes the background: it is never tracked and its centroid is
     // not checked (a producer may leave it NaN).
-    let mut tracker = Tracker::new(TrackerParams::default())?;
+    let mut tracker = Tracker::new(confirmed_at_once())?;
     let (n, mut seg) = frame(
         &[Obj {
             label: 3,
@@ -582,7 +638,7 @@ fn fragments_of_a_tracked_object_take_its_id_and_a_distant_segment_does_not() ->
             let mut tracker = Tracker::new(TrackerParams {
                 absorb_overlap,
                 merge_inside,
-                ..TrackerParams::default()
+                ..confirmed_at_once()
             })?;
             let mut id = 0;
             for k in 0..4 {
@@ -670,7 +726,7 @@ fn two_pieces(xa: f64, xb: f64) -> (usize, Segmentation) {
 fn touching_tracks_that_move_alike_become_one_and_others_stay_apart() -> Result<(), TrackerError> {
     // Two pieces 20 px apart (their 20 px boxes touch), moving at `va` and `vb` px/s.
     let run = |va: f64, vb: f64| -> Result<Vec<(u32, u32)>, TrackerError> {
-        let mut tracker = Tracker::new(TrackerParams::default())?;
+        let mut tracker = Tracker::new(confirmed_at_once())?;
         let mut ids = Vec::new();
         for k in 0..8 {
             let t = k as f64 * DT;
@@ -682,7 +738,7 @@ fn touching_tracks_that_move_alike_become_one_and_others_stay_apart() -> Result<
     };
     let alike = run(150.0, 150.0)?;
     assert!(
-        TrackerParams::default().min_hits_to_merge == 3,
+        confirmed_at_once().min_hits_to_merge == 3,
         "the assertions below count on it"
     );
     // Separate until both tracks have three matches, then one id from there on.
@@ -704,7 +760,7 @@ fn long_tracked_neighbours_that_come_to_touch_merge_only_without_a_hit_limit() -
     let run = |merge_velocity_max_hits: u32| -> Result<Vec<(u32, u32)>, TrackerError> {
         let mut tracker = Tracker::new(TrackerParams {
             merge_velocity_max_hits,
-            ..TrackerParams::default()
+            ..confirmed_at_once()
         })?;
         let mut ids = Vec::new();
         for k in 0..16 {
@@ -734,7 +790,7 @@ fn a_piece_inside_another_tracks_box_is_merged_whatever_its_velocity() -> Result
         let mut tracker = Tracker::new(TrackerParams {
             merge_inside,
             absorb_overlap: 0.0,
-            ..TrackerParams::default()
+            ..confirmed_at_once()
         })?;
         let mut ids = Vec::new();
         for k in 0..6 {
@@ -759,7 +815,7 @@ fn two_objects_tracked_apart_stay_apart_when_one_passes_inside_the_others_box() 
     // A large object (40 x 40 px box) still, a small one coming from 200 px away at 300 px/s
     // and passing across it: tracked apart for longer than `merge_inside_max_hits` before
     // their boxes overlap.
-    let p = TrackerParams::default();
+    let p = confirmed_at_once();
     let mut tracker = Tracker::new(p.clone())?;
     let mut overlapped = 0;
     for k in 0..30 {
@@ -784,7 +840,7 @@ fn objects_joined_while_overlapping_are_split_once_apart() -> Result<(), Tracker
         let mut tracker = Tracker::new(TrackerParams {
             split_gap_px,
             split_after_slices,
-            ..TrackerParams::default()
+            ..confirmed_at_once()
         })?;
         let mut ids = Vec::new();
         for k in 0..15 {
@@ -796,7 +852,7 @@ fn objects_joined_while_overlapping_are_split_once_apart() -> Result<(), Tracker
         Ok(ids)
     };
     // Off: the track's box grows over both objects and keeps absorbing the second one.
-    let d = TrackerParams::default();
+    let d = confirmed_at_once();
     let off = run(0.0, d.split_after_slices)?;
     assert!(off.iter().all(|&(a, b)| a == 1 && b == 1), "{off:?}");
     // On: one track while the boxes are within the gap, two once the second one is clear of
@@ -852,7 +908,7 @@ fn segments_whose_boxes_touch_but_whose_events_lie_apart_split_when_grouped_by_e
     let run = |split_cell_px: u16| -> Result<Vec<(u32, u32)>, TrackerError> {
         let mut tracker = Tracker::new(TrackerParams {
             split_cell_px,
-            ..TrackerParams::default()
+            ..confirmed_at_once()
         })?;
         let mut ids = Vec::new();
         for k in 0..15 {
@@ -887,7 +943,7 @@ fn segments_whose_boxes_touch_but_whose_events_lie_apart_split_when_grouped_by_e
         "{cells:?}"
     );
     // Pixels that do not fit the labels are refused.
-    let mut tracker = Tracker::new(TrackerParams::default())?;
+    let mut tracker = Tracker::new(confirmed_at_once())?;
     let (_, seg) = large_and_small([300.0, 300.0], [300.0, 300.0], 150);
     let (x, y) = pixels(&seg, |_| [280.0, 280.0, 320.0, 320.0]);
     let n = seg.label.len();
@@ -950,7 +1006,7 @@ fn a_split_track_stays_with_its_larger_group() -> Result<(), TrackerError> {
     // once (`split_after_slices` 1).
     let mut tracker = Tracker::new(TrackerParams {
         split_after_slices: 1,
-        ..TrackerParams::default()
+        ..confirmed_at_once()
     })?;
     for k in 0..3 {
         let (n, seg) = still_object();
@@ -1008,11 +1064,11 @@ fn a_missed_track_does_not_take_the_segment_of_the_track_that_follows_the_object
 {
     // The stray track, missed for nine slices, is closer to the segment in Mahalanobis distance
     // (its position has grown uncertain) and in box overlap: without the cascade it wins.
-    let (before, after) = stale_track_scenario(TrackerParams::default())?;
+    let (before, after) = stale_track_scenario(confirmed_at_once())?;
     assert_eq!(after, before, "the object's id must not change");
     let plain = TrackerParams {
         matching_cascade: false,
-        ..TrackerParams::default()
+        ..confirmed_at_once()
     };
     let (before, after) = stale_track_scenario(plain)?;
     assert_ne!(
@@ -1072,11 +1128,11 @@ fn merge_scenario(params: TrackerParams) -> Result<(u32, u32), TrackerError> {
 
 #[test]
 fn of_two_merged_tracks_the_one_matched_more_often_keeps_its_id() -> Result<(), TrackerError> {
-    let (before, after) = merge_scenario(TrackerParams::default())?;
+    let (before, after) = merge_scenario(confirmed_at_once())?;
     assert_eq!(after, before, "the object's id must not change");
     let oldest = TrackerParams {
         merge_keeps_most_hits: false,
-        ..TrackerParams::default()
+        ..confirmed_at_once()
     };
     let (before, after) = merge_scenario(oldest)?;
     assert_ne!(
@@ -1094,7 +1150,7 @@ fn a_group_smaller_than_split_min_share_stays_with_its_track() -> Result<(), Tra
         let mut tracker = Tracker::new(TrackerParams {
             split_min_share,
             split_after_slices: 1,
-            ..TrackerParams::default()
+            ..confirmed_at_once()
         })?;
         for k in 0..3 {
             let (n, seg) = still_object();

@@ -8,7 +8,7 @@ use evseg_schemas::{Segment, Segmentation, Track, Tracks};
 use crate::association::{associate, associate_cascade, pair_cost};
 use crate::error::TrackerError;
 use crate::kalman::CvKalman;
-use crate::params::TrackerParams;
+use crate::params::{TentativeEvents, TrackerParams};
 
 /// One live track.
 #[derive(Debug, Clone)]
@@ -130,9 +130,9 @@ fn bbox_f64(b: [f32; 4]) -> [f64; 4] {
 /// 7. every event of a segment takes the id of the segment's track; events of label 0 and of
 ///    small unmatched segments (no track) are background, 0.
 ///
-/// Events of a tentative track carry its id too, since the evaluator scores per-event labels and
-/// the id does not change on confirmation; only `Tracks::tracks` waits for `min_hits`. With
-/// `label_tentative` off they are labelled background until the track is confirmed.
+/// Events of a tentative track (fewer than `min_hits` matches) are moving but carry no id:
+/// [`Tracks::UNCONFIRMED`] until the track is confirmed (`tentative_events` can give them the
+/// track's id, or background); only confirmed tracks are listed in `Tracks::tracks`.
 #[derive(Debug, Clone)]
 pub struct Tracker {
     params: TrackerParams,
@@ -408,16 +408,18 @@ impl Tracker {
         }
 
         // ---- outputs ----
-        let hide_tentative = !self.params.label_tentative;
         let id_of_segment: Vec<u32> = track_of_segment
             .iter()
             .map(|m| {
                 m.map_or(0, |ti| {
                     let tr = &self.tracks[ti];
-                    if hide_tentative && tr.hits < self.params.min_hits {
-                        0
-                    } else {
-                        tr.id
+                    if tr.hits >= self.params.min_hits {
+                        return tr.id;
+                    }
+                    match self.params.tentative_events {
+                        TentativeEvents::Unconfirmed => Tracks::UNCONFIRMED,
+                        TentativeEvents::Id => tr.id,
+                        TentativeEvents::Background => 0,
                     }
                 })
             })

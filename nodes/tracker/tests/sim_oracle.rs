@@ -1,11 +1,12 @@
 //! The tracker on simulated sequences segmented by the ground truth ("oracle" segmentation whose
 //! labels are scrambled every slice, as a segmenter's per-slice cluster numbers are): every
 //! object must keep one track id for the whole sequence, different objects different ids, and
-//! background events must stay 0.
+//! background events must stay 0. An object's events are unconfirmed (moving, no id) only in
+//! its track's first `min_hits - 1` slices.
 
 use std::collections::{BTreeMap, BTreeSet};
 
-use evseg_schemas::{Egomotion, EventPacket, Events, Segment, Segmentation, Truth};
+use evseg_schemas::{Egomotion, EventPacket, Events, Segment, Segmentation, Tracks, Truth};
 use evseg_slicer::{SliceOut, Slicer, SlicerParams};
 use evseg_tracker::{Tracker, TrackerParams};
 
@@ -53,7 +54,8 @@ type IdsPerObject = BTreeMap<u16, BTreeSet<u32>>;
 
 /// Runs `preset` through the slicer and the tracker. Returns, per object, the set of track ids
 /// its events got in slices where it had at least `min_events` events, and the number of slices
-/// where such an object's events were not all labelled with one non-zero id.
+/// where such an object's events were not all labelled with one non-zero id, not counting the
+/// first `min_hits - 1` slices in which they were all unconfirmed.
 fn track_preset(
     preset: &str,
     seconds: f64,
@@ -66,6 +68,8 @@ fn track_preset(
     let mut slicer = Slicer::new(SlicerParams::default())?;
     let params = TrackerParams::default();
     let min_events = params.min_events;
+    let tentative_slices = params.min_hits as usize - 1;
+    let mut unconfirmed: BTreeMap<u16, usize> = BTreeMap::new();
     let mut tracker = Tracker::new(params)?;
     let mut ids = IdsPerObject::new();
     let mut bad_slices = 0;
@@ -90,7 +94,15 @@ fn track_preset(
                 if count < min_events as usize {
                     continue;
                 }
-                if set.len() != 1 || set.contains(&0) {
+                if set.len() == 1 && set.contains(&Tracks::UNCONFIRMED) {
+                    let n = unconfirmed.entry(obj).or_default();
+                    *n += 1;
+                    if *n > tentative_slices {
+                        bad_slices += 1;
+                    }
+                    continue;
+                }
+                if set.len() != 1 || set.contains(&0) || set.contains(&Tracks::UNCONFIRMED) {
                     bad_slices += 1;
                 }
                 ids.entry(obj).or_default().extend(set);

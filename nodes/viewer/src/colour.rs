@@ -34,7 +34,8 @@ pub fn hsv(h: f64, s: f64, v: f64) -> [u8; 3] {
 }
 
 /// Colour of segment / track / object `id`: [`BACKGROUND`] for 0, [`UNLABELLED`] for
-/// `u32::MAX` and `u16::MAX` (the pipeline's "no cluster" values), else a saturated colour whose
+/// `u32::MAX` and `u16::MAX` (the pipeline's "no cluster" values, and a tracker's moving events
+/// whose track is not confirmed yet, `Tracks::UNCONFIRMED`), else a saturated colour whose
 /// hue is `id` times the golden-ratio conjugate (mod 1), so the same id has the same colour in
 /// every slice, every layer and every run.
 pub fn label_colour(id: u32) -> [u8; 4] {
