@@ -57,8 +57,9 @@ fn ab_compares_two_variants_on_one_recording() {
     assert!(r.stdout.contains("| input | IoU mask (%) |"), "{}", r.stdout);
     let rows = read_json(&work.join("ab.json"));
     let rows = rows.as_array().unwrap();
-    // IoU mask, events, per object, three RMSE axes, median direction error, false alarms.
-    assert_eq!(rows.len(), 8, "{rows:?}");
+    // IoU mask, events, per object, three RMSE axes, median direction error, the worst
+    // object's id switches (MOTS and any overlap), false alarms.
+    assert_eq!(rows.len(), 10, "{rows:?}");
     for row in rows {
         assert_eq!(row["a"], row["b"], "{row}");
         if let Some(d) = row["difference"].as_f64() {

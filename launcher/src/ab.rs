@@ -53,6 +53,16 @@ const FIGURES: &[(&str, &str, f64)] = &[
         1.0,
     ),
     (
+        "id switches, worst object",
+        "/sequence/id_switches_worst_object",
+        1.0,
+    ),
+    (
+        "id switches, worst object, any overlap",
+        "/sequence/id_switches_any_overlap_worst_object",
+        1.0,
+    ),
+    (
         "false alarms, static windows (%)",
         "/sequence/static_share_labelled_moving/mean",
         100.0,

@@ -84,11 +84,6 @@ fn row_from_report(scene: &str, seed: u64, run: &Path, report: &Value) -> SceneR
     let s = &report["sequence"];
     let has_moving = s["windows_with_moving_object"].as_u64().unwrap_or(0) > 0;
     let pick = |v: &Value| if has_moving { num(v) } else { None };
-    let worst = |key: &str| {
-        s["iou_per_object"]
-            .as_array()
-            .and_then(|objs| objs.iter().filter_map(|o| o[key].as_u64()).max())
-    };
     let rmse = s["egomotion"]["rmse_mps"].as_array().and_then(|a| {
         let v: Vec<f64> = a.iter().filter_map(Value::as_f64).collect();
         (v.len() == 3).then(|| [v[0], v[1], v[2]])
@@ -101,8 +96,8 @@ fn row_from_report(scene: &str, seed: u64, run: &Path, report: &Value) -> SceneR
         iou_per_object: pick(&s["iou_per_object_mean"]),
         rmse_mps: rmse,
         median_direction_error_deg: num(&s["egomotion"]["direction_error"]["median_deg"]),
-        max_id_switches: worst("id_switches"),
-        max_id_switches_any_overlap: worst("id_switches_any_overlap"),
+        max_id_switches: s["id_switches_worst_object"].as_u64(),
+        max_id_switches_any_overlap: s["id_switches_any_overlap_worst_object"].as_u64(),
         static_windows: s["static_share_labelled_moving"]["windows"].as_u64().unwrap_or(0),
         static_share_labelled_moving: num(&s["static_share_labelled_moving"]["mean"]),
         run: run.to_path_buf(),
@@ -246,8 +241,7 @@ mod tests {
             "windows_with_moving_object": 3,
             "iou_mask": {"mean": 0.5}, "iou_events": {"mean": 0.25}, "iou_per_object_mean": 0.75,
             "egomotion": {"rmse_mps": [0.1, 0.2, 0.3], "direction_error": {"median_deg": 4.0}},
-            "iou_per_object": [{"id_switches": 2, "id_switches_any_overlap": 7},
-                {"id_switches": 5, "id_switches_any_overlap": 6}]
+            "id_switches_worst_object": 5, "id_switches_any_overlap_worst_object": 7
         }});
         let r = row_from_report("a", 1, Path::new("x"), &report);
         assert_eq!((r.static_windows, r.static_share_labelled_moving), (0, None));

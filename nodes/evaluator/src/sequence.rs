@@ -117,6 +117,11 @@ pub struct SequenceSummary {
     pub iou_per_object: Vec<ObjectIouSummary>,
     /// Mean of the per-object means.
     pub iou_per_object_mean: Option<f64>,
+    /// Id switches of the object with the most ([`ObjectIouSummary::id_switches`], issue 5's
+    /// target is at most one), `None` without objects.
+    pub id_switches_worst_object: Option<u64>,
+    /// The same over any overlap ([`ObjectIouSummary::id_switches_any_overlap`]).
+    pub id_switches_any_overlap_worst_object: Option<u64>,
     /// Egomotion.
     pub egomotion: EgomotionSummary,
     /// Object motion.
@@ -315,6 +320,9 @@ impl SequenceAccumulator {
             .collect();
         let iou_per_object_mean = (!iou_per_object.is_empty())
             .then(|| iou_per_object.iter().map(|o| o.mean_iou).sum::<f64>() / iou_per_object.len() as f64);
+        let id_switches_worst_object = iou_per_object.iter().map(|o| o.id_switches).max();
+        let id_switches_any_overlap_worst_object =
+            iou_per_object.iter().map(|o| o.id_switches_any_overlap).max();
         let mut dirs = self.directions.clone();
         dirs.sort_by(f64::total_cmp);
         let median = (!dirs.is_empty()).then(|| {
@@ -333,6 +341,8 @@ impl SequenceAccumulator {
             iou_mask: self.iou_mask.summary(),
             iou_per_object,
             iou_per_object_mean,
+            id_switches_worst_object,
+            id_switches_any_overlap_worst_object,
             egomotion: EgomotionSummary {
                 windows: self.ego_n,
                 skipped: self.ego_skipped.clone(),

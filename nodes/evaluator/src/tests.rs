@@ -209,6 +209,13 @@ fn a_small_piece_matched_for_want_of_a_better_one_is_not_an_identity_switch() {
     let sum = ev.summary("synthetic");
     let o = &sum.iou_per_object[0];
     assert_eq!((o.id_switches, o.id_switches_any_overlap), (0, 2));
+    assert_eq!(
+        (
+            sum.id_switches_worst_object,
+            sum.id_switches_any_overlap_worst_object
+        ),
+        (Some(0), Some(2))
+    );
     assert_eq!(o.matched_windows, 8);
     // The unconfirmed windows stay moving for the IoU per event.
     assert_eq!(sum.iou_events.windows, 10);
