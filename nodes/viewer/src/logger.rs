@@ -7,8 +7,9 @@
 //!   pixel `(x, y)` is drawn at `(x + 0.5, y + 0.5)` so it lands inside the image pixel),
 //!   coloured ON / OFF; `events/frame`: the sensor outline (static);
 //! - `segments/P/events`: the same points coloured by P's per-event label (tracks or segments;
-//!   stable colour per id, grey = background); `segments/P/boxes`: P's track boxes labelled
-//!   `id N` (or segment boxes labelled `segment N`);
+//!   stable colour per id, grey = background, dark half-transparent grey = moving without a
+//!   confirmed track, `Tracks::UNCONFIRMED`); `segments/P/boxes`: P's confirmed track boxes
+//!   labelled `id N` (or segment boxes labelled `segment N`);
 //! - `flow/P/events`: the same points coloured by P's normal-flow direction (hue) and magnitude
 //!   (brightness);
 //! - `truth/events`: coloured by the ground-truth object id (only truth from the node that made
