@@ -211,7 +211,8 @@ impl ObjectAcc {
     }
 }
 
-/// Adds slice reports one at a time.
+/// Adds slice reports one at a time. Made with [`SequenceAccumulator::new`]; `default()` counts
+/// every match as the object's identity (`switch_min_iou` 0).
 #[derive(Debug, Default)]
 pub struct SequenceAccumulator {
     /// IoU above which a match is the object's identity (`EvalParams::switch_min_iou`).
