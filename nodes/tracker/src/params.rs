@@ -24,16 +24,22 @@ pub enum TentativeEvents {
 }
 
 impl TentativeEvents {
+    /// Every value with its name as written in a graph.
+    const ALL: [(Self, &'static str); 3] = [
+        (Self::Unconfirmed, "unconfirmed"),
+        (Self::Id, "id"),
+        (Self::Background, "background"),
+    ];
+
     /// The parameter's values, as written in a graph.
-    pub const NAMES: [&'static str; 3] = ["unconfirmed", "id", "background"];
+    pub const NAMES: [&'static str; 3] = [Self::ALL[0].1, Self::ALL[1].1, Self::ALL[2].1];
 
     /// The value's name, as written in a graph.
     pub fn name(self) -> &'static str {
-        match self {
-            Self::Unconfirmed => "unconfirmed",
-            Self::Id => "id",
-            Self::Background => "background",
-        }
+        Self::ALL
+            .iter()
+            .find(|(v, _)| *v == self)
+            .map_or("unconfirmed", |(_, n)| n)
     }
 }
 
@@ -41,16 +47,15 @@ impl std::str::FromStr for TentativeEvents {
     type Err = TrackerError;
 
     fn from_str(s: &str) -> Result<Self, Self::Err> {
-        match s {
-            "unconfirmed" => Ok(Self::Unconfirmed),
-            "id" => Ok(Self::Id),
-            "background" => Ok(Self::Background),
-            other => Err(TrackerError::InvalidChoice {
+        Self::ALL
+            .iter()
+            .find(|(_, n)| *n == s)
+            .map(|(v, _)| *v)
+            .ok_or_else(|| TrackerError::InvalidChoice {
                 name: "tentative_events",
-                value: other.to_string(),
+                value: s.to_string(),
                 expected: &Self::NAMES,
-            }),
-        }
+            })
     }
 }
 

@@ -1165,3 +1165,16 @@ fn a_group_smaller_than_split_min_share_stays_with_its_track() -> Result<(), Tra
     assert_eq!(run(0.25)?, (1, 2));
     Ok(())
 }
+
+#[test]
+fn tentative_events_names_round_trip_and_a_bad_one_lists_the_valid_ones() {
+    for name in TentativeEvents::NAMES {
+        let v: TentativeEvents = name.parse().unwrap();
+        assert_eq!(v.name(), name);
+    }
+    let err = "label".parse::<TentativeEvents>().unwrap_err().to_string();
+    assert!(
+        err.contains("tentative_events") && err.contains("`label`") && err.contains("unconfirmed"),
+        "{err}"
+    );
+}
