@@ -24,22 +24,19 @@ pub enum TentativeEvents {
 }
 
 impl TentativeEvents {
-    /// Every value with its name as written in a graph.
-    const ALL: [(Self, &'static str); 3] = [
-        (Self::Unconfirmed, "unconfirmed"),
-        (Self::Id, "id"),
-        (Self::Background, "background"),
-    ];
+    /// Every value.
+    const ALL: [Self; 3] = [Self::Unconfirmed, Self::Id, Self::Background];
 
     /// The parameter's values, as written in a graph.
-    pub const NAMES: [&'static str; 3] = [Self::ALL[0].1, Self::ALL[1].1, Self::ALL[2].1];
+    pub const NAMES: [&'static str; 3] = [Self::ALL[0].name(), Self::ALL[1].name(), Self::ALL[2].name()];
 
     /// The value's name, as written in a graph.
-    pub fn name(self) -> &'static str {
-        Self::ALL
-            .iter()
-            .find(|(v, _)| *v == self)
-            .map_or("unconfirmed", |(_, n)| n)
+    pub const fn name(self) -> &'static str {
+        match self {
+            Self::Unconfirmed => "unconfirmed",
+            Self::Id => "id",
+            Self::Background => "background",
+        }
     }
 }
 
@@ -48,9 +45,8 @@ impl std::str::FromStr for TentativeEvents {
 
     fn from_str(s: &str) -> Result<Self, Self::Err> {
         Self::ALL
-            .iter()
-            .find(|(_, n)| *n == s)
-            .map(|(v, _)| *v)
+            .into_iter()
+            .find(|v| v.name() == s)
             .ok_or_else(|| TrackerError::InvalidChoice {
                 name: "tentative_events",
                 value: s.to_string(),
