@@ -457,6 +457,24 @@ fn malformed_input_is_an_error_not_a_panic_and_leaves_the_evaluator_usable() {
             ..
         })
     ));
+    for v in [-0.1, 1.0, f64::NAN] {
+        let p = EvalParams {
+            switch_min_iou: v,
+            ..EvalParams::default()
+        };
+        let err = Evaluator::new(p).unwrap_err();
+        assert!(
+            matches!(
+                err,
+                EvalError::Param {
+                    name: "switch_min_iou",
+                    ..
+                }
+            ),
+            "{err}"
+        );
+        assert!(err.to_string().contains("switch_min_iou"), "{err}");
+    }
 }
 
 #[test]
