@@ -2,9 +2,13 @@
 //! ground-truth id, kept for a few slices evenly spread over the sequence.
 
 use crate::slice_eval::{TruthIds, UNKNOWN_ID};
+use evseg_schemas::Tracks;
 
-/// Pixel without any event in a snapshot's label raster.
-pub const NO_EVENT_LABEL: u32 = u32::MAX;
+/// Pixel without any event in a snapshot's label raster. Not `u32::MAX`: that is
+/// [`Tracks::UNCONFIRMED`], a label events carry (moving, track not confirmed yet), which the
+/// frames must show; track ids count up from 1 and never reach this value.
+pub const NO_EVENT_LABEL: u32 = u32::MAX - 1;
+const _: () = assert!(NO_EVENT_LABEL != Tracks::UNCONFIRMED);
 /// Pixel without any event in a snapshot's truth raster.
 pub const NO_EVENT_ID: u16 = u16::MAX - 1;
 /// Pixel whose last event has no ground truth (outside the mask's time) in a truth raster.
@@ -161,6 +165,17 @@ mod tests {
             ]
         );
         assert_eq!(s.truth[5], 6);
+        // An unconfirmed track's label is an event, not the raster's "no event".
+        let u = FrameSnapshot::new(
+            0,
+            (0.0, 1.0),
+            (1, 1),
+            (&[0], &[0]),
+            &[Tracks::UNCONFIRMED],
+            &vec![1],
+            None,
+        );
+        assert_eq!(u.predicted, vec![Tracks::UNCONFIRMED]);
         assert_eq!(s.truth[1], NO_EVENT_ID);
     }
 

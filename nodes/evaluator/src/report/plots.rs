@@ -3,6 +3,7 @@
 
 use super::raster::{BLACK, Canvas, GRID, INK, Rgb, WHITE};
 use crate::frames::{FrameSnapshot, NO_EVENT_ID, NO_EVENT_LABEL, UNKNOWN_TRUTH};
+use evseg_schemas::Tracks;
 
 /// How a series is drawn.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -218,6 +219,8 @@ pub fn unmatched_color(label: u32) -> Rgb {
 const NO_EVENT: Rgb = [16, 16, 16];
 const BACKGROUND_EVENT: Rgb = [120, 120, 120];
 const UNKNOWN_EVENT: Rgb = [60, 60, 110];
+/// Events labelled [`Tracks::UNCONFIRMED`]: moving, but their track is not confirmed yet.
+const UNCONFIRMED_EVENT: Rgb = [215, 215, 215];
 
 /// Importance of a pixel when several source pixels fall on one display pixel.
 fn rank(c: Rgb) -> u8 {
@@ -260,6 +263,9 @@ fn panel(w: usize, h: usize, pw: usize, src: impl Fn(usize, usize) -> Rgb) -> Ca
     c
 }
 
+/// Height of a line of the frames figure's key, pixels.
+const KEY_LINE: i64 = 18;
+
 /// Frames side by side: per row, events coloured by predicted label (left) and by ground truth
 /// (right); grey = background events, dark blue = events without ground truth, black = no event.
 pub fn frames_figure(frames: &[&FrameSnapshot], panel_width: usize) -> Canvas {
@@ -273,6 +279,7 @@ pub fn frames_figure(frames: &[&FrameSnapshot], panel_width: usize) -> Canvas {
             let pred = panel(w, h, panel_width, |x, y| match f.predicted[y * w + x] {
                 NO_EVENT_LABEL => NO_EVENT,
                 0 => BACKGROUND_EVENT,
+                Tracks::UNCONFIRMED => UNCONFIRMED_EVENT,
                 l => match f.matches.iter().find(|m| m.0 == l) {
                     Some(&(_, object)) => label_color(object as u32),
                     None => unmatched_color(l),
@@ -293,7 +300,8 @@ pub fn frames_figure(frames: &[&FrameSnapshot], panel_width: usize) -> Canvas {
         })
         .collect();
     let width = (2 * panel_width + 3 * gap).max(780);
-    let height = head + rows.iter().map(|r| caption + r.0.height + gap).sum::<usize>() + 40;
+    let height =
+        head + rows.iter().map(|r| caption + r.0.height + gap).sum::<usize>() + 4 * KEY_LINE as usize;
     let mut c = Canvas::new(width, height, WHITE);
     let left = gap as i64;
     let right = (2 * gap + panel_width) as i64;
@@ -309,22 +317,30 @@ pub fn frames_figure(frames: &[&FrameSnapshot], panel_width: usize) -> Canvas {
     }
     let key = [
         (BACKGROUND_EVENT, "background event"),
+        (UNCONFIRMED_EVENT, "moving, track not confirmed"),
         (UNKNOWN_EVENT, "no truth (away from mask time)"),
         (NO_EVENT, "no event"),
     ];
     let mut x = left;
     for (col, name) in key {
+        let item = 16 + super::font::text_width(name, 1) as i64;
+        if x > left && x + item > width as i64 - gap as i64 {
+            x = left;
+            y += KEY_LINE;
+        }
         c.fill_rect(x, y + 4, x + 12, y + 14, col);
         c.text(name, x + 16, y + 5, 1, INK);
-        x += 16 + super::font::text_width(name, 1) as i64 + 20;
+        x += item + 20;
     }
-    c.text(
-        "colours: one per object; a predicted label takes its matched object's colour",
-        left,
-        y + 22,
-        1,
-        INK,
-    );
+    for (k, line) in [
+        "colours: one per object; a predicted label takes its matched object's colour,",
+        "a label matched to no object a dimmed colour of its own",
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        c.text(line, left, y + KEY_LINE * (k as i64 + 1), 1, INK);
+    }
     c
 }
 
@@ -362,5 +378,29 @@ mod tests {
             c.get(LEFT as usize + 1, (200 - BOTTOM) as usize - 1),
             Some([255, 0, 0])
         );
+    }
+
+    #[test]
+    fn frames_show_unconfirmed_events_apart_from_pixels_without_events() {
+        // A 4 x 2 sensor: one background event, one unconfirmed, one with a track id; the
+        // other five pixels have no event.
+        let labels = [0, Tracks::UNCONFIRMED, 7];
+        let truth = vec![0, 1, 1];
+        let f = FrameSnapshot::new(
+            0,
+            (0.0, 0.03),
+            (4, 2),
+            (&[0, 1, 2], &[0, 0, 0]),
+            &labels,
+            &truth,
+            None,
+        );
+        let c = frames_figure(&[&f], 4);
+        let count = |col: Rgb| c.pixels.iter().filter(|&&v| v == col).count();
+        // Panels are rasterised at 1:1 here; the key draws a 12 x 10 swatch of each colour.
+        let swatch = 12 * 10;
+        assert_eq!(count(UNCONFIRMED_EVENT), 1 + swatch);
+        assert_eq!(count(BACKGROUND_EVENT), 2 + swatch);
+        assert_eq!(count(unmatched_color(7)), 1);
     }
 }
