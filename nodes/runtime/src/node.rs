@@ -869,14 +869,14 @@ impl Running {
     }
 }
 
-/// Reads the config and opens ports. `fixed_ports`: the config's inputs and outputs must be
-/// ports of `description` (false only for nodes whose ports are chosen by the launcher: the
-/// recorder's inputs, the replay source's outputs, see [`crate::raw`]).
-pub(crate) fn start(
+/// Reads and checks the config. `fixed_ports`: the config's inputs and outputs must be ports of
+/// `description` (false only for nodes whose ports are chosen by the launcher: the recorder's
+/// inputs, the replay source's outputs, see [`crate::raw`]).
+pub(crate) fn load_config(
     description: &NodeDescription,
     path: &std::path::Path,
     fixed_ports: bool,
-) -> Result<Running, RuntimeError> {
+) -> Result<NodeConfig, RuntimeError> {
     let cfg = NodeConfig::load(path)?;
     if cfg.window == 0 || cfg.queue == 0 {
         return Err(RuntimeError::Config(format!(
@@ -900,6 +900,11 @@ pub(crate) fn start(
             )));
         }
     }
+    Ok(cfg)
+}
+
+/// Opens the node's Zenoh session, its ports, its shared-memory pool and its liveliness token.
+pub(crate) fn connect(cfg: NodeConfig) -> Result<Running, RuntimeError> {
     let session = open_session(&cfg.zenoh)?;
     let (book, mut handles) = CreditBook::start(&session, &cfg)?;
     let cc = match cfg.mode {
@@ -1001,8 +1006,7 @@ pub fn run_stage<S: Stage>(
     description: NodeDescription,
     make: impl FnOnce(&NodeConfig) -> Result<S, BoxError>,
 ) -> std::process::ExitCode {
-    main_wrapper(description, true, |run| {
-        let mut stage = make(&run.cfg).map_err(|e| in_node(&run.cfg.node, e))?;
+    main_wrapper(description, true, make, |run, mut stage| {
         stage_loop(run, &mut stage)
     })
 }
@@ -1012,8 +1016,7 @@ pub fn run_source<S: Source>(
     description: NodeDescription,
     make: impl FnOnce(&NodeConfig) -> Result<S, BoxError>,
 ) -> std::process::ExitCode {
-    main_wrapper(description, true, |run| {
-        let mut source = make(&run.cfg).map_err(|e| in_node(&run.cfg.node, e))?;
+    main_wrapper(description, true, make, |run, mut source| {
         source_loop(run, &mut source)
     })
 }
@@ -1027,16 +1030,21 @@ pub fn run_raw_source<S: Source>(
     description: NodeDescription,
     make: impl FnOnce(&NodeConfig) -> Result<S, BoxError>,
 ) -> std::process::ExitCode {
-    main_wrapper(description, false, |run| {
-        let mut source = make(&run.cfg).map_err(|e| in_node(&run.cfg.node, e))?;
+    main_wrapper(description, false, make, |run, mut source| {
         source_loop(run, &mut source)
     })
 }
 
-pub(crate) fn main_wrapper(
+/// The `main` of every node binary: `--describe`, or `--config FILE`: reads and checks the
+/// config, builds the node's state with `make`, connects ([`connect`]) and runs `body`. The
+/// state is built before connecting so that a node's own set-up (reading a recording, baking
+/// the simulator's textures, loading weights) overlaps the other nodes' start-up instead of
+/// following its own, and a bad parameter stops the node before it joins the network.
+pub(crate) fn main_wrapper<T>(
     description: NodeDescription,
     fixed_ports: bool,
-    body: impl FnOnce(Running) -> Result<(), RuntimeError>,
+    make: impl FnOnce(&NodeConfig) -> Result<T, BoxError>,
+    body: impl FnOnce(Running, T) -> Result<(), RuntimeError>,
 ) -> std::process::ExitCode {
     crate::memory::tune_allocator();
     init_tracing();
@@ -1060,7 +1068,10 @@ pub(crate) fn main_wrapper(
             }
         },
         Cli::Run(path) => {
-            let result = start(&description, &path, fixed_ports).and_then(body);
+            let result = load_config(&description, &path, fixed_ports).and_then(|cfg| {
+                let made = make(&cfg).map_err(|e| in_node(&cfg.node, e))?;
+                body(connect(cfg)?, made)
+            });
             match result {
                 Ok(()) => {
                     tracing::info!("finished");

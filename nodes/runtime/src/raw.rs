@@ -16,7 +16,7 @@ use evseg_schemas::{Envelope, FrameKind, codec};
 
 use crate::config::{Mode, NodeConfig};
 use crate::error::{BoxError, RuntimeError};
-use crate::node::{RESEND_AFTER, Running, StatsClock, in_node, main_wrapper, maybe_stats, note_losses};
+use crate::node::{RESEND_AFTER, Running, StatsClock, main_wrapper, maybe_stats, note_losses};
 use crate::progress::DONE;
 use crate::signals;
 use crate::transport::{POLL, SeqGaps};
@@ -130,8 +130,7 @@ pub fn run_raw_consumer<C: RawConsumer>(
     description: NodeDescription,
     make: impl FnOnce(&NodeConfig) -> Result<C, BoxError>,
 ) -> std::process::ExitCode {
-    main_wrapper(description, false, |run| {
-        let mut consumer = make(&run.cfg).map_err(|e| in_node(&run.cfg.node, e))?;
+    main_wrapper(description, false, make, |run, mut consumer| {
         raw_loop(run, &mut consumer)
     })
 }

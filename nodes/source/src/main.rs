@@ -21,7 +21,9 @@ struct SourceNode {
     seq: u64,
     /// Real-time factor for live runs (0 = as fast as possible).
     speed: f64,
-    started: Instant,
+    /// When the first batch was due, for live pacing (set at the first step, not when the node
+    /// was built: it is built before it connects).
+    started: Option<Instant>,
     summary: SourceSummary,
     summary_path: std::path::PathBuf,
 }
@@ -58,7 +60,11 @@ impl Source for SourceNode {
         };
         if self.speed > 0.0 {
             let due = t_start / self.speed;
-            let now = self.started.elapsed().as_secs_f64();
+            let now = self
+                .started
+                .get_or_insert_with(Instant::now)
+                .elapsed()
+                .as_secs_f64();
             if due > now {
                 std::thread::sleep(std::time::Duration::from_secs_f64(due - now));
             }
@@ -264,7 +270,7 @@ fn main() -> ExitCode {
             } else {
                 0.0
             },
-            started: Instant::now(),
+            started: None,
             summary: SourceSummary {
                 digest: EventDigest::default(),
                 first_publish_ns: None,
