@@ -48,6 +48,8 @@
 //! in their 3x3 cells. FILL_PLANAR (diagnostic; replaces the final labels of events without a
 //! group): 1 = those with no grouped event in their 3x3 cells take the planar label, 2 = all of
 //! them do, 3 = as 1, and the others stay foreground only where the planar label agrees.
+//! STAGE_TIMES: per scene, the seconds spent in the over-segmentation, the planar segmenter,
+//! the background merger and the hierarchical merger (wall time of each call, one thread).
 //! ORACLE_FIT: the plane fitted to the true background's events only (instead of leaving out
 //! the previous slice's foreground).
 //! Diagnostics that replace the final labels: ORACLE_CLUSTERS (each cluster labelled by its
@@ -612,11 +614,13 @@ fn main() -> anyhow::Result<()> {
             lambda: env_or("OVERSEG_LAMBDA", OversegParams::default().lambda)?,
             ..OversegParams::default()
         })?;
+        let overseg_start = std::time::Instant::now();
         let clusters: Vec<_> = slices
             .iter()
             .zip(&flows)
             .map(|((s, _, _), f)| overseg.segment(&s.camera, &s.events, f))
             .collect::<Result<_, _>>()?;
+        let overseg_s = overseg_start.elapsed().as_secs_f64();
         for set in &sets {
             let (mut bgp, mut hp, mut pp) = (
                 BackgroundParams::default(),
@@ -643,6 +647,8 @@ fn main() -> anyhow::Result<()> {
             let mut fill_stats = [[[0usize; 3]; 2]; 2];
             // FILL_STATS: ungrouped events labelled background: [object, background] x [no labelled neighbour, labelled neighbours].
             let mut fill_why = [[0usize; 2]; 2];
+            // STAGE_TIMES: seconds in the planar segmenter, background merger, hierarchical merger.
+            let mut stage_s = [0.0f64; 3];
             let (mut planar_pred_all, mut planar_inter_all) = (0usize, 0usize);
             // Slices without a moving object: share of events labelled moving (final, planar).
             let mut static_fa: Vec<(f64, f64)> = Vec::new();
@@ -658,12 +664,14 @@ fn main() -> anyhow::Result<()> {
                         .map(|&o| f64::from(u8::from(o == 0)))
                         .collect()
                 });
+                let clock = std::time::Instant::now();
                 let r = match oracle_fit {
                     Some(w) => planar.segment_weighted(&s.camera, &s.events, f, rate, Some(&w))?,
                     None => {
                         planar.segment_with_previous(&s.camera, &s.events, f, rate, prev_planar.as_deref())?
                     }
                 };
+                stage_s[0] += clock.elapsed().as_secs_f64();
                 let debug_mask = match (std::env::var("DEBUG_FIT").is_ok(), prev_planar.as_deref()) {
                     (true, Some(pl)) if dump_k > 0 => {
                         let ps = &slices[dump_k - 1].0;
@@ -696,6 +704,7 @@ fn main() -> anyhow::Result<()> {
                         r.previous_applied, r.fitted_events
                     );
                 }
+                let clock = std::time::Instant::now();
                 let m = bg.merge(&SliceInput {
                     camera: &s.camera,
                     events: &s.events,
@@ -706,7 +715,10 @@ fn main() -> anyhow::Result<()> {
                     residuals: &r.residuals,
                     previous_labels: prev.as_deref(),
                 })?;
+                stage_s[1] += clock.elapsed().as_secs_f64();
+                let clock = std::time::Instant::now();
                 let h = hier.merge(&s.camera, &s.events, f, rate, &m.coarse)?;
+                stage_s[2] += clock.elapsed().as_secs_f64();
                 let mut oracle_label;
                 let mut label = &h.segmentation.label;
                 if std::env::var("SEGS").is_ok() {
@@ -1176,6 +1188,13 @@ fn main() -> anyhow::Result<()> {
                 dirs.get(dirs.len() / 2).copied().unwrap_or(f64::NAN),
                 dirs.len()
             );
+            if std::env::var("STAGE_TIMES").is_ok() {
+                let events: usize = slices.iter().map(|(s, _, _)| s.events.len()).sum();
+                println!(
+                    "  stage seconds ({events} events): over-segmentation {overseg_s:.3}, planar {:.3}, background merger {:.3}, hierarchical merger {:.3}",
+                    stage_s[0], stage_s[1], stage_s[2]
+                );
+            }
             if std::env::var("FILL_STATS").is_ok() {
                 for (kind, name) in ["grouped", "ungrouped"].iter().enumerate() {
                     for (which, w) in ["final", "planar"].iter().enumerate() {
