@@ -165,6 +165,7 @@ mod tests {
             ]
         );
         assert_eq!(s.truth[5], 6);
+        assert_eq!(s.truth[1], NO_EVENT_ID);
         // An unconfirmed track's label is an event, not the raster's "no event".
         let u = FrameSnapshot::new(
             0,
@@ -176,7 +177,6 @@ mod tests {
             None,
         );
         assert_eq!(u.predicted, vec![Tracks::UNCONFIRMED]);
-        assert_eq!(s.truth[1], NO_EVENT_ID);
     }
 
     #[test]
