@@ -670,6 +670,99 @@ fn the_normal_flow_compare_graph_scores_both_estimators_on_the_same_slices() {
     );
 }
 
+/// `evseg bench --sequences` finds the EVIMO2 v2 folders below the folder it is given, scores
+/// each through the graph into one table, and reports a corrupt one by name without stopping
+/// the others; the command then fails, naming it.
+#[test]
+fn bench_sequences_scores_every_evimo2_folder_and_reports_a_broken_one() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path().join("data");
+    let split = root.join("cam/imo/eval");
+    for (scene, seed) in [("one-object", "5"), ("two-objects", "6")] {
+        let out = split.join(format!("{scene}-{seed}"));
+        let sim = std::process::Command::new(evseg_tests::bin("evseg"))
+            .args([
+                "sim",
+                "--scene",
+                scene,
+                "--seconds",
+                "0.2",
+                "--seed",
+                seed,
+                "--out",
+            ])
+            .arg(&out)
+            .output()
+            .unwrap();
+        assert!(sim.status.success(), "{}", String::from_utf8_lossy(&sim.stderr));
+    }
+    // A copy of the first whose dataset_info.npz is cut short.
+    let broken = split.join("broken");
+    std::fs::create_dir_all(&broken).unwrap();
+    for entry in std::fs::read_dir(split.join("one-object-5")).unwrap() {
+        let path = entry.unwrap().path();
+        let bytes = std::fs::read(&path).unwrap();
+        let keep = if path.ends_with("dataset_info.npz") {
+            100
+        } else {
+            bytes.len()
+        };
+        std::fs::write(broken.join(path.file_name().unwrap()), &bytes[..keep]).unwrap();
+    }
+    let (g, _) = graph_file(
+        dir.path(),
+        &repo_graph_on_loopback("graphs/evimo2.yaml", free_port()),
+    );
+    let work = dir.path().join("work");
+    let run = Launcher::start(
+        dir.path(),
+        &[
+            "bench",
+            "--graph",
+            g.to_str().unwrap(),
+            "--sequences",
+            root.to_str().unwrap(),
+            "--work",
+            work.to_str().unwrap(),
+        ],
+        "a",
+    )
+    .wait(Duration::from_secs(600));
+    assert!(
+        !run.status.success(),
+        "a broken sequence must fail the command:\n{}",
+        run.stdout
+    );
+    assert!(
+        run.stderr
+            .contains("1 of 3 sequences failed: cam/imo/eval/broken"),
+        "{}",
+        run.stderr
+    );
+    let bench = read_json(&work.join("bench.json"));
+    let names: Vec<&str> = bench["rows"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|r| r["scene"].as_str().unwrap())
+        .collect();
+    assert_eq!(names, ["cam/imo/eval/one-object-5", "cam/imo/eval/two-objects-6"]);
+    for r in bench["rows"].as_array().unwrap() {
+        let iou = r["iou_mask"].as_f64().unwrap();
+        assert!((0.0..=1.0).contains(&iou) && r["seed"].is_null(), "{r}");
+    }
+    let failure = &bench["failures"][0];
+    assert_eq!(failure["sequence"], "cam/imo/eval/broken");
+    assert!(
+        failure["error"].as_str().unwrap().contains("dataset_info.npz"),
+        "the error names the corrupt file: {failure}"
+    );
+    let md = std::fs::read_to_string(work.join("bench.md")).unwrap();
+    assert!(md.contains("| cam/imo/eval/one-object-5 | "), "{md}");
+    assert!(md.contains("| **mean** | "), "{md}");
+    assert!(md.contains("- cam/imo/eval/broken ("), "{md}");
+}
+
 /// `evseg bench pipeline` listens on a free loopback port of its own, not the graph's: with the
 /// graph's port held by someone else (here the test's own listener, as another run would), the
 /// benchmark still runs and reports its figures.

@@ -174,14 +174,22 @@ enum Command {
         graph: PathBuf,
     },
     /// Benchmarks (use --release binaries). Without a subcommand: the versioned simulator scene
-    /// set through a graph, scored by its evaluator, as a table with mean values. Every run's
-    /// router listens on a free loopback port, so benchmarks run beside other graphs.
+    /// set through a graph, scored by its evaluator, as a table with mean values; with
+    /// `--sequences`, EVIMO2 v2 sequence folders instead, one row each. Every run's router
+    /// listens on a free loopback port, so benchmarks run beside other graphs.
+    #[command(args_conflicts_with_subcommands = true)]
     Bench {
         #[command(subcommand)]
         what: Option<BenchWhat>,
-        /// Graph to run (needs an evseg-source and an evseg-evaluator node).
-        #[arg(long, default_value = "graph.yaml")]
-        graph: PathBuf,
+        /// Graph to run (needs an evseg-source and an evseg-evaluator node) [default:
+        /// graph.yaml, or graphs/evimo2.yaml with --sequences]
+        #[arg(long)]
+        graph: Option<PathBuf>,
+        /// EVIMO2 v2 sequence folders, or folders holding them (up to four levels below, as
+        /// the dataset's `<camera>/<category>/<split>/`), to bench instead of the simulator's
+        /// scene set; a sequence that fails is reported and the others still run.
+        #[arg(long, num_args = 1..)]
+        sequences: Vec<PathBuf>,
         /// Working folder (one run folder per scene).
         #[arg(long, default_value = "runs/bench")]
         work: PathBuf,
@@ -332,15 +340,55 @@ fn main() -> ExitCode {
         Command::Bench {
             what: None,
             graph,
+            sequences,
             work,
-        } => bench_scenes::bench(&graph, &work, false).and_then(|rows| {
-            let md = bench_scenes::markdown(&rows, &graph);
-            println!("{md}");
-            std::fs::create_dir_all(&work)?;
-            std::fs::write(work.join("bench.md"), &md)?;
-            std::fs::write(work.join("bench.json"), serde_json::to_string_pretty(&rows)?)?;
-            Ok(())
-        }),
+        } if sequences.is_empty() => {
+            let graph = graph.unwrap_or_else(|| PathBuf::from("graph.yaml"));
+            bench_scenes::bench(&graph, &work, false).and_then(|rows| {
+                let md = bench_scenes::markdown(&rows, &graph, bench_scenes::Rows::Scenes);
+                println!("{md}");
+                std::fs::create_dir_all(&work)?;
+                std::fs::write(work.join("bench.md"), &md)?;
+                std::fs::write(work.join("bench.json"), serde_json::to_string_pretty(&rows)?)?;
+                Ok(())
+            })
+        }
+        Command::Bench {
+            what: None,
+            graph,
+            sequences,
+            work,
+        } => {
+            let graph = graph.unwrap_or_else(|| PathBuf::from("graphs/evimo2.yaml"));
+            bench_scenes::bench_sequences(&graph, &sequences, &work, false).and_then(|(rows, failures)| {
+                let mut md = bench_scenes::markdown(&rows, &graph, bench_scenes::Rows::Sequences);
+                if !failures.is_empty() {
+                    md.push_str("\nNot scored (the run failed):\n\n");
+                    for f in &failures {
+                        md.push_str(&format!("- {} ({}): {}\n", f.sequence, f.path.display(), f.error));
+                    }
+                }
+                println!("{md}");
+                std::fs::create_dir_all(&work)?;
+                std::fs::write(work.join("bench.md"), &md)?;
+                let json = serde_json::json!({ "rows": rows, "failures": failures });
+                std::fs::write(work.join("bench.json"), serde_json::to_string_pretty(&json)?)?;
+                if failures.is_empty() {
+                    Ok(())
+                } else {
+                    anyhow::bail!(
+                        "{} of {} sequences failed: {}",
+                        failures.len(),
+                        failures.len() + rows.len(),
+                        failures
+                            .iter()
+                            .map(|f| f.sequence.as_str())
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    )
+                }
+            })
+        }
         Command::Bench {
             what:
                 Some(BenchWhat::Pipeline {

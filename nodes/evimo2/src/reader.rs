@@ -751,10 +751,10 @@ fn mask_resolution(path: &Path) -> Option<(u16, u16)> {
 /// How deep [`check_sequence_folder`] looks below a folder that is not a sequence: EVIMO2's
 /// layout is `<camera>/<category>/<split>/<sequence>/`, so 4 levels reach the sequences from
 /// the dataset's root.
-const SEQUENCE_SEARCH_DEPTH: usize = 4;
+pub const SEQUENCE_SEARCH_DEPTH: usize = 4;
 
 /// Most folders [`check_sequence_folder`] visits while looking for sequences below a folder.
-const SEQUENCE_SEARCH_VISITS: usize = 10_000;
+pub const SEQUENCE_SEARCH_VISITS: usize = 10_000;
 
 /// Most sequence folders named in the error of [`check_sequence_folder`].
 const SEQUENCE_SEARCH_NAMED: usize = 5;
@@ -800,6 +800,18 @@ fn check_sequence_folder(folder: &Path) -> Result<()> {
         )
     };
     Err(Evimo2Error::invalid(shown, message))
+}
+
+/// The EVIMO2 v2 sequence folders at or below `root`: `root` itself when it holds [`EVENTS_T`],
+/// else the folders up to [`SEQUENCE_SEARCH_DEPTH`] levels below it that do, sorted by path;
+/// and whether the search visited every folder within that depth (it stops after
+/// [`SEQUENCE_SEARCH_VISITS`]). Unreadable folders are skipped. For tools that run many
+/// sequences (`evseg bench --sequences`); opening one checks it with a clear error instead.
+pub fn find_sequence_folders(root: &Path) -> (Vec<PathBuf>, bool) {
+    if root.join(EVENTS_T).is_file() {
+        return (vec![root.to_path_buf()], true);
+    }
+    sequence_folders_below(root)
 }
 
 /// Folders below `root` (up to [`SEQUENCE_SEARCH_DEPTH`] levels, sorted) that hold [`EVENTS_T`],
