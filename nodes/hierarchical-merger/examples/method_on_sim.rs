@@ -52,7 +52,9 @@
 //! the background merger and the hierarchical merger (wall time of each call, one thread).
 //! ORACLE_FIT: the plane fitted to the true background's events only (instead of leaving out
 //! the previous slice's foreground).
-//! Diagnostics that replace the final labels: ORACLE_CLUSTERS (each cluster labelled by its
+//! Diagnostics that replace the final labels: ORACLE_GROUPED (every event with a coarse group
+//! takes its truth, 1 = moving, and the others the hierarchical merger's fill from them: the
+//! fill's ceiling), ORACLE_CLUSTERS (each cluster labelled by its
 //! ground-truth majority: the over-segmentation's ceiling), ORACLE_T=ratio (a cluster is
 //! background when the true camera translation explains it with a depth of its own).
 
@@ -784,6 +786,28 @@ fn main() -> anyhow::Result<()> {
                         }
                     }
                     label = &planar_filled;
+                }
+                if std::env::var("ORACLE_GROUPED").is_ok() {
+                    // Events with a group take their truth (1 = moving); the others the fill.
+                    let mut l: Vec<u32> = (0..s.events.len())
+                        .map(|i| {
+                            if m.coarse.group[i] == u32::MAX {
+                                evseg_hierarchical_merger::fill::UNLABELLED
+                            } else {
+                                u32::from(truth.event_object[i] != 0)
+                            }
+                        })
+                        .collect();
+                    evseg_hierarchical_merger::fill::fill_unlabelled(
+                        &s.events,
+                        s.camera.width,
+                        s.camera.height,
+                        hier.params().fill_cell_px,
+                        hier.params().fill_reach,
+                        &mut l,
+                    );
+                    oracle_label = l;
+                    label = &oracle_label;
                 }
                 if std::env::var("ORACLE_CLUSTERS").is_ok() {
                     let k = usize::from(c.count);
