@@ -297,6 +297,12 @@ fn an_evimo2_folder_runs_through_the_graph_into_the_evaluator() {
         run.stdout
     );
     assert_no_error_logged(&out);
+    // The node logs are files to read and grep: no terminal colour codes in them.
+    for entry in std::fs::read_dir(out.join("logs")).unwrap() {
+        let path = entry.unwrap().path();
+        let text = std::fs::read_to_string(&path).unwrap();
+        assert!(!text.contains('\u{1b}'), "escape codes in {}", path.display());
+    }
 }
 
 /// Runs the repository's `graph.yaml` on loopback for `seconds` of simulator time, with extra

@@ -689,7 +689,13 @@ fn init_tracing() {
         tracing_subscriber::reload::Layer::new(tracing_subscriber::EnvFilter::new(&directives));
     let initialised = tracing_subscriber::registry()
         .with(filter)
-        .with(tracing_subscriber::fmt::layer().with_writer(std::io::stderr))
+        .with(
+            tracing_subscriber::fmt::layer()
+                .with_writer(std::io::stderr)
+                // Colours only on a terminal: under `evseg run` stderr is the node's log file,
+                // which a user reads or greps, and escape codes there are noise.
+                .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr())),
+        )
         .try_init();
     if initialised.is_ok() {
         let _ = LOG_FILTER.set((directives, handle));
