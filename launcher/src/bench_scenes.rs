@@ -11,7 +11,7 @@ use anyhow::{Context, bail};
 use serde_json::Value;
 
 use crate::resolve::BinaryResolver;
-use crate::run::{RunOptions, load_graph, run};
+use crate::run::{RunOptions, apply_overrides, load_graph, run};
 
 /// Version of the scene set; part of every report.
 ///
@@ -116,28 +116,53 @@ pub fn node_with_binary(graph: &evseg_graph::Graph, binary: &str) -> anyhow::Res
 }
 
 /// Runs every scene of the set through `graph_path`; returns the rows.
-pub fn bench(graph_path: &Path, work: &Path, quiet: bool) -> anyhow::Result<Vec<SceneRow>> {
+pub fn bench(
+    graph_path: &Path,
+    work: &Path,
+    overrides: &[String],
+    quiet: bool,
+) -> anyhow::Result<Vec<SceneRow>> {
     let dir = graph_path.parent().map(Path::to_path_buf).unwrap_or_default();
     let graph = load_graph(graph_path, &BinaryResolver::new(&dir))?;
     let source = node_with_binary(&graph, "evseg-source")?;
     let evaluator = node_with_binary(&graph, "evseg-evaluator")?;
+    // A bad override fails here, once, not in every run.
+    apply_overrides(&mut graph.clone(), overrides)?;
     let mut rows = Vec::new();
     for &(scene, seed, seconds) in BENCH_SET {
         let out = work.join(format!("{scene}-{seed}"));
         eprintln!("{BENCH_VERSION}: {scene} (seed {seed}, {seconds} s)");
-        let set = vec![
+        let ours = vec![
             format!("{source}.kind=synthetic"),
             format!("{source}.scene={scene}"),
             format!("{source}.seed={seed}"),
             format!("{source}.seconds={seconds}"),
             format!("{evaluator}.sequence={scene}"),
         ];
+        let set = with_overrides(overrides, ours)?;
         rows.push(run_and_score(graph_path, &out, set, quiet, scene, Some(seed))?);
     }
     if rows.is_empty() {
         bail!("no scenes");
     }
     Ok(rows)
+}
+
+/// The user's parameter overrides (`node.param=value`, `evseg bench --set`) followed by the
+/// bench's own (`ours`: the source's input and the evaluator's sequence name); an override of
+/// a parameter the bench sets itself is refused, naming it, since the bench's inputs are what
+/// make its figures comparable.
+fn with_overrides(user: &[String], ours: Vec<String>) -> anyhow::Result<Vec<String>> {
+    let key = |s: &str| s.split_once('=').map_or(s.trim(), |(k, _)| k.trim()).to_string();
+    for u in user {
+        if ours.iter().any(|o| key(o) == key(u)) {
+            bail!(
+                "--set {u}: `{}` is set by the bench itself for every scene or sequence (its input and name); change the graph's other parameters",
+                key(u)
+            );
+        }
+    }
+    Ok(user.iter().cloned().chain(ours).collect())
 }
 
 /// Runs `graph_path` into run folder `out` with the parameter overrides `set` and reads the
@@ -288,12 +313,15 @@ pub fn bench_sequences(
     graph_path: &Path,
     roots: &[PathBuf],
     work: &Path,
+    overrides: &[String],
     quiet: bool,
 ) -> anyhow::Result<(Vec<SceneRow>, Vec<SequenceFailure>)> {
     let dir = graph_path.parent().map(Path::to_path_buf).unwrap_or_default();
     let graph = load_graph(graph_path, &BinaryResolver::new(&dir))?;
     let source = node_with_binary(&graph, "evseg-source")?;
     let evaluator = node_with_binary(&graph, "evseg-evaluator")?;
+    // A bad override fails here, once, not in every sequence's run.
+    apply_overrides(&mut graph.clone(), overrides)?;
     let sequences = sequences_in(roots)?;
     let (mut rows, mut failures) = (Vec::new(), Vec::new());
     let mut taken = std::collections::BTreeSet::new();
@@ -306,12 +334,13 @@ pub fn bench_sequences(
         );
         let out = work.join(run_folder_name(name, &mut taken));
         let absolute = path.canonicalize().unwrap_or_else(|_| path.clone());
-        let set = vec![
+        let ours = vec![
             format!("{source}.kind=evimo2"),
             // A JSON string, so that no path is read as a number or `null`.
             format!("{source}.path={}", Value::String(absolute.display().to_string())),
             format!("{evaluator}.sequence={}", Value::String(name.clone())),
         ];
+        let set = with_overrides(overrides, ours)?;
         match run_and_score(graph_path, &out, set, quiet, name, None) {
             Ok(row) => rows.push(row),
             Err(e) => {
@@ -347,13 +376,18 @@ pub enum Rows {
 }
 
 /// The table in the paper's form, one row per scene (or sequence), plus a mean row.
-pub fn markdown(rows: &[SceneRow], graph: &Path, kind: Rows) -> String {
+pub fn markdown(rows: &[SceneRow], graph: &Path, kind: Rows, overrides: &[String]) -> String {
     let (title, head, rule) = match kind {
         Rows::Scenes => (BENCH_VERSION, "| Scene | Seed ", "|---|---:"),
         Rows::Sequences => ("EVIMO2 v2 sequences", "| Sequence ", "|---"),
     };
+    let with = if overrides.is_empty() {
+        String::new()
+    } else {
+        format!(" with --set {}", overrides.join(" --set "))
+    };
     let mut s = format!(
-        "{title} on {} (IoU in %, RMSE in m/s with the predicted direction scaled by the true speed)\n\n\
+        "{title} on {}{with} (IoU in %, RMSE in m/s with the predicted direction scaled by the true speed)\n\n\
          {head}| IoU mask | IoU events | IoU per object | Vx RMSE | Vy RMSE | Vz RMSE | median dir. err (deg) | id switches, worst object (any overlap) |\n\
          {rule}|---:|---:|---:|---:|---:|---:|---:|---:|\n",
         graph.display()
@@ -453,7 +487,7 @@ mod tests {
             (100, Some(0.0125))
         );
         assert_eq!(e.iou_mask, None, "a scene without moving objects has no IoU");
-        let md = markdown(&[r.clone(), e.clone()], Path::new("g.yaml"), Rows::Scenes);
+        let md = markdown(&[r.clone(), e.clone()], Path::new("g.yaml"), Rows::Scenes, &[]);
         assert!(
             md.contains("| **mean** | | 50.00 | 25.00 | 75.00 | 0.100 | 0.200 | 0.300 | 4.0 | 5.0 (7.0) |"),
             "{md}"
@@ -466,8 +500,16 @@ mod tests {
         // The same rows as EVIMO2 sequences: no seed column, in every table.
         let (mut r, mut e) = (r, e);
         (r.scene, r.seed, e.scene, e.seed) = ("imo/eval/scene13".into(), None, "x".into(), None);
-        let md = markdown(&[r, e], Path::new("g.yaml"), Rows::Sequences);
-        assert!(md.starts_with("EVIMO2 v2 sequences on g.yaml"), "{md}");
+        let md = markdown(
+            &[r, e],
+            Path::new("g.yaml"),
+            Rows::Sequences,
+            &["tracker.min_hits=1".into()],
+        );
+        assert!(
+            md.starts_with("EVIMO2 v2 sequences on g.yaml with --set tracker.min_hits=1 (IoU"),
+            "{md}"
+        );
         assert!(md.contains("| Sequence | IoU mask |"), "{md}");
         assert!(md.contains("| imo/eval/scene13 | 50.00 | 25.00 |"), "{md}");
         assert!(md.contains("| **mean** | 50.00 | 25.00 | 75.00 |"), "{md}");
@@ -527,6 +569,19 @@ mod tests {
         );
         assert_eq!(one_line("just this"), "just this");
         assert_eq!(one_line(""), "");
+    }
+
+    #[test]
+    fn user_overrides_come_first_and_may_not_change_the_benchs_own() {
+        let ours = || vec!["source.seed=101".to_string(), "evaluator.sequence=a".to_string()];
+        assert_eq!(
+            with_overrides(&["tracker.min_hits=1".into()], ours()).unwrap(),
+            ["tracker.min_hits=1", "source.seed=101", "evaluator.sequence=a"]
+        );
+        let e = with_overrides(&[" source.seed = 7".into()], ours())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("`source.seed` is set by the bench itself"), "{e}");
     }
 
     #[test]

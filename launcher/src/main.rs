@@ -190,6 +190,11 @@ enum Command {
         /// scene set; a sequence that fails is reported and the others still run.
         #[arg(long, num_args = 1..)]
         sequences: Vec<PathBuf>,
+        /// Parameter override `node.param=value` for every run (repeatable), e.g. to compare a
+        /// setting on the whole set; named in the table's title. The bench's own settings (the
+        /// source's input, the evaluator's sequence name) cannot be overridden.
+        #[arg(long)]
+        set: Vec<String>,
         /// Working folder (one run folder per scene).
         #[arg(long, default_value = "runs/bench")]
         work: PathBuf,
@@ -342,11 +347,12 @@ fn main() -> ExitCode {
             what: None,
             graph,
             sequences,
+            set,
             work,
         } if sequences.is_empty() => {
             let graph = graph.unwrap_or_else(|| PathBuf::from("graph.yaml"));
-            bench_scenes::bench(&graph, &work, false).and_then(|rows| {
-                let md = bench_scenes::markdown(&rows, &graph, bench_scenes::Rows::Scenes);
+            bench_scenes::bench(&graph, &work, &set, false).and_then(|rows| {
+                let md = bench_scenes::markdown(&rows, &graph, bench_scenes::Rows::Scenes, &set);
                 println!("{md}");
                 std::fs::create_dir_all(&work)?;
                 std::fs::write(work.join("bench.md"), &md)?;
@@ -358,37 +364,40 @@ fn main() -> ExitCode {
             what: None,
             graph,
             sequences,
+            set,
             work,
         } => {
             let graph = graph.unwrap_or_else(|| PathBuf::from("graphs/evimo2.yaml"));
-            bench_scenes::bench_sequences(&graph, &sequences, &work, false).and_then(|(rows, failures)| {
-                let mut md = bench_scenes::markdown(&rows, &graph, bench_scenes::Rows::Sequences);
-                if !failures.is_empty() {
-                    md.push_str("\nNot scored (the run failed):\n\n");
-                    for f in &failures {
-                        md.push_str(&format!("- {} ({}): {}\n", f.sequence, f.path.display(), f.error));
+            bench_scenes::bench_sequences(&graph, &sequences, &work, &set, false).and_then(
+                |(rows, failures)| {
+                    let mut md = bench_scenes::markdown(&rows, &graph, bench_scenes::Rows::Sequences, &set);
+                    if !failures.is_empty() {
+                        md.push_str("\nNot scored (the run failed):\n\n");
+                        for f in &failures {
+                            md.push_str(&format!("- {} ({}): {}\n", f.sequence, f.path.display(), f.error));
+                        }
                     }
-                }
-                println!("{md}");
-                std::fs::create_dir_all(&work)?;
-                std::fs::write(work.join("bench.md"), &md)?;
-                let json = serde_json::json!({ "rows": rows, "failures": failures });
-                std::fs::write(work.join("bench.json"), serde_json::to_string_pretty(&json)?)?;
-                if failures.is_empty() {
-                    Ok(())
-                } else {
-                    anyhow::bail!(
-                        "{} of {} sequences failed: {}",
-                        failures.len(),
-                        failures.len() + rows.len(),
-                        failures
-                            .iter()
-                            .map(|f| f.sequence.as_str())
-                            .collect::<Vec<_>>()
-                            .join(", ")
-                    )
-                }
-            })
+                    println!("{md}");
+                    std::fs::create_dir_all(&work)?;
+                    std::fs::write(work.join("bench.md"), &md)?;
+                    let json = serde_json::json!({ "rows": rows, "failures": failures });
+                    std::fs::write(work.join("bench.json"), serde_json::to_string_pretty(&json)?)?;
+                    if failures.is_empty() {
+                        Ok(())
+                    } else {
+                        anyhow::bail!(
+                            "{} of {} sequences failed: {}",
+                            failures.len(),
+                            failures.len() + rows.len(),
+                            failures
+                                .iter()
+                                .map(|f| f.sequence.as_str())
+                                .collect::<Vec<_>>()
+                                .join(", ")
+                        )
+                    }
+                },
+            )
         }
         Command::Bench {
             what:

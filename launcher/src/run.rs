@@ -78,7 +78,7 @@ pub fn load_graph(path: &Path, resolver: &BinaryResolver) -> anyhow::Result<Grap
 }
 
 /// Applies `node.param=value` overrides, checking node and parameter exist.
-fn apply_overrides(graph: &mut Graph, sets: &[String]) -> anyhow::Result<()> {
+pub(crate) fn apply_overrides(graph: &mut Graph, sets: &[String]) -> anyhow::Result<()> {
     for s in sets {
         let (lhs, value) = s
             .split_once('=')
