@@ -677,8 +677,8 @@ fn the_normal_flow_compare_graph_scores_both_estimators_on_the_same_slices() {
 }
 
 /// `evseg bench --sequences` finds the EVIMO2 v2 folders below the folder it is given, scores
-/// each through the graph into one table, and reports a corrupt one by name without stopping
-/// the others; the command then fails, naming it.
+/// each through the graph (with the `--set` override) into one table, and reports a corrupt
+/// one by name without stopping the others; the command then fails, naming it.
 #[test]
 fn bench_sequences_scores_every_evimo2_folder_and_reports_a_broken_one() {
     let dir = tempfile::tempdir().unwrap();
@@ -728,6 +728,8 @@ fn bench_sequences_scores_every_evimo2_folder_and_reports_a_broken_one() {
             g.to_str().unwrap(),
             "--sequences",
             root.to_str().unwrap(),
+            "--set",
+            "tracker.min_hits=1",
             "--work",
             work.to_str().unwrap(),
         ],
@@ -764,6 +766,7 @@ fn bench_sequences_scores_every_evimo2_folder_and_reports_a_broken_one() {
         "the error names the corrupt file: {failure}"
     );
     let md = std::fs::read_to_string(work.join("bench.md")).unwrap();
+    assert!(md.contains("with --set tracker.min_hits=1 (IoU"), "{md}");
     assert!(md.contains("| cam/imo/eval/one-object-5 | "), "{md}");
     assert!(md.contains("| **mean** | "), "{md}");
     assert!(md.contains("- cam/imo/eval/broken ("), "{md}");
