@@ -115,6 +115,17 @@ pub fn node_with_binary(graph: &evseg_graph::Graph, binary: &str) -> anyhow::Res
         .with_context(|| format!("the graph has no `{binary}` node"))
 }
 
+/// The ids of the source and evaluator nodes of the graph at `graph_path`, after checking the
+/// user's `overrides` against it (a bad one fails here, once, not in every run).
+fn bench_nodes(graph_path: &Path, overrides: &[String]) -> anyhow::Result<(String, String)> {
+    let dir = graph_path.parent().map(Path::to_path_buf).unwrap_or_default();
+    let mut graph = load_graph(graph_path, &BinaryResolver::new(&dir))?;
+    let source = node_with_binary(&graph, "evseg-source")?;
+    let evaluator = node_with_binary(&graph, "evseg-evaluator")?;
+    apply_overrides(&mut graph, overrides)?;
+    Ok((source, evaluator))
+}
+
 /// Runs every scene of the set through `graph_path`; returns the rows.
 pub fn bench(
     graph_path: &Path,
@@ -122,12 +133,7 @@ pub fn bench(
     overrides: &[String],
     quiet: bool,
 ) -> anyhow::Result<Vec<SceneRow>> {
-    let dir = graph_path.parent().map(Path::to_path_buf).unwrap_or_default();
-    let graph = load_graph(graph_path, &BinaryResolver::new(&dir))?;
-    let source = node_with_binary(&graph, "evseg-source")?;
-    let evaluator = node_with_binary(&graph, "evseg-evaluator")?;
-    // A bad override fails here, once, not in every run.
-    apply_overrides(&mut graph.clone(), overrides)?;
+    let (source, evaluator) = bench_nodes(graph_path, overrides)?;
     let mut rows = Vec::new();
     for &(scene, seed, seconds) in BENCH_SET {
         let out = work.join(format!("{scene}-{seed}"));
@@ -316,12 +322,7 @@ pub fn bench_sequences(
     overrides: &[String],
     quiet: bool,
 ) -> anyhow::Result<(Vec<SceneRow>, Vec<SequenceFailure>)> {
-    let dir = graph_path.parent().map(Path::to_path_buf).unwrap_or_default();
-    let graph = load_graph(graph_path, &BinaryResolver::new(&dir))?;
-    let source = node_with_binary(&graph, "evseg-source")?;
-    let evaluator = node_with_binary(&graph, "evseg-evaluator")?;
-    // A bad override fails here, once, not in every sequence's run.
-    apply_overrides(&mut graph.clone(), overrides)?;
+    let (source, evaluator) = bench_nodes(graph_path, overrides)?;
     let sequences = sequences_in(roots)?;
     let (mut rows, mut failures) = (Vec::new(), Vec::new());
     let mut taken = std::collections::BTreeSet::new();
