@@ -284,6 +284,18 @@ fn run_folder_name(name: &str, taken: &mut std::collections::BTreeSet<String>) -
     candidate
 }
 
+/// The list of the sequences that could not be scored, to follow the table (empty when none).
+pub fn failures_markdown(failures: &[SequenceFailure]) -> String {
+    if failures.is_empty() {
+        return String::new();
+    }
+    let mut s = String::from("\nNot scored (the run failed):\n\n");
+    for f in failures {
+        s.push_str(&format!("- {} ({}): {}\n", f.sequence, f.path.display(), f.error));
+    }
+    s
+}
+
 /// `text` without terminal colour codes, on one line: its first line and, when it has more
 /// (a failed run's error ends with the node's last log lines), its last one.
 fn one_line(text: &str) -> String {

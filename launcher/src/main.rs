@@ -271,6 +271,15 @@ fn init_tracing() {
         .try_init();
 }
 
+/// Prints a bench's table and writes it as `bench.md`, with `json` as `bench.json`, into `work`.
+fn publish_table(work: &Path, md: &str, json: &serde_json::Value) -> anyhow::Result<()> {
+    println!("{md}");
+    std::fs::create_dir_all(work)?;
+    std::fs::write(work.join("bench.md"), md)?;
+    std::fs::write(work.join("bench.json"), serde_json::to_string_pretty(json)?)?;
+    Ok(())
+}
+
 fn check(graph: &Path) -> anyhow::Result<()> {
     let dir = graph.parent().map(Path::to_path_buf).unwrap_or_default();
     let resolver = resolve::BinaryResolver::new(&dir);
@@ -353,11 +362,7 @@ fn main() -> ExitCode {
             let graph = graph.unwrap_or_else(|| PathBuf::from("graph.yaml"));
             bench_scenes::bench(&graph, &work, &set, false).and_then(|rows| {
                 let md = bench_scenes::markdown(&rows, &graph, bench_scenes::Rows::Scenes, &set);
-                println!("{md}");
-                std::fs::create_dir_all(&work)?;
-                std::fs::write(work.join("bench.md"), &md)?;
-                std::fs::write(work.join("bench.json"), serde_json::to_string_pretty(&rows)?)?;
-                Ok(())
+                publish_table(&work, &md, &serde_json::to_value(&rows)?)
             })
         }
         Command::Bench {
@@ -371,17 +376,9 @@ fn main() -> ExitCode {
             bench_scenes::bench_sequences(&graph, &sequences, &work, &set, false).and_then(
                 |(rows, failures)| {
                     let mut md = bench_scenes::markdown(&rows, &graph, bench_scenes::Rows::Sequences, &set);
-                    if !failures.is_empty() {
-                        md.push_str("\nNot scored (the run failed):\n\n");
-                        for f in &failures {
-                            md.push_str(&format!("- {} ({}): {}\n", f.sequence, f.path.display(), f.error));
-                        }
-                    }
-                    println!("{md}");
-                    std::fs::create_dir_all(&work)?;
-                    std::fs::write(work.join("bench.md"), &md)?;
+                    md.push_str(&bench_scenes::failures_markdown(&failures));
                     let json = serde_json::json!({ "rows": rows, "failures": failures });
-                    std::fs::write(work.join("bench.json"), serde_json::to_string_pretty(&json)?)?;
+                    publish_table(&work, &md, &json)?;
                     if failures.is_empty() {
                         Ok(())
                     } else {
