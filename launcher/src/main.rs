@@ -201,8 +201,8 @@ enum Command {
     },
     /// Simulate a scene and write it as an EVIMO2 v2 sequence folder.
     Sim {
-        /// Scene preset (one-object, two-objects, fast-rotation, enter-leave, camera-only,
-        /// low-contrast, high-contrast, distorted-lens).
+        /// Scene preset (one-object, two-objects, three-objects, fast-rotation, enter-leave,
+        /// camera-only, low-contrast, high-contrast, distorted-lens).
         #[arg(long)]
         scene: String,
         /// Output folder.

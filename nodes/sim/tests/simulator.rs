@@ -344,6 +344,24 @@ fn every_preset_runs_and_streams_are_well_formed() {
 }
 
 #[test]
+fn three_objects_puts_three_distinct_objects_in_view_and_each_fires_events() {
+    let mut cfg = preset("three-objects", 1).unwrap().with_resolution_scale(0.25);
+    cfg.duration_s = 0.3;
+    assert_eq!(cfg.scene.objects.len(), 3);
+    let out = run(&mut Simulator::new(cfg).unwrap(), 0.05);
+    for id in 1..=3u16 {
+        let in_masks = out.truth.masks.iter().filter(|m| m.ids.contains(&id)).count();
+        assert_eq!(
+            in_masks,
+            out.truth.masks.len(),
+            "object {id} in view in {in_masks} masks"
+        );
+        let events = out.truth.event_object.iter().filter(|&&o| o == id).count();
+        assert!(events > 50, "object {id}: {events} events");
+    }
+}
+
+#[test]
 fn invalid_configurations_are_rejected_with_the_field_named() {
     let good = preset("one-object", 1).unwrap();
     let mut bad = good.clone();
