@@ -201,9 +201,8 @@ enum Command {
     },
     /// Simulate a scene and write it as an EVIMO2 v2 sequence folder.
     Sim {
-        /// Scene preset (one-object, two-objects, three-objects, fast-rotation, enter-leave,
-        /// camera-only, low-contrast, high-contrast, distorted-lens).
-        #[arg(long)]
+        /// Scene preset.
+        #[arg(long, value_parser = clap::builder::PossibleValuesParser::new(evseg_source::synthetic::PRESET_NAMES))]
         scene: String,
         /// Output folder.
         #[arg(long)]
@@ -542,4 +541,30 @@ fn print_outcome(outcome: &run::RunOutcome) {
         outcome.seconds,
         outcome.dir.display()
     );
+}
+
+#[cfg(test)]
+mod tests {
+    use clap::Parser;
+
+    use super::{Cli, Command};
+
+    #[test]
+    fn sim_takes_every_preset_and_refuses_an_unknown_scene_naming_the_presets() {
+        for &scene in evseg_source::synthetic::PRESET_NAMES {
+            let cli = Cli::try_parse_from(["evseg", "sim", "--scene", scene, "--out", "/tmp/x"]);
+            assert!(
+                matches!(cli.map(|c| c.command), Ok(Some(Command::Sim { .. }))),
+                "{scene}"
+            );
+        }
+        let err = Cli::try_parse_from(["evseg", "sim", "--scene", "three-object", "--out", "/tmp/x"])
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
+        assert!(
+            err.contains("three-object") && err.contains("three-objects") && err.contains("camera-only"),
+            "{err}"
+        );
+    }
 }

@@ -3,6 +3,10 @@
 use evseg_schemas::CameraInfo;
 use evseg_sim::{Simulator, preset};
 
+/// Names of the simulator's scene presets (the `scene` parameter of a `synthetic` source and
+/// `evseg sim --scene`).
+pub use evseg_sim::PRESET_NAMES;
+
 use crate::{Batch, EventSource, SourceError};
 
 /// A simulated sequence.
