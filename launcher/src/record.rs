@@ -105,6 +105,7 @@ pub fn add_recorder(
         inputs,
         outputs: Vec::new(),
         restart: RestartPolicy::default(),
+        pool_mib: None,
         span: Default::default(),
         param_spans: Default::default(),
     });

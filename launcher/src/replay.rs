@@ -195,6 +195,16 @@ impl ReplayPlan {
                 self.file.display()
             );
         }
+        // The replay publishes what the replaced nodes published, so it gets the largest of
+        // their shared-memory pools (a replaced slicer's, not the graph's smaller default).
+        let shm = &graph.shared_memory;
+        let pool_mib = graph
+            .nodes
+            .iter()
+            .filter(|n| self.replaced.contains(&n.id))
+            .map(|n| shm.pool_mib_of(n))
+            .max()
+            .filter(|&mib| mib != shm.pool_mib);
         g.nodes.retain(|n| !self.replaced.contains(&n.id));
         for n in &mut g.nodes {
             // Feedback into a replaced node: nobody reads it now.
@@ -230,6 +240,7 @@ impl ReplayPlan {
                 inputs: Vec::new(),
                 outputs,
                 restart: RestartPolicy::default(),
+                pool_mib,
                 span: Default::default(),
                 param_spans: Default::default(),
             },
@@ -430,6 +441,25 @@ mod tests {
         let out = p.apply(&g, "local").unwrap();
         let names: Vec<&str> = out.nodes[0].outputs.iter().map(|o| o.name.as_str()).collect();
         assert_eq!(names, ["slicer/slices", "slicer/truth"]);
+        // The graph's pools: the replay keeps none of its own.
+        assert_eq!(out.nodes[0].pool_mib, None);
+    }
+
+    #[test]
+    fn the_replay_node_gets_the_largest_pool_of_the_nodes_it_replaces() {
+        let mut g = graph();
+        g.shared_memory.pool_mib = 4;
+        for (id, mib) in [("source", 16), ("slicer", 32), ("seg", 64)] {
+            if let Some(n) = g.nodes.iter_mut().find(|n| n.id == id) {
+                n.pool_mib = Some(mib);
+            }
+        }
+        let p = plan(&g, &["slicer/slices", "slicer/truth"]);
+        let out = p.apply(&g, "local").unwrap();
+        assert_eq!(out.nodes[0].id, "replay");
+        // `seg` stays live with its own pool; the replay takes the slicer's, not 4 MiB.
+        assert_eq!(out.nodes[0].pool_mib, Some(32));
+        assert_eq!(out.node("seg").and_then(|n| n.pool_mib), Some(64));
     }
 
     #[test]

@@ -145,7 +145,7 @@ pub fn node_config(graph: &Graph, node: &NodeSpec, router: &[String], run_dir: &
             listen: vec!["tcp/127.0.0.1:0".into()],
             shared_memory: ShmSettings {
                 enabled: graph.shared_memory.enabled,
-                pool_bytes: u64::from(graph.shared_memory.pool_mib) << 20,
+                pool_bytes: u64::from(graph.shared_memory.pool_mib_of(node)) << 20,
             },
         },
         params: node.params.clone(),

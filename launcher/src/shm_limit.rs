@@ -33,25 +33,27 @@ pub struct NodeLock {
     pub bytes: u64,
 }
 
-/// Per node of `nodes` (the nodes this launcher starts), what it would lock with pools of
-/// `pool_bytes`. A producer started by another machine's launcher is reached over the network,
-/// so only producers in `nodes` count.
-pub fn locked_per_node(nodes: &[NodeSpec], pool_bytes: u64) -> Vec<NodeLock> {
+/// Per node of `nodes` (the nodes this launcher starts), what it would lock with the pool sizes
+/// of `shm` (each node's own `pool_mib` or the graph's). A producer started by another
+/// machine's launcher is reached over the network, so only producers in `nodes` count.
+pub fn locked_per_node(nodes: &[NodeSpec], shm: &SharedMemory) -> Vec<NodeLock> {
+    let pool_bytes = |n: &NodeSpec| u64::from(shm.pool_mib_of(n)) << 20;
     nodes
         .iter()
         .map(|n| {
-            let mut producers: Vec<&str> = n
+            let mut producers: Vec<&NodeSpec> = n
                 .inputs
                 .iter()
-                .map(|i| i.from_node.as_str())
-                .filter(|p| *p != n.id && nodes.iter().any(|m| m.id == *p))
+                .filter(|i| i.from_node != n.id)
+                .filter_map(|i| nodes.iter().find(|m| m.id == i.from_node))
                 .collect();
-            producers.sort_unstable();
-            producers.dedup();
+            producers.sort_unstable_by(|a, b| a.id.cmp(&b.id));
+            producers.dedup_by(|a, b| a.id == b.id);
+            let mapped: u64 = producers.iter().map(|m| pool_bytes(m)).sum();
             NodeLock {
                 node: n.id.clone(),
                 producers: producers.len(),
-                bytes: (pool_bytes + ZENOH_SEGMENT_OVERHEAD_BYTES) * (1 + producers.len() as u64),
+                bytes: pool_bytes(n) + mapped + ZENOH_SEGMENT_OVERHEAD_BYTES * (1 + producers.len() as u64),
             }
         })
         .collect()
@@ -105,7 +107,7 @@ pub fn over_limit(nodes: &[NodeSpec], shm: &SharedMemory, graph_file: &Path) -> 
     if !shm.enabled {
         return None;
     }
-    let locks = locked_per_node(nodes, u64::from(shm.pool_mib) << 20);
+    let locks = locked_per_node(nodes, shm);
     let allowance = memlock_allowance();
     let over = over_allowance(&locks, allowance)?;
     let mib = |b: u64| b as f64 / (1u64 << 20) as f64;
@@ -114,10 +116,13 @@ pub fn over_limit(nodes: &[NodeSpec], shm: &SharedMemory, graph_file: &Path) -> 
         n => format!("{n} nodes"),
     };
     Some(format!(
-        "node `{}` would lock {:.1} MiB (its {} MiB pool and those of the {producers} it reads, which Zenoh locks in memory), above this user's locked-memory limit of {:.1} MiB (`ulimit -l`). Raise the limit (`memlock` in /etc/security/limits.conf, or CAP_IPC_LOCK) or lower `zenoh.shared_memory.pool_mib` in {}",
+        "node `{}` would lock {:.1} MiB (its {} MiB pool and those of the {producers} it reads, which Zenoh locks in memory), above this user's locked-memory limit of {:.1} MiB (`ulimit -l`). Raise the limit (`memlock` in /etc/security/limits.conf, or CAP_IPC_LOCK) or lower `zenoh.shared_memory.pool_mib` (or the nodes' own `pool_mib`) in {}",
         over.node,
         mib(over.bytes),
-        shm.pool_mib,
+        nodes
+            .iter()
+            .find(|n| n.id == over.node)
+            .map_or(shm.pool_mib, |n| shm.pool_mib_of(n)),
         mib(allowance.unwrap_or(u64::MAX)),
         graph_file.display()
     ))
@@ -151,7 +156,11 @@ mod tests {
             "name: g\nnodes:\n  - { id: s, run: src }\n  - { id: m, run: mid, inputs: { a: s/out } }\n  - { id: k, run: sink, inputs: { a: s/out, b: m/out, c: s/out } }\n",
         );
         let mib = 1u64 << 20;
-        let locks = locked_per_node(&g.nodes, 8 * mib);
+        let shm = SharedMemory {
+            enabled: true,
+            pool_mib: 8,
+        };
+        let locks = locked_per_node(&g.nodes, &shm);
         let by = |id: &str| locks.iter().find(|l| l.node == id).unwrap().clone();
         assert_eq!(by("s").producers, 0);
         assert_eq!(by("s").bytes, 8 * mib + ZENOH_SEGMENT_OVERHEAD_BYTES);
@@ -162,7 +171,7 @@ mod tests {
         // On a machine without `s`, its frames come over the network.
         let here: Vec<_> = g.nodes.iter().filter(|n| n.id != "s").cloned().collect();
         assert_eq!(
-            locked_per_node(&here, 8 * mib).iter().map(|l| l.producers).max(),
+            locked_per_node(&here, &shm).iter().map(|l| l.producers).max(),
             Some(1)
         );
         // The node over the limit that locks the most is named; no limit, nothing.
@@ -172,6 +181,22 @@ mod tests {
         );
         assert_eq!(over_allowance(&locks, Some(32 * mib)), None);
         assert_eq!(over_allowance(&locks, None), None);
+    }
+
+    #[test]
+    fn each_pool_counts_at_its_own_size_in_its_node_and_in_every_consumer() {
+        // `s` has a 32 MiB pool of its own, `m` the graph's 2 MiB.
+        let g = graph(
+            "name: g\nzenoh: { shared_memory: { pool_mib: 2 } }\nnodes:\n  - { id: s, run: src, pool_mib: 32 }\n  - { id: m, run: mid, inputs: { a: s/out } }\n  - { id: k, run: sink, inputs: { a: s/out, b: m/out, c: m/out } }\n",
+        );
+        assert_eq!(g.node("s").and_then(|n| n.pool_mib), Some(32));
+        assert_eq!(g.node("m").and_then(|n| n.pool_mib), None);
+        let (mib, o) = (1u64 << 20, ZENOH_SEGMENT_OVERHEAD_BYTES);
+        let locks = locked_per_node(&g.nodes, &g.shared_memory);
+        let by = |id: &str| locks.iter().find(|l| l.node == id).unwrap().bytes;
+        assert_eq!(by("s"), 32 * mib + o);
+        assert_eq!(by("m"), 2 * mib + 32 * mib + 2 * o);
+        assert_eq!(by("k"), 2 * mib + 32 * mib + 2 * mib + 3 * o);
     }
 
     #[test]

@@ -543,6 +543,7 @@ fn build_nodes(nodes: &[RawNode<'_>], work: Vec<NodeWork<'_>>, order: &[usize]) 
             inputs,
             outputs,
             restart: node.restart,
+            pool_mib: node.pool_mib,
             span: node.at,
             param_spans: w.param_spans,
         }));

@@ -119,6 +119,7 @@ pub fn load(path: &Path, resolver: Resolver<'_>) -> Result<Graph, GraphError> {
 ///       previous: { from: tracker/tracks, feedback: true }
 ///     outputs: [slices]    # default: every output of the binary
 ///     restart: { policy: on-failure, max: 3 }   # policy never (default) | on-failure
+///     pool_mib: 32         # this node's shared-memory pool, MiB (default: zenoh's pool_mib)
 /// ```
 ///
 /// Example with an in-memory resolver (the launcher's runs `<binary> --describe`):

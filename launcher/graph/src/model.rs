@@ -73,7 +73,8 @@ impl Machine {
 pub struct SharedMemory {
     /// Use shared memory for local links (default true).
     pub enabled: bool,
-    /// Size of each node's pool, MiB (default [`SharedMemory::DEFAULT_POOL_MIB`]). A message
+    /// Size of each node's pool, MiB, where the node does not give its own (`pool_mib:` on the
+    /// node, [`NodeSpec::pool_mib`]; default [`SharedMemory::DEFAULT_POOL_MIB`]). A message
     /// stays in the pool until every local consumer has released it, so the pool should hold
     /// `window` messages of the largest output: 100k-event slices are 1.3 MB, 1M-event slices
     /// 13 MB (with the simulator's ground truth, about 2.4 MB per 40k-event slice). Zenoh locks
@@ -91,6 +92,11 @@ impl SharedMemory {
     /// AMD EPYC VM; throughput 0.87-0.88 -> 0.90-0.93 M events/s, medians of 3 runs). Larger
     /// slices still arrive when the pool is full, through the heap and the socket.
     pub const DEFAULT_POOL_MIB: u32 = 32;
+
+    /// The pool size of `node`, MiB: its own `pool_mib`, else the graph's.
+    pub fn pool_mib_of(&self, node: &NodeSpec) -> u32 {
+        node.pool_mib.unwrap_or(self.pool_mib)
+    }
 
     /// True for the defaults (left out of the canonical form, so graphs that do not mention
     /// shared memory hash as before).
@@ -207,6 +213,14 @@ pub struct NodeSpec {
     pub outputs: Vec<OutputSpec>,
     /// Restart policy.
     pub restart: RestartPolicy,
+    /// Size of this node's shared-memory pool, MiB, where graph.yaml gives one (`pool_mib:` on
+    /// the node); `None` = the graph's `zenoh.shared_memory.pool_mib`
+    /// ([`SharedMemory::pool_mib_of`]). A node whose outputs are small (per-event labels, a
+    /// flow field) needs far less than the source and slicer, whose slices carry the events and
+    /// the ground truth; Zenoh locks every pool in memory in its node and in each consumer.
+    /// Left out of the canonical form when not given, so graphs without it hash as before.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pool_mib: Option<u32>,
     /// Where the node starts in graph.yaml (not part of the canonical form).
     #[serde(skip)]
     pub span: Span,

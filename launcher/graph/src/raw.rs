@@ -12,7 +12,9 @@ const RECORD_KEYS: &[&str] = &["path", "outputs"];
 const ZENOH_KEYS: &[&str] = &["machines", "shared_memory"];
 const SHARED_MEMORY_KEYS: &[&str] = &["enabled", "pool_mib"];
 const MACHINE_KEYS: &[&str] = &["listen", "connect"];
-const NODE_KEYS: &[&str] = &["id", "run", "machine", "params", "inputs", "outputs", "restart"];
+const NODE_KEYS: &[&str] = &[
+    "id", "run", "machine", "params", "inputs", "outputs", "restart", "pool_mib",
+];
 const INPUT_KEYS: &[&str] = &["from", "feedback"];
 const RESTART_KEYS: &[&str] = &["policy", "max"];
 
@@ -48,6 +50,8 @@ pub(crate) struct RawNode<'a> {
     pub named_ports: Option<Vec<String>>,
     pub outputs: Option<Vec<Spanned<String>>>,
     pub restart: RestartPolicy,
+    /// The node's own shared-memory pool size, MiB, when given.
+    pub pool_mib: Option<u32>,
 }
 
 impl RawNode<'_> {
@@ -318,6 +322,9 @@ fn read_node<'a>(node: &'a Node, p: &mut Problems) -> Option<RawNode<'a>> {
         .get("restart")
         .and_then(|n| read_restart(n, p))
         .unwrap_or_default();
+    let pool_mib = fields
+        .get("pool_mib")
+        .and_then(|n| shape::count(n, "`pool_mib`", 1, p));
     Some(RawNode {
         at: node.at,
         id,
@@ -328,6 +335,7 @@ fn read_node<'a>(node: &'a Node, p: &mut Problems) -> Option<RawNode<'a>> {
         named_ports,
         outputs,
         restart,
+        pool_mib,
     })
 }
 

@@ -435,6 +435,24 @@ fn bad_shared_memory_settings() {
         "    run: evseg-source",
     ];
     single_error(&lines, 3, 30, &["`zenoh.shared_memory.pool_mib`", "at least 1"]);
+
+    // A node's own pool size: an integer of at least 1 MiB, reported where it is written.
+    let lines = [
+        "name: z",
+        "nodes:",
+        "  - id: source",
+        "    run: evseg-source",
+        "    pool_mib: 0",
+    ];
+    single_error(&lines, 5, 15, &["`pool_mib`", "at least 1"]);
+    let lines = [
+        "name: z",
+        "nodes:",
+        "  - id: source",
+        "    run: evseg-source",
+        "    pool_mib: lots",
+    ];
+    single_error(&lines, 5, 15, &["`pool_mib`", "integer"]);
 }
 
 #[test]
