@@ -217,7 +217,30 @@ enum Command {
         /// DAVIS346, 2 a 1280 x 960 one; the presets are 640 x 480.
         #[arg(long, default_value_t = 1.0)]
         resolution_scale: f64,
+        /// A simulator setting, NAME=VALUE (repeatable, applied in order), so that the sequence
+        /// differs from the preset as another camera or simulator would: contrast, c_on, c_off,
+        /// c_sigma, refractory_s, noise_rate_hz, hot_pixels, hot_pixel_rate_hz, gyro_noise_std,
+        /// gyro_bias, texture_contrast, camera_motion (`evseg_sim::SETTINGS`).
+        #[arg(long = "set", value_name = "NAME=VALUE", value_parser = parse_sim_setting)]
+        settings: Vec<(String, f64)>,
     },
+}
+
+/// `NAME=VALUE` of `evseg sim --set`: a known setting name and a number.
+fn parse_sim_setting(s: &str) -> Result<(String, f64), String> {
+    let (name, value) = s
+        .split_once('=')
+        .ok_or_else(|| format!("expected NAME=VALUE, got `{s}`"))?;
+    let name = name.trim();
+    if !evseg_sim::SETTINGS.iter().any(|(n, _)| *n == name) {
+        let known: Vec<&str> = evseg_sim::SETTINGS.iter().map(|(n, _)| *n).collect();
+        return Err(format!("unknown setting `{name}`; known: {}", known.join(", ")));
+    }
+    let value: f64 = value
+        .trim()
+        .parse()
+        .map_err(|_| format!("setting `{name}`: `{}` is not a number", value.trim()))?;
+    Ok((name.to_string(), value))
 }
 
 #[derive(Subcommand)]
@@ -343,10 +366,18 @@ fn main() -> ExitCode {
             seed,
             seconds,
             resolution_scale,
-        } => evseg_source::synthetic::write_evimo2(&scene, seed, seconds, resolution_scale, &out)
+            settings,
+        } => evseg_source::synthetic::scene_config(&scene, seed, seconds, &settings)
+            .and_then(|config| evseg_source::synthetic::write_evimo2_config(config, resolution_scale, &out))
             .map(|n| {
+                let with: Vec<String> = settings.iter().map(|(k, v)| format!("{k}={v}")).collect();
+                let with = if with.is_empty() {
+                    String::new()
+                } else {
+                    format!(", {}", with.join(", "))
+                };
                 println!(
-                    "{n} events of `{scene}` (seed {seed}) written to {} as an EVIMO2 v2 folder",
+                    "{n} events of `{scene}` (seed {seed}{with}) written to {} as an EVIMO2 v2 folder",
                     out.display()
                 );
             })
@@ -566,5 +597,36 @@ mod tests {
             err.contains("three-object") && err.contains("three-objects") && err.contains("camera-only"),
             "{err}"
         );
+    }
+
+    #[test]
+    fn sim_settings_are_name_value_pairs_of_known_settings() {
+        let args = |extra: &[&'static str]| {
+            let mut a = vec!["evseg", "sim", "--scene", "one-object", "--out", "/tmp/x"];
+            a.extend_from_slice(extra);
+            Cli::try_parse_from(a)
+        };
+        let cli = args(&["--set", "contrast=0.3", "--set", " noise_rate_hz = 1 "]);
+        let Ok(Cli {
+            command: Some(Command::Sim { settings, .. }),
+        }) = cli
+        else {
+            panic!("not parsed");
+        };
+        assert_eq!(
+            settings,
+            [("contrast".to_string(), 0.3), ("noise_rate_hz".to_string(), 1.0)]
+        );
+        for (bad, says) in [
+            ("contrast", "NAME=VALUE"),
+            ("thresh=0.3", "unknown setting `thresh`"),
+            ("contrast=high", "`high` is not a number"),
+        ] {
+            let err = args(&["--set", bad])
+                .err()
+                .map(|e| e.to_string())
+                .unwrap_or_default();
+            assert!(err.contains(says), "{bad}: {err}");
+        }
     }
 }

@@ -1236,34 +1236,13 @@ fn main() -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Applies SIM_SET ("name=value,..."): the sensor's (`c_on`, `c_off`, `c_sigma`,
-/// `refractory_s`, `noise_rate_hz`, `hot_pixels`, `hot_pixel_rate_hz`, `contrast` = both
-/// thresholds) and the IMU's (`gyro_noise_std` rad/s, `gyro_bias` rad/s on every axis) settings
-/// of a preset, `texture_contrast` (the preset's textures' contrast scaled) and `camera_motion`
-/// (the camera trajectory's rates and sinusoid amplitudes scaled: 0 holds the camera still at
-/// its start pose's offsets), for studies of how the method holds up on sensors and scenes
-/// unlike the presets'.
+/// Applies SIM_SET ("name=value,..."): the simulator's named settings (`evseg_sim::SETTINGS`:
+/// sensor thresholds, mismatch, noise, hot pixels, the IMU's noise and bias, texture contrast,
+/// camera motion), for studies of how the method holds up on sensors and scenes unlike the
+/// presets'.
 fn sim_override(set: &str, cfg: &mut evseg_sim::SceneConfig) -> anyhow::Result<()> {
     for (k, f) in settings(set, "SIM_SET")? {
-        let e = &mut cfg.esim;
-        match k {
-            "c_on" => e.c_on = f,
-            "c_off" => e.c_off = f,
-            "contrast" => {
-                e.c_on = f;
-                e.c_off = f;
-            }
-            "c_sigma" => e.c_sigma = f,
-            "refractory_s" => e.refractory_s = f,
-            "noise_rate_hz" => e.noise_rate_hz = f,
-            "hot_pixels" => e.hot_pixels = f as u32,
-            "hot_pixel_rate_hz" => e.hot_pixel_rate_hz = f,
-            "gyro_noise_std" => cfg.imu.gyro_noise_std = f,
-            "gyro_bias" => cfg.imu.gyro_bias = [f, -f, f],
-            "texture_contrast" => evseg_sim::scale_contrast(cfg, f),
-            "camera_motion" => scale_camera_motion(&mut cfg.camera_trajectory, f),
-            other => bail!("SIM_SET: unknown setting {other}"),
-        }
+        evseg_sim::apply_setting(cfg, k, f).with_context(|| format!("SIM_SET {k}={f}"))?;
     }
     Ok(())
 }
@@ -1321,17 +1300,6 @@ fn print_cell_extent(slices: &[(Slice, Truth, (f64, f64))], flows: &[NormalFlow]
         median(1, 1),
         bg_more(1)
     );
-}
-
-/// Scales every rate and sinusoid amplitude of `traj` (positions and angles) by `factor`, so
-/// the camera moves `factor` times as fast along a path of the same shape; 0 keeps it still.
-fn scale_camera_motion(traj: &mut evseg_sim::RigidTrajectory, factor: f64) {
-    for s in traj.position.iter_mut().chain(traj.angles.iter_mut()) {
-        s.rate *= factor;
-        for term in &mut s.terms {
-            term.amplitude *= factor;
-        }
-    }
 }
 
 /// Per event without a group: some grouped event (`group != u32::MAX`) lies in the 3x3 cells

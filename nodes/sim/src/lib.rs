@@ -39,6 +39,7 @@ pub mod radix;
 pub mod render;
 pub mod rng;
 pub mod scene;
+pub mod settings;
 mod stable;
 pub mod texture;
 pub mod trajectory;
@@ -53,6 +54,7 @@ pub use esim::EsimConfig;
 pub use imu::{IMU_TO_CAMERA, ImuConfig};
 pub use presets::{PRESET_NAMES, preset, scale_contrast};
 pub use scene::{BoxConfig, Lighting, ObjectConfig, PlaneConfig, SceneContent};
+pub use settings::{SETTINGS, apply_setting};
 pub use texture::{Pattern, TextureConfig};
 pub use trajectory::{RigidTrajectory, Signal, Sinusoid};
 

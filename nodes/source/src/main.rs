@@ -114,11 +114,11 @@ fn open(cfg: &NodeConfig) -> Result<Box<dyn EventSource>, BoxError> {
     match kind.as_str() {
         "synthetic" => {
             let scene: String = cfg.param("scene")?;
-            Ok(Box::new(SyntheticSource::new(
-                &scene,
-                cfg.param("seed")?,
-                seconds,
-            )?))
+            let settings: std::collections::BTreeMap<String, f64> = cfg.param("settings")?;
+            let settings: Vec<(String, f64)> = settings.into_iter().collect();
+            let config =
+                evseg_source::synthetic::scene_config(&scene, cfg.param("seed")?, seconds, &settings)?;
+            Ok(Box::new(SyntheticSource::from_config(config)?))
         }
         "evimo2" => {
             let options = evseg_evimo2::ReadOptions {
@@ -225,6 +225,7 @@ fn description() -> NodeDescription {
     .required("kind", "source kind: synthetic (built-in simulator), evimo2 (EVIMO2 v2 folder), file (AEDAT4, EVT2/EVT3 .raw, .es, text), pattern (transport test pattern)")
     .param("path", serde_json::Value::Null, "evimo2: sequence folder; file: recording")
     .param("scene", "two-objects", &format!("synthetic: scene preset ({})", evseg_source::synthetic::PRESET_NAMES.join(", ")))
+    .param("settings", serde_json::json!({}), &format!("synthetic: the simulator's named settings applied to the preset, e.g. {{\"contrast\": 0.3}} ({})", evseg_sim::SETTINGS.iter().map(|(name, _)| *name).collect::<Vec<_>>().join(", ")))
     .param("camera_file", serde_json::Value::Null, "file: JSON camera file (intrinsics, distortion, IMU-to-camera rotation, time offset)")
     .param("imu_topic", serde_json::Value::Null, "evimo2: IMU topic in meta (default: the first)")
     .param("imu_to_camera", serde_json::Value::Null, "evimo2: IMU-to-camera rotation, row-major 9 numbers (default: EVIMO2 convention)")

@@ -17,14 +17,7 @@ pub struct SyntheticSource {
 impl SyntheticSource {
     /// Scene preset `scene` with `seed`, optionally cut or stretched to `seconds`.
     pub fn new(scene: &str, seed: u64, seconds: Option<f64>) -> Result<Self, SourceError> {
-        let mut config = preset(scene, seed).map_err(|e| SourceError::Param(e.to_string()))?;
-        if let Some(s) = seconds {
-            if !(s.is_finite() && s > 0.0) {
-                return Err(SourceError::Param(format!("seconds must be > 0, got {s}")));
-            }
-            config.duration_s = s;
-        }
-        Self::from_config(config)
+        Self::from_config(scene_config(scene, seed, seconds, &[])?)
     }
 
     /// A scene of the caller's own (a preset with changed sensor, IMU or scene settings, say);
@@ -33,6 +26,28 @@ impl SyntheticSource {
         let sim = Simulator::new(config).map_err(|e| SourceError::Param(e.to_string()))?;
         Ok(Self { sim })
     }
+}
+
+/// The configuration of preset `scene` with `seed`, optionally cut or stretched to `seconds`,
+/// with the simulator's named `settings` applied in order (`evseg_sim::SETTINGS`: contrast
+/// thresholds, noise, IMU noise, texture contrast, camera motion, ...).
+pub fn scene_config(
+    scene: &str,
+    seed: u64,
+    seconds: Option<f64>,
+    settings: &[(String, f64)],
+) -> Result<evseg_sim::SceneConfig, SourceError> {
+    let mut config = preset(scene, seed).map_err(|e| SourceError::Param(e.to_string()))?;
+    if let Some(s) = seconds {
+        if !(s.is_finite() && s > 0.0) {
+            return Err(SourceError::Param(format!("seconds must be > 0, got {s}")));
+        }
+        config.duration_s = s;
+    }
+    for (name, value) in settings {
+        evseg_sim::apply_setting(&mut config, name, *value).map_err(|e| SourceError::Param(e.to_string()))?;
+    }
+    Ok(config)
 }
 
 impl EventSource for SyntheticSource {
@@ -69,11 +84,16 @@ pub fn write_evimo2(
     resolution_scale: f64,
     out: &std::path::Path,
 ) -> Result<u64, SourceError> {
+    write_evimo2_config(scene_config(scene, seed, seconds, &[])?, resolution_scale, out)
+}
+
+/// As [`write_evimo2`], for a configuration of the caller's own (from [`scene_config`], say).
+pub fn write_evimo2_config(
+    mut config: evseg_sim::SceneConfig,
+    resolution_scale: f64,
+    out: &std::path::Path,
+) -> Result<u64, SourceError> {
     use evseg_evimo2::{FrameTruth, SequenceData, write_sequence};
-    let mut config = preset(scene, seed).map_err(|e| SourceError::Param(e.to_string()))?;
-    if let Some(s) = seconds {
-        config.duration_s = s;
-    }
     if !(resolution_scale.is_finite() && resolution_scale > 0.0 && resolution_scale <= 8.0) {
         return Err(SourceError::Param(format!(
             "resolution scale must be in (0, 8], got {resolution_scale}"
@@ -174,5 +194,19 @@ mod tests {
             .err()
             .expect("a negative threshold is refused");
         assert!(err.to_string().contains("c_on"), "{err}");
+    }
+
+    #[test]
+    fn named_settings_change_the_preset_and_an_unknown_one_is_refused_by_name() {
+        let config = scene_config("one-object", 5, Some(0.02), &[("contrast".into(), 0.4)]).unwrap();
+        assert_eq!((config.esim.c_on, config.esim.c_off), (0.4, 0.4));
+        let fewer = count(SyntheticSource::from_config(config).unwrap(), 0.02);
+        let same = count(SyntheticSource::new("one-object", 5, Some(0.02)).unwrap(), 0.02);
+        assert!(fewer * 2 < same, "{fewer} events at 0.4, {same} at 0.2");
+        let err = scene_config("one-object", 5, None, &[("contrast_pos".into(), 0.4)])
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
+        assert!(err.contains("contrast_pos") && err.contains("c_sigma"), "{err}");
     }
 }
