@@ -12,16 +12,19 @@ fn graph_file(dir: &Path, text: &str) -> (PathBuf, PathBuf) {
 }
 
 /// The repository's graph file `name` (a lock-step graph), with its Zenoh router listening on
-/// loopback `port` only.
+/// loopback `port` only (added to its `zenoh:` section, or in a new one).
 fn repo_graph_on_loopback(name: &str, port: u16) -> String {
-    std::fs::read_to_string(evseg_tests::workspace_root().join(name))
-        .unwrap()
-        .replace(
-            "mode: lockstep",
-            &format!(
-                "mode: lockstep\nzenoh:\n  machines:\n    local: {{ listen: [\"tcp/127.0.0.1:{port}\"] }}"
-            ),
+    let text = std::fs::read_to_string(evseg_tests::workspace_root().join(name)).unwrap();
+    let machines = format!("  machines:\n    local: {{ listen: [\"tcp/127.0.0.1:{port}\"] }}\n");
+    if text.contains("\nzenoh:\n") {
+        text.replacen("\nzenoh:\n", &format!("\nzenoh:\n{machines}"), 1)
+    } else {
+        text.replacen(
+            "mode: lockstep\n",
+            &format!("mode: lockstep\nzenoh:\n{machines}"),
+            1,
         )
+    }
 }
 
 /// Starts `evseg run graph --out run -q` in `dir`.
@@ -884,11 +887,19 @@ fn check_and_run_as_normal_user(graph: &str) -> Option<(Finished, Finished, Path
 }
 
 /// The repository's graph file `name` on a free loopback port, with shared-memory pools of
-/// `pool_mib` MiB.
+/// `pool_mib` MiB for every node (the graph's own pool sizes, its `shared_memory` line and its
+/// nodes' `pool_mib`, left out).
 fn repo_graph_with_pool(name: &str, pool_mib: u32) -> String {
-    repo_graph_on_loopback(name, free_port()).replace(
+    let text = repo_graph_on_loopback(name, free_port());
+    let own_pool = |l: &str| {
+        let t = l.trim_start();
+        (l.starts_with("  shared_memory:") || (t.starts_with("pool_mib:") && l.len() > t.len()))
+    };
+    let kept: Vec<&str> = text.lines().filter(|l| !own_pool(l)).collect();
+    (kept.join("\n") + "\n").replacen(
         "zenoh:\n",
         &format!("zenoh:\n  shared_memory: {{ enabled: true, pool_mib: {pool_mib} }}\n"),
+        1,
     )
 }
 
