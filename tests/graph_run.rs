@@ -893,7 +893,7 @@ fn repo_graph_with_pool(name: &str, pool_mib: u32) -> String {
     let text = repo_graph_on_loopback(name, free_port());
     let own_pool = |l: &str| {
         let t = l.trim_start();
-        (l.starts_with("  shared_memory:") || (t.starts_with("pool_mib:") && l.len() > t.len()))
+        l.starts_with("  shared_memory:") || (t.starts_with("pool_mib:") && l.len() > t.len())
     };
     let kept: Vec<&str> = text.lines().filter(|l| !own_pool(l)).collect();
     (kept.join("\n") + "\n").replacen(
