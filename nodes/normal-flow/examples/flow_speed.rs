@@ -4,7 +4,10 @@
 //!
 //! `cargo run --release -p evseg-normal-flow --example flow_speed -- [scene] [seed] [seconds]`
 //! (default `two-objects 7 3`, as `evseg bench pipeline`); `XLA=0` fits each slice on its own
-//! instead of letting the look-ahead reach into the next slice as the node does. The simulated events are cached in
+//! instead of letting the look-ahead reach into the next slice as the node does;
+//! `NF_CHECK_RADIUS` (0 = no scale check), `NF_SKIP_CONF` and `NF_SKIP_SD_DEG` change the scale
+//! check's window and the fits it skips (`PlaneFitParams::check_radius`,
+//! `check_skip_confidence`, `check_skip_direction_sd_rad`). The simulated events are cached in
 //! `/tmp/flow_speed-<scene>-<seed>-<seconds>.bin` so that a second run counts the estimator only.
 //! Prints the events, the estimator's time (s) and an FNV-1a digest of `nx`, `ny`, `confidence`.
 
@@ -30,6 +33,21 @@ fn main() -> anyhow::Result<()> {
     let params = PlaneFitParams {
         min_confidence: 0.0,
         max_direction_sd_rad: 16f64.to_radians(),
+        check_radius: std::env::var("NF_CHECK_RADIUS")
+            .ok()
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(PlaneFitParams::default().check_radius),
+        check_skip_confidence: std::env::var("NF_SKIP_CONF")
+            .ok()
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(PlaneFitParams::default().check_skip_confidence),
+        check_skip_direction_sd_rad: std::env::var("NF_SKIP_SD_DEG")
+            .ok()
+            .and_then(|v| v.parse::<f64>().ok())
+            .map_or(
+                PlaneFitParams::default().check_skip_direction_sd_rad,
+                f64::to_radians,
+            ),
         ..PlaneFitParams::default()
     };
     let mut est = PlaneFitEstimator::new(&camera, params)?;
