@@ -16,8 +16,9 @@
 //! FLOW_MIN_CONF (the plane-fit estimator's min_confidence; default 0 as in graph.yaml),
 //! NF_MAX_SD_DEG (default 16 as in graph.yaml; "inf" = no test), NF_LOOKAHEAD_MS / NF_RADIUS /
 //! NF_DT_MAX_MS / NF_OUTLIER_MS / NF_CHECK_RADIUS / NF_CHECK_DEG / NF_CHECK_SPEED /
-//! NF_SKIP_CONF / NF_SKIP_SD_DEG (its other settings), PREV_FINAL (the planar segmenter's feedback is the final labels instead of the
-//! background merger's coarse groups that graph.yaml wires; the default was the final labels
+//! NF_SKIP_CONF / NF_SKIP_SD_DEG (its other settings), PREV_FINAL (the planar segmenter's
+//! feedback is the final labels instead of the background merger's coarse groups that
+//! graph.yaml wires; the default was the final labels
 //! before 2026-11-27, which scored low-contrast higher than the graph does), CONS
 //! ("cell,min_neighbours,max_deviation[,ridge]" of the normal-flow consensus, default as
 //! graph.yaml: the node's with `max_deviation` 0.15; "0" = off), DUMP=k (PNG panels of slice

@@ -20,6 +20,14 @@ use evseg_sim::{Simulator, preset};
 
 const SLICE_S: f64 = 0.03;
 
+/// The value of environment variable `name`, or `default` when it is unset or not a `T`.
+fn env_or<T: std::str::FromStr>(name: &str, default: T) -> T {
+    std::env::var(name)
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(default)
+}
+
 fn main() -> anyhow::Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let scene = args.first().map_or("two-objects", String::as_str).to_string();
@@ -33,21 +41,13 @@ fn main() -> anyhow::Result<()> {
     let params = PlaneFitParams {
         min_confidence: 0.0,
         max_direction_sd_rad: 16f64.to_radians(),
-        check_radius: std::env::var("NF_CHECK_RADIUS")
-            .ok()
-            .and_then(|v| v.parse().ok())
-            .unwrap_or(PlaneFitParams::default().check_radius),
-        check_skip_confidence: std::env::var("NF_SKIP_CONF")
-            .ok()
-            .and_then(|v| v.parse().ok())
-            .unwrap_or(PlaneFitParams::default().check_skip_confidence),
-        check_skip_direction_sd_rad: std::env::var("NF_SKIP_SD_DEG")
-            .ok()
-            .and_then(|v| v.parse::<f64>().ok())
-            .map_or(
-                PlaneFitParams::default().check_skip_direction_sd_rad,
-                f64::to_radians,
-            ),
+        check_radius: env_or("NF_CHECK_RADIUS", PlaneFitParams::default().check_radius),
+        check_skip_confidence: env_or("NF_SKIP_CONF", PlaneFitParams::default().check_skip_confidence),
+        check_skip_direction_sd_rad: env_or(
+            "NF_SKIP_SD_DEG",
+            PlaneFitParams::default().check_skip_direction_sd_rad.to_degrees(),
+        )
+        .to_radians(),
         ..PlaneFitParams::default()
     };
     let mut est = PlaneFitEstimator::new(&camera, params)?;

@@ -13,9 +13,9 @@
 //! 22.5 degrees and, for half of the slices, time reversed (targets rotated / negated alike), so
 //! that a scene's texture cannot stand for its motion (without it the network learned the
 //! training scenes' flows from their textures: sign-correct 0.97 on a training scene, 0.52 on an
-//! unseen one). A validation set from scene seed
-//! `1000 seed + 900` of every training preset is scored after each epoch (never the scoring seeds 1 and 7
-//! of `score_presets` and graphs/). The run is deterministic from `--seed` on a given machine.
+//! unseen one). A validation set from scene seed `1000 seed + 900` of every training preset is
+//! scored after each epoch (never the scoring seeds 1 and 7 of `score_presets` and graphs/).
+//! The run is deterministic from `--seed` on a given machine.
 
 use std::time::Instant;
 
