@@ -233,8 +233,10 @@ fn parse_sim_setting(s: &str) -> Result<(String, f64), String> {
         .ok_or_else(|| format!("expected NAME=VALUE, got `{s}`"))?;
     let name = name.trim();
     if !evseg_sim::SETTINGS.iter().any(|(n, _)| *n == name) {
-        let known: Vec<&str> = evseg_sim::SETTINGS.iter().map(|(n, _)| *n).collect();
-        return Err(format!("unknown setting `{name}`; known: {}", known.join(", ")));
+        return Err(format!(
+            "unknown setting `{name}`; known: {}",
+            evseg_sim::setting_names()
+        ));
     }
     let value: f64 = value
         .trim()

@@ -26,6 +26,8 @@ pub const ZENOH_SEGMENT_OVERHEAD_BYTES: u64 = 3 << 19;
 pub struct NodeLock {
     /// Node id.
     pub node: String,
+    /// Its own pool, MiB.
+    pub pool_mib: u32,
     /// Distinct producers of its inputs among the nodes started here (their pools it maps).
     pub producers: usize,
     /// Bytes locked: its pool and one pool per such producer, each with
@@ -52,6 +54,7 @@ pub fn locked_per_node(nodes: &[NodeSpec], shm: &SharedMemory) -> Vec<NodeLock> 
             let mapped: u64 = producers.iter().map(|m| pool_bytes(m)).sum();
             NodeLock {
                 node: n.id.clone(),
+                pool_mib: shm.pool_mib_of(n),
                 producers: producers.len(),
                 bytes: pool_bytes(n) + mapped + ZENOH_SEGMENT_OVERHEAD_BYTES * (1 + producers.len() as u64),
             }
@@ -119,10 +122,7 @@ pub fn over_limit(nodes: &[NodeSpec], shm: &SharedMemory, graph_file: &Path) -> 
         "node `{}` would lock {:.1} MiB (its {} MiB pool and those of the {producers} it reads, which Zenoh locks in memory), above this user's locked-memory limit of {:.1} MiB (`ulimit -l`). Raise the limit (`memlock` in /etc/security/limits.conf, or CAP_IPC_LOCK) or lower `zenoh.shared_memory.pool_mib` (or the nodes' own `pool_mib`) in {}",
         over.node,
         mib(over.bytes),
-        nodes
-            .iter()
-            .find(|n| n.id == over.node)
-            .map_or(shm.pool_mib, |n| shm.pool_mib_of(n)),
+        over.pool_mib,
         mib(allowance.unwrap_or(u64::MAX)),
         graph_file.display()
     ))

@@ -54,7 +54,7 @@ pub use esim::EsimConfig;
 pub use imu::{IMU_TO_CAMERA, ImuConfig};
 pub use presets::{PRESET_NAMES, preset, scale_contrast};
 pub use scene::{BoxConfig, Lighting, ObjectConfig, PlaneConfig, SceneContent};
-pub use settings::{SETTINGS, apply_setting};
+pub use settings::{SETTINGS, apply_setting, setting_names};
 pub use texture::{Pattern, TextureConfig};
 pub use trajectory::{RigidTrajectory, Signal, Sinusoid};
 

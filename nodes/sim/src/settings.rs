@@ -44,6 +44,15 @@ pub const SETTINGS: &[(&str, &str)] = &[
     ),
 ];
 
+/// The names of [`SETTINGS`], comma-separated (for help texts and errors).
+pub fn setting_names() -> String {
+    SETTINGS
+        .iter()
+        .map(|(name, _)| *name)
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
 /// Changes setting `name` of `cfg` to `value` (see [`SETTINGS`]). Unknown names and values that
 /// are not finite (or, for `hot_pixels`, not a whole number >= 0) are refused here; ranges the
 /// simulator cannot run (a negative threshold, say) are refused by [`crate::Simulator::new`],
@@ -79,10 +88,9 @@ pub fn apply_setting(cfg: &mut SceneConfig, name: &str, value: f64) -> Result<()
         "texture_contrast" => crate::scale_contrast(cfg, value),
         "camera_motion" => scale_camera_motion(&mut cfg.camera_trajectory, value),
         _ => {
-            let names: Vec<&str> = SETTINGS.iter().map(|(n, _)| *n).collect();
             return Err(SimError::Config(format!(
                 "unknown setting '{name}'; known settings: {}",
-                names.join(", ")
+                setting_names()
             )));
         }
     }

@@ -225,7 +225,7 @@ fn description() -> NodeDescription {
     .required("kind", "source kind: synthetic (built-in simulator), evimo2 (EVIMO2 v2 folder), file (AEDAT4, EVT2/EVT3 .raw, .es, text), pattern (transport test pattern)")
     .param("path", serde_json::Value::Null, "evimo2: sequence folder; file: recording")
     .param("scene", "two-objects", &format!("synthetic: scene preset ({})", evseg_source::synthetic::PRESET_NAMES.join(", ")))
-    .param("settings", serde_json::json!({}), &format!("synthetic: the simulator's named settings applied to the preset, e.g. {{\"contrast\": 0.3}} ({})", evseg_sim::SETTINGS.iter().map(|(name, _)| *name).collect::<Vec<_>>().join(", ")))
+    .param("settings", serde_json::json!({}), &format!("synthetic: the simulator's named settings applied to the preset, e.g. {{\"contrast\": 0.3}} ({})", evseg_sim::setting_names()))
     .param("camera_file", serde_json::Value::Null, "file: JSON camera file (intrinsics, distortion, IMU-to-camera rotation, time offset)")
     .param("imu_topic", serde_json::Value::Null, "evimo2: IMU topic in meta (default: the first)")
     .param("imu_to_camera", serde_json::Value::Null, "evimo2: IMU-to-camera rotation, row-major 9 numbers (default: EVIMO2 convention)")
