@@ -11,6 +11,7 @@ pub struct NormalEquations<const N: usize> {
     ata: [[f64; N]; N],
     atb: [f64; N],
     count: usize,
+    weight: f64,
 }
 
 impl<const N: usize> Default for NormalEquations<N> {
@@ -19,6 +20,7 @@ impl<const N: usize> Default for NormalEquations<N> {
             ata: [[0.0; N]; N],
             atb: [0.0; N],
             count: 0,
+            weight: 0.0,
         }
     }
 }
@@ -36,6 +38,7 @@ impl<const N: usize> NormalEquations<N> {
             }
         }
         self.count += 1;
+        self.weight += w;
     }
 
     /// Equations added.
@@ -54,6 +57,33 @@ impl<const N: usize> NormalEquations<N> {
             *a += b;
         }
         self.count += other.count;
+        self.weight += other.weight;
+    }
+
+    /// The information per unit weight, `A^T W A / sum w` (upper triangle, row by row, as
+    /// stored); `None` before any weight was added.
+    pub fn information(&self) -> Option<[[f64; N]; N]> {
+        (self.weight > 0.0).then(|| self.ata.map(|row| row.map(|v| v / self.weight)))
+    }
+
+    /// Sum of the weights added.
+    pub fn total_weight(&self) -> f64 {
+        self.weight
+    }
+
+    /// Adds a Gaussian prior on the parameters: `weight (p - center)^T info (p - center)` joins
+    /// the sum minimised (`info` symmetric, upper triangle as [`Self::information`] gives it).
+    /// Counts as no equation ([`Self::count`]) and no weight.
+    pub fn add_prior(&mut self, info: &[[f64; N]; N], center: &[f64; N], weight: f64) {
+        // `info` is symmetric and stored as its upper triangle: entry (i, j) is at
+        // [min(i, j)][max(i, j)].
+        let at = |i: usize, j: usize| if j >= i { info[i][j] } else { info[j][i] };
+        for (i, (row, b)) in self.ata.iter_mut().zip(&mut self.atb).enumerate() {
+            for (j, a) in row.iter_mut().enumerate().skip(i) {
+                *a += weight * at(i, j);
+            }
+            *b += weight * center.iter().enumerate().map(|(j, c)| at(i, j) * c).sum::<f64>();
+        }
     }
 
     /// Solves with regularization `lambda` (>= 0); `None` when the system is singular.
@@ -159,5 +189,31 @@ mod tests {
         let r = ne.solve(1e3).unwrap();
         assert!(r.iter().map(|v| v * v).sum::<f64>() < s.iter().map(|v| v * v).sum::<f64>());
         assert!(NormalEquations::<3>::default().solve(0.0).is_none());
+    }
+
+    /// Equations that fix only the first parameter: the prior sets the second, and where the
+    /// equations do fix a parameter a weak prior barely moves it. `information` is the
+    /// normal matrix per unit weight.
+    #[test]
+    fn a_prior_holds_the_directions_the_equations_leave_open() {
+        let mut ne = NormalEquations::<2>::default();
+        for k in 0..10 {
+            ne.add(&[1.0, 0.0], 3.0, 0.5 + f64::from(k) * 0.1);
+        }
+        assert!(ne.solve(0.0).is_none(), "the second parameter is undetermined");
+        assert!((ne.total_weight() - 9.5).abs() < 1e-12);
+        let info = ne.information().unwrap();
+        assert!((info[0][0] - 1.0).abs() < 1e-12 && info[0][1] == 0.0 && info[1][1] == 0.0);
+        let prior_info = [[1.0, 0.5], [0.0, 2.0]];
+        let mut with = ne.clone();
+        with.add_prior(&prior_info, &[2.0, -7.0], 1e-3);
+        assert_eq!(with.count(), 10);
+        let p = with.solve(0.0).unwrap();
+        // The first parameter: the equations' 3 (the prior pulls by about 1e-3 / 9.5).
+        assert!((p[0] - 3.0).abs() < 1e-3, "{p:?}");
+        // The second: the prior's -7, shifted by its correlation with the first: the prior's
+        // conditional mean -7 - (0.5 / 2) (3 - 2).
+        assert!((p[1] - (-7.0 - 0.25 * (p[0] - 2.0))).abs() < 1e-9, "{p:?}");
+        assert!(NormalEquations::<2>::default().information().is_none());
     }
 }

@@ -172,6 +172,7 @@ fn apply(
             "min_center_gap" => planar.min_center_gap = f,
             "density_cell_px" => planar.density_cell_px = f as u16,
             "previous_weight" => planar.previous.weight = f,
+            "fit_memory" => planar.fit_memory = f,
             "robust_needs_previous" => planar.robust_needs_previous = f > 0.0,
             "tukey_fit" => planar.fit.robust = evseg_planar_segmenter::Robust::Tukey { c: f },
             "huber_fit" => {
@@ -737,7 +738,7 @@ fn main() -> anyhow::Result<()> {
                     // Per segment (label != 0) and per over-segmentation cluster: events per
                     // true object id (0 = background).
                     let per = events_per_object(
-                        h.segmentation.label.iter().map(|&l| (l != 0).then_some(l)),
+                        h.segmentation.label.iter().copied().map(Some),
                         &truth.event_object,
                     );
                     let by_cluster = events_per_object(
@@ -763,6 +764,35 @@ fn main() -> anyhow::Result<()> {
                         line.push_str(&format!(" {l}:{m:?}"));
                     }
                     println!("{line}");
+                    // Pairs of final segments with the same majority object: their motion
+                    // similarity and whether their boxes touch.
+                    let maj: std::collections::BTreeMap<u32, u16> = per
+                        .iter()
+                        .filter_map(|(l, m)| m.iter().max_by_key(|e| *e.1).map(|e| (*l, *e.0)))
+                        .collect();
+                    let segs = &h.segmentation.segments;
+                    for a in segs.iter().filter(|s| s.label != 0) {
+                        for b in segs.iter().filter(|s| s.label > a.label) {
+                            let (Some(&ma), Some(&mb)) = (maj.get(&a.label), maj.get(&b.label)) else {
+                                continue;
+                            };
+                            if ma == 0 || mb == 0 {
+                                continue;
+                            }
+                            let sim = evseg_hierarchical_merger::similarity(
+                                a.translation,
+                                b.translation,
+                                0.0,
+                                0.0,
+                                0.0,
+                            );
+                            let touch = evseg_hierarchical_merger::boxes_touch(a.bbox, b.bbox, 2.0);
+                            println!(
+                                "  pair t {:.2} {}{} objs {ma}/{mb} ev {}/{} sim {sim:.3} touch {touch} ta {:.2?} tb {:.2?}",
+                                span.0, a.label, b.label, a.events, b.events, a.translation, b.translation
+                            );
+                        }
+                    }
                 }
                 // FILL_PLANAR=1: ungrouped events without a grouped event in the 3x3 cells of 4 px
                 // take the planar label; =2: every ungrouped event does; =3: as 1, and the other

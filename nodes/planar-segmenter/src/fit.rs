@@ -77,7 +77,14 @@ impl Equation {
     }
 }
 
-fn solve(eqs: &[Equation], weights: Option<&[f64]>, ridge: f64) -> Option<[f64; 8]> {
+/// The weighted least-squares solution and the information per unit weight of the equations
+/// (without the prior).
+fn solve(
+    eqs: &[Equation],
+    weights: Option<&[f64]>,
+    ridge: f64,
+    prior: Option<(&PlanarPrior, f64)>,
+) -> Option<([f64; 8], [[f64; 8]; 8])> {
     let mut ne = NormalEquations::<8>::default();
     for (i, e) in eqs.iter().enumerate() {
         let w = weights.map_or(1.0, |w| w[i]);
@@ -85,7 +92,25 @@ fn solve(eqs: &[Equation], weights: Option<&[f64]>, ridge: f64) -> Option<[f64; 
             ne.add(&e.g, e.b, w);
         }
     }
-    ne.solve(ridge * ne.count() as f64)
+    let info = ne.information()?;
+    if let Some((prior, forget)) = prior {
+        ne.add_prior(&prior.info, &prior.a, forget * ne.total_weight());
+    }
+    Some((ne.solve(ridge * ne.count() as f64)?, info))
+}
+
+/// A previous fit carried into the next one (recursive least squares with forgetting): the
+/// previous model `a` and its information per unit weight `M = sum w g g^T / sum w`, added to
+/// the next fit's normal equations as the prior `forget W (a' - a)^T M (a' - a)`, `W` the next
+/// fit's total weight. Where the new slice's equations determine the model they dominate; in
+/// the directions they leave open (a background seen in only part of the image, the rest
+/// behind an object) the previous model holds.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PlanarPrior {
+    /// The previous model.
+    pub a: [f64; 8],
+    /// Upper triangle of its information per unit weight, row by row.
+    pub info: [[f64; 8]; 8],
 }
 
 /// `1.4826 * median(|r|)`: the standard deviation of Gaussian residuals, robust to outliers.
@@ -110,14 +135,27 @@ pub fn fit_planar(eqs: &[Equation], params: &FitParams) -> Option<[f64; 8]> {
 /// (base weight > 0) only: equations weighted 0 (e.g. the planar segmenter's previous
 /// foreground) must not set how far the fitted ones may lie from the model.
 pub fn fit_planar_weighted(eqs: &[Equation], base: Option<&[f64]>, params: &FitParams) -> Option<[f64; 8]> {
+    fit_planar_with_prior(eqs, base, params, None).map(|(a, _)| a)
+}
+
+/// [`fit_planar_weighted`] with a previous fit as a prior, weighing `forget` times the total
+/// base weight of `eqs` (see [`PlanarPrior`]; `None` or a weight of 0: no prior). Returns the
+/// model and, as the next fit's prior, its own information per unit weight (final weights).
+pub fn fit_planar_with_prior(
+    eqs: &[Equation],
+    base: Option<&[f64]>,
+    params: &FitParams,
+    prior: Option<(&PlanarPrior, f64)>,
+) -> Option<([f64; 8], PlanarPrior)> {
     if eqs.len() < 8 || base.is_some_and(|b| b.len() != eqs.len()) {
         return None;
     }
-    let mut a = solve(eqs, base, params.ridge)?;
+    let prior = prior.filter(|(_, forget)| forget.is_finite() && *forget > 0.0);
+    let (mut a, mut info) = solve(eqs, base, params.ridge, prior)?;
     if params.robust == Robust::LeastSquares {
-        return Some(a);
+        return Some((a, PlanarPrior { a, info }));
     }
-    let mut weights = vec![1.0; eqs.len()];
+    let mut weights = base.map_or_else(|| vec![1.0; eqs.len()], <[f64]>::to_vec);
     for _ in 0..params.iterations {
         let r: Vec<f64> = eqs.iter().map(|e| e.residual(&a)).collect();
         let in_fit = |i: usize| base.is_none_or(|b| b[i] > 0.0);
@@ -151,10 +189,10 @@ pub fn fit_planar_weighted(eqs: &[Equation], base: Option<&[f64]>, params: &FitP
                 *w *= b;
             }
         }
-        match solve(eqs, Some(&weights), params.ridge) {
-            Some(next) => a = next,
+        match solve(eqs, Some(&weights), params.ridge, prior) {
+            Some(next) => (a, info) = next,
             None => break, // too many equations rejected; keep the last fit
         }
     }
-    Some(a)
+    Some((a, PlanarPrior { a, info }))
 }

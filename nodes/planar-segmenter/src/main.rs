@@ -118,6 +118,16 @@ fn main() -> ExitCode {
         d.robust_needs_previous,
         "use the robust fit only where the previous slice's foreground was left out of the fit (least squares otherwise)",
     )
+    .param(
+        "fit_memory",
+        d.fit_memory,
+        "weight of the previous slice's fit as a prior on this slice's, as a fraction of this slice's own fit weight (0 = off, the paper)",
+    )
+    .param(
+        "fit_memory_gap_s",
+        d.fit_memory_gap_s,
+        "the previous fit is a prior only when its slice ended at most this long before this slice's first event, seconds",
+    )
     .param(SLOPE_PARAM, SLOPE_DEFAULT, SLOPE_PARAM_DOC)
     .param("robust_iterations", d.fit.iterations, "reweighting rounds")
     .param("ridge", d.fit.ridge, "Tikhonov regularization per equation")
@@ -201,6 +211,8 @@ fn main() -> ExitCode {
             min_center_gap: cfg.param("min_center_gap")?,
             split_power: cfg.param("split_power")?,
             robust_needs_previous: cfg.param("robust_needs_previous")?,
+            fit_memory: cfg.param("fit_memory")?,
+            fit_memory_gap_s: cfg.param("fit_memory_gap_s")?,
             two_means_iter: cfg.param("two_means_iter")?,
             classify_invalid: cfg.param("classify_invalid")?,
             min_support: cfg.param("min_support")?,

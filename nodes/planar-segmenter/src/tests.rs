@@ -100,6 +100,7 @@ fn huber() -> PlanarParams {
             ..Default::default()
         },
         robust_needs_previous: false,
+        fit_memory: 0.0,
         ..Default::default()
     }
 }
@@ -113,6 +114,8 @@ fn ls() -> PlanarParams {
             ..Default::default()
         },
         sigma_reference_focal_px: 0.0,
+        // Each slice fitted alone: these tests segment one slice several times.
+        fit_memory: 0.0,
         ..Default::default()
     }
 }
@@ -524,7 +527,10 @@ fn a_compressed_split_spreads_further_past_a_clean_object() {
 fn the_robust_fit_is_used_only_with_the_previous_foreground() {
     let (ev, fl, truth) = scene(6000, true, 0.0, flow_with_object);
     let labels: Vec<u32> = truth.iter().map(|&o| u32::from(o)).collect();
-    let d = PlanarParams::default();
+    let d = PlanarParams {
+        fit_memory: 0.0,
+        ..PlanarParams::default()
+    };
     assert!(d.robust_needs_previous && d.fit.robust != Robust::LeastSquares);
     let model = |params: PlanarParams, labels: Option<&[u32]>| {
         let mut seg = PlanarSegmenter::new(params).unwrap();
@@ -594,4 +600,108 @@ fn equations_weighted_zero_do_not_set_the_robust_scale() {
         err(&with_zeros),
         err(&plain)
     );
+}
+
+/// Noisy equations of `a_true` at `count` random points with `x` in `x_range` (normalized
+/// units); a random gradient direction each.
+fn strip_equations(
+    a_true: &[f64; 8],
+    count: usize,
+    x_range: (f64, f64),
+    noise: f64,
+    rng: &mut Rng,
+) -> Vec<Equation> {
+    (0..count)
+        .map(|_| {
+            let x = x_range.0 + (x_range.1 - x_range.0) * rng.next();
+            let y = rng.next() - 0.5;
+            let th = rng.next() * std::f64::consts::TAU;
+            let e = Equation::new(x, y, [th.cos(), th.sin()], 0.0);
+            let b = e.g.iter().zip(a_true).map(|(g, a)| g * a).sum::<f64>() + noise * (rng.next() - 0.5);
+            Equation { b, ..e }
+        })
+        .collect()
+}
+
+/// The largest error of the flow a model predicts over the whole view (normalized units/s).
+fn worst_flow_error(a: &[f64; 8], a_true: &[f64; 8]) -> f64 {
+    let mut worst: f64 = 0.0;
+    for i in 0..=10 {
+        for j in 0..=10 {
+            let (x, y) = (f64::from(i) * 0.1 - 0.5, f64::from(j) * 0.1 - 0.5);
+            let (f, g) = (planar_flow(x, y, a), planar_flow(x, y, a_true));
+            worst = worst.max((f[0] - g[0]).hypot(f[1] - g[1]));
+        }
+    }
+    worst
+}
+
+/// The background seen only in a strip at the image's left edge (an object covering the
+/// rest): fitted alone, the 8-parameter model extrapolates the strip's noise over the view;
+/// with the previous slice's fit over the whole view as a prior it stays close. A prior of
+/// weight 0 is the plain fit, to the bit.
+#[test]
+fn the_previous_fit_holds_the_model_where_the_equations_leave_it_open() {
+    let a_true = expected_a();
+    let mut rng = Rng(11);
+    let full = strip_equations(&a_true, 2000, (-0.5, 0.5), 0.01, &mut rng);
+    let strip = strip_equations(&a_true, 300, (-0.5, -0.4), 0.01, &mut rng);
+    let p = FitParams::default();
+    let (_, prior) = fit_planar_with_prior(&full, None, &p, None).unwrap();
+    let alone = fit_planar(&strip, &p).unwrap();
+    let (held, _) = fit_planar_with_prior(&strip, None, &p, Some((&prior, 1.0))).unwrap();
+    let (e_alone, e_held) = (
+        worst_flow_error(&alone, &a_true),
+        worst_flow_error(&held, &a_true),
+    );
+    assert!(e_held < 0.01, "with the prior: {e_held}");
+    assert!(
+        e_alone > 10.0 * e_held,
+        "alone {e_alone}, with the prior {e_held}"
+    );
+    let (zero, _) = fit_planar_with_prior(&strip, None, &p, Some((&prior, 0.0))).unwrap();
+    assert_eq!(zero, alone);
+}
+
+/// The segmenter carries its fit to the next slice only when that slice follows within
+/// `fit_memory_gap_s` and its flow is derotated alike; otherwise the fit is the fit of a fresh
+/// segmenter.
+#[test]
+fn the_fit_memory_reaches_only_the_next_slice_in_the_same_space() {
+    let (ev_a, fl_a, _) = scene(3000, true, 0.0, flow_with_object);
+    let (mut ev_b, fl_b, _) = scene(3000, false, 0.02, camera_flow);
+    let params = PlanarParams {
+        fit_memory: 1.0,
+        ..ls()
+    };
+    let model = |first: Option<&Events>, b: &Events, w: Option<RotationRate>| {
+        let mut seg = PlanarSegmenter::new(params).unwrap();
+        if let Some(a) = first {
+            seg.segment(&camera(), a, &fl_a, Some(W.into())).unwrap();
+        }
+        seg.segment(&camera(), b, &fl_b, w).unwrap().residuals.model
+    };
+    let fresh = model(None, &ev_b, Some(W.into()));
+    // Slice b right after a (its events from 0 s, a's up to 3 ms): a's fit is its prior.
+    assert_ne!(model(Some(&ev_a), &ev_b, Some(W.into())), fresh);
+    // Raw flow after derotated flow: no prior.
+    assert_eq!(model(Some(&ev_a), &ev_b, None), model(None, &ev_b, None));
+    // Slice b a second later: no prior.
+    for t in &mut ev_b.t {
+        *t += 1.0;
+    }
+    assert_eq!(
+        model(Some(&ev_a), &ev_b, Some(W.into())),
+        model(None, &ev_b, Some(W.into()))
+    );
+    // Memory 0: no prior.
+    let off = PlanarParams {
+        fit_memory: 0.0,
+        ..params
+    };
+    let mut seg = PlanarSegmenter::new(off).unwrap();
+    seg.segment(&camera(), &ev_a, &fl_a, Some(W.into())).unwrap();
+    ev_b.t.iter_mut().for_each(|t| *t -= 1.0);
+    let r = seg.segment(&camera(), &ev_b, &fl_b, Some(W.into())).unwrap();
+    assert_eq!(r.residuals.model, fresh);
 }
