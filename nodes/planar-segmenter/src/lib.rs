@@ -239,7 +239,11 @@ pub struct PlanarParams {
     /// 0.797; seeds 501-607: 0.8362 / 0.8305 / 0.8452, lowest 0.637 / 0.569 / 0.745, where
     /// low-contrast 606 starts with the object taken for the background and the prior
     /// holds whichever fit it is given: 1 for the better worst case). Both a right and a
-    /// wrong fit are held for a few slices; the residuals still decide every event.
+    /// wrong fit are held for a few slices; the residuals still decide every event. The
+    /// costs: the prior lags the camera's motion (scenes that never flip lose about half a
+    /// point, fast-rotation 1-2), false alarms rise (bench camera-only 205 6.75 -> 9.95 %),
+    /// and on seeds 11-12 (2 s) the mean falls 0.893 -> 0.872 with low-contrast 12 flipping
+    /// (README, "Robustness to the sensor's settings").
     pub fit_memory: f64,
     /// The previous fit is a prior only when its slice ended at most this long before this
     /// slice's first event, seconds (default 0.1: a slice or two dropped; after a longer gap
