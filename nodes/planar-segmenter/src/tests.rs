@@ -442,6 +442,18 @@ fn malformed_input_is_an_error() {
             ..Default::default()
         },
         PlanarParams {
+            fit_memory: -1.0,
+            ..Default::default()
+        },
+        PlanarParams {
+            fit_memory: f64::INFINITY,
+            ..Default::default()
+        },
+        PlanarParams {
+            fit_memory_gap_s: f64::NAN,
+            ..Default::default()
+        },
+        PlanarParams {
             fit: FitParams {
                 robust: Robust::Huber { k: 0.0 },
                 ..Default::default()
