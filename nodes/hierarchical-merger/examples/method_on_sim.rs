@@ -173,6 +173,7 @@ fn apply(
             "density_cell_px" => planar.density_cell_px = f as u16,
             "previous_weight" => planar.previous.weight = f,
             "fit_memory" => planar.fit_memory = f,
+            "start_centre_weight" => planar.start_centre_weight = f,
             "robust_needs_previous" => planar.robust_needs_previous = f > 0.0,
             "tukey_fit" => planar.fit.robust = evseg_planar_segmenter::Robust::Tukey { c: f },
             "huber_fit" => {

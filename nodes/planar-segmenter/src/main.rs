@@ -128,6 +128,11 @@ fn main() -> ExitCode {
         d.fit_memory_gap_s,
         "the previous fit is a prior only when its slice ended at most this long before this slice's first event, seconds",
     )
+    .param(
+        "start_centre_weight",
+        d.start_centre_weight,
+        "in a slice fitted without the previous foreground and the previous fit (the first), the weight of the view's centre, rising linearly to 1 at the border (1 = off)",
+    )
     .param(SLOPE_PARAM, SLOPE_DEFAULT, SLOPE_PARAM_DOC)
     .param("robust_iterations", d.fit.iterations, "reweighting rounds")
     .param("ridge", d.fit.ridge, "Tikhonov regularization per equation")
@@ -213,6 +218,7 @@ fn main() -> ExitCode {
             robust_needs_previous: cfg.param("robust_needs_previous")?,
             fit_memory: cfg.param("fit_memory")?,
             fit_memory_gap_s: cfg.param("fit_memory_gap_s")?,
+            start_centre_weight: cfg.param("start_centre_weight")?,
             two_means_iter: cfg.param("two_means_iter")?,
             classify_invalid: cfg.param("classify_invalid")?,
             min_support: cfg.param("min_support")?,

@@ -446,6 +446,14 @@ fn malformed_input_is_an_error() {
             ..Default::default()
         },
         PlanarParams {
+            start_centre_weight: 1.5,
+            ..Default::default()
+        },
+        PlanarParams {
+            start_centre_weight: f64::NAN,
+            ..Default::default()
+        },
+        PlanarParams {
             fit_memory: f64::INFINITY,
             ..Default::default()
         },
@@ -716,4 +724,58 @@ fn the_fit_memory_reaches_only_the_next_slice_in_the_same_space() {
     ev_b.t.iter_mut().for_each(|t| *t -= 1.0);
     let r = seg.segment(&camera(), &ev_b, &fl_b, Some(W.into())).unwrap();
     assert_eq!(r.residuals.model, fresh);
+}
+
+/// The first slice's centre ramp: `f` at the centre, 1 at the border, linear between; a slice
+/// with the previous fit as its prior is not weighted, and `start_centre_weight` 1 is the plain
+/// first fit.
+#[test]
+fn the_first_fit_weighs_the_view_border_more() {
+    assert!((centre_ramp(160, 120, 320, 240, 0.25) - (0.25 + 0.75 * (0.5 / 120.0))).abs() < 1e-12);
+    assert!((centre_ramp(0, 120, 320, 240, 0.25) - (0.25 + 0.75 * (159.5 / 160.0))).abs() < 1e-12);
+    assert!((centre_ramp(240, 120, 320, 240, 0.25) - (0.25 + 0.75 * (80.5 / 160.0))).abs() < 1e-12);
+    assert_eq!(centre_ramp(10, 10, 320, 240, 1.0), 1.0);
+    let (ev, fl, _) = scene(6000, true, 0.0, flow_with_object);
+    let first = |start_centre_weight: f64| {
+        let mut seg = PlanarSegmenter::new(PlanarParams {
+            start_centre_weight,
+            fit_memory: 1.0,
+            ..ls()
+        })
+        .unwrap();
+        let a = seg
+            .segment(&camera(), &ev, &fl, Some(W.into()))
+            .unwrap()
+            .residuals
+            .model;
+        let b = seg
+            .segment(&camera(), &ev, &fl, Some(W.into()))
+            .unwrap()
+            .residuals
+            .model;
+        (a, b)
+    };
+    let (plain, plain_next) = first(1.0);
+    let (ramped, ramped_next) = first(0.25);
+    // The object (a square right of the centre) pulls the ramped fit less.
+    assert_ne!(plain, ramped);
+    assert!(
+        model_error(&ramped) < model_error(&plain),
+        "{} {}",
+        model_error(&ramped),
+        model_error(&plain)
+    );
+    let fresh = PlanarSegmenter::new(PlanarParams {
+        start_centre_weight: 1.0,
+        fit_memory: 0.0,
+        ..ls()
+    })
+    .unwrap()
+    .segment(&camera(), &ev, &fl, Some(W.into()))
+    .unwrap()
+    .residuals
+    .model;
+    assert_eq!(plain, fresh);
+    // The second slices differ only through their priors (the first fits).
+    assert_ne!(plain_next, ramped_next);
 }
