@@ -38,6 +38,9 @@
 //! - The previous slice's fit is a prior on this slice's ([`PlanarParams::fit_memory`],
 //!   [`PlanarPrior`]): with the previous foreground left out, what remains of the background
 //!   may be a strip of the image, over which the fit alone extrapolates badly.
+//! - A slice fitted with neither (the first) weighs the view's border more than its centre
+//!   ([`PlanarParams::start_centre_weight`]): an object there from the start lies inside the
+//!   view, the room around it.
 //! - 2-means always splits in two; when the two centres are closer than
 //!   [`PlanarParams::min_center_gap`] the slice is taken as all background (a scene without a
 //!   moving object would otherwise have half its noise called foreground).
