@@ -616,19 +616,21 @@ impl PlanarSegmenter {
         // within `fit_memory_gap_s` of this slice's first) and its flow was derotated alike
         // (a model of derotated flow is no prior for one of raw flow).
         let derotated = w.is_some();
-        let prior = match (&self.last_fit, events.t.first()) {
+        let last = match (&self.last_fit, events.t.first()) {
             (Some((prior, t_end, was_derotated)), Some(&t0))
-                if p.fit_memory > 0.0
-                    && *was_derotated == derotated
-                    && (t0 - t_end).abs() <= p.fit_memory_gap_s =>
+                if *was_derotated == derotated && (t0 - t_end).abs() <= p.fit_memory_gap_s =>
             {
-                Some((prior, p.fit_memory))
+                Some(prior)
             }
             _ => None,
         };
-        // A slice fitted with neither the previous foreground nor the previous fit (the first
-        // one, or after a gap): the view's border weighs more (`start_centre_weight`).
-        if prior.is_none() && !previous_applied && p.start_centre_weight < 1.0 {
+        let prior = last
+            .filter(|_| p.fit_memory > 0.0)
+            .map(|prior| (prior, p.fit_memory));
+        // A slice with neither the previous foreground nor a previous fit just before it (the
+        // first, or the first after a gap): the view's border weighs more
+        // (`start_centre_weight`), whether or not the previous fit is used as a prior.
+        if last.is_none() && !previous_applied && p.start_centre_weight < 1.0 {
             for (w, &(x, y)) in weights.iter_mut().zip(&pixels) {
                 *w *= centre_ramp(x, y, camera.width, camera.height, p.start_centre_weight);
             }

@@ -101,6 +101,7 @@ fn huber() -> PlanarParams {
         },
         robust_needs_previous: false,
         fit_memory: 0.0,
+        start_centre_weight: 1.0,
         ..Default::default()
     }
 }
@@ -114,8 +115,9 @@ fn ls() -> PlanarParams {
             ..Default::default()
         },
         sigma_reference_focal_px: 0.0,
-        // Each slice fitted alone: these tests segment one slice several times.
+        // Each slice fitted alone and alike: these tests segment one slice several times.
         fit_memory: 0.0,
+        start_centre_weight: 1.0,
         ..Default::default()
     }
 }
@@ -549,6 +551,7 @@ fn the_robust_fit_is_used_only_with_the_previous_foreground() {
     let labels: Vec<u32> = truth.iter().map(|&o| u32::from(o)).collect();
     let d = PlanarParams {
         fit_memory: 0.0,
+        start_centre_weight: 1.0,
         ..PlanarParams::default()
     };
     assert!(d.robust_needs_previous && d.fit.robust != Robust::LeastSquares);
@@ -778,4 +781,23 @@ fn the_first_fit_weighs_the_view_border_more() {
     assert_eq!(plain, fresh);
     // The second slices differ only through their priors (the first fits).
     assert_ne!(plain_next, ramped_next);
+    // Without the memory the ramp still weighs the first slice only.
+    let mut seg = PlanarSegmenter::new(PlanarParams {
+        start_centre_weight: 0.25,
+        fit_memory: 0.0,
+        ..ls()
+    })
+    .unwrap();
+    let a = seg
+        .segment(&camera(), &ev, &fl, Some(W.into()))
+        .unwrap()
+        .residuals
+        .model;
+    let b = seg
+        .segment(&camera(), &ev, &fl, Some(W.into()))
+        .unwrap()
+        .residuals
+        .model;
+    assert_eq!(a, ramped);
+    assert_eq!(b, fresh);
 }
