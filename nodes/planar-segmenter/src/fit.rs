@@ -135,25 +135,25 @@ pub fn fit_planar(eqs: &[Equation], params: &FitParams) -> Option<[f64; 8]> {
 /// (base weight > 0) only: equations weighted 0 (e.g. the planar segmenter's previous
 /// foreground) must not set how far the fitted ones may lie from the model.
 pub fn fit_planar_weighted(eqs: &[Equation], base: Option<&[f64]>, params: &FitParams) -> Option<[f64; 8]> {
-    fit_planar_with_prior(eqs, base, params, None).map(|(a, _)| a)
+    fit_planar_with_prior(eqs, base, params, None).map(|fit| fit.a)
 }
 
 /// [`fit_planar_weighted`] with a previous fit as a prior, weighing `forget` times the total
 /// base weight of `eqs` (see [`PlanarPrior`]; `None` or a weight of 0: no prior). Returns the
-/// model and, as the next fit's prior, its own information per unit weight (final weights).
+/// model (`a`) with its own information per unit weight (final weights): the next fit's prior.
 pub fn fit_planar_with_prior(
     eqs: &[Equation],
     base: Option<&[f64]>,
     params: &FitParams,
     prior: Option<(&PlanarPrior, f64)>,
-) -> Option<([f64; 8], PlanarPrior)> {
+) -> Option<PlanarPrior> {
     if eqs.len() < 8 || base.is_some_and(|b| b.len() != eqs.len()) {
         return None;
     }
     let prior = prior.filter(|(_, forget)| forget.is_finite() && *forget > 0.0);
     let (mut a, mut info) = solve(eqs, base, params.ridge, prior)?;
     if params.robust == Robust::LeastSquares {
-        return Some((a, PlanarPrior { a, info }));
+        return Some(PlanarPrior { a, info });
     }
     let mut weights = base.map_or_else(|| vec![1.0; eqs.len()], <[f64]>::to_vec);
     for _ in 0..params.iterations {
@@ -194,5 +194,5 @@ pub fn fit_planar_with_prior(
             None => break, // too many equations rejected; keep the last fit
         }
     }
-    Some((a, PlanarPrior { a, info }))
+    Some(PlanarPrior { a, info })
 }

@@ -639,8 +639,8 @@ impl PlanarSegmenter {
         self.last_fit = fitted
             .as_ref()
             .zip(events.t.last())
-            .map(|((_, info), &t)| (info.clone(), t, derotated));
-        let Some((a, _)) = fitted else {
+            .map(|(fit, &t)| (fit.clone(), t, derotated));
+        let Some(PlanarPrior { a, .. }) = fitted else {
             return Ok(PlanarResult {
                 residuals: Residuals {
                     residual,

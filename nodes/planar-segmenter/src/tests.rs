@@ -670,9 +670,11 @@ fn the_previous_fit_holds_the_model_where_the_equations_leave_it_open() {
     let full = strip_equations(&a_true, 2000, (-0.5, 0.5), 0.01, &mut rng);
     let strip = strip_equations(&a_true, 300, (-0.5, -0.4), 0.01, &mut rng);
     let p = FitParams::default();
-    let (_, prior) = fit_planar_with_prior(&full, None, &p, None).unwrap();
+    let prior = fit_planar_with_prior(&full, None, &p, None).unwrap();
     let alone = fit_planar(&strip, &p).unwrap();
-    let (held, _) = fit_planar_with_prior(&strip, None, &p, Some((&prior, 1.0))).unwrap();
+    let held = fit_planar_with_prior(&strip, None, &p, Some((&prior, 1.0)))
+        .unwrap()
+        .a;
     let (e_alone, e_held) = (
         worst_flow_error(&alone, &a_true),
         worst_flow_error(&held, &a_true),
@@ -682,7 +684,9 @@ fn the_previous_fit_holds_the_model_where_the_equations_leave_it_open() {
         e_alone > 10.0 * e_held,
         "alone {e_alone}, with the prior {e_held}"
     );
-    let (zero, _) = fit_planar_with_prior(&strip, None, &p, Some((&prior, 0.0))).unwrap();
+    let zero = fit_planar_with_prior(&strip, None, &p, Some((&prior, 0.0)))
+        .unwrap()
+        .a;
     assert_eq!(zero, alone);
 }
 
@@ -739,25 +743,23 @@ fn the_first_fit_weighs_the_view_border_more() {
     assert!((centre_ramp(240, 120, 320, 240, 0.25) - (0.25 + 0.75 * (80.5 / 160.0))).abs() < 1e-12);
     assert_eq!(centre_ramp(10, 10, 320, 240, 1.0), 1.0);
     let (ev, fl, _) = scene(6000, true, 0.0, flow_with_object);
-    let first = |start_centre_weight: f64| {
+    // The models of the same slice segmented twice in a row by one segmenter.
+    let twice = |start_centre_weight: f64, fit_memory: f64| {
         let mut seg = PlanarSegmenter::new(PlanarParams {
             start_centre_weight,
-            fit_memory: 1.0,
+            fit_memory,
             ..ls()
         })
         .unwrap();
-        let a = seg
-            .segment(&camera(), &ev, &fl, Some(W.into()))
-            .unwrap()
-            .residuals
-            .model;
-        let b = seg
-            .segment(&camera(), &ev, &fl, Some(W.into()))
-            .unwrap()
-            .residuals
-            .model;
-        (a, b)
+        let mut model = || {
+            seg.segment(&camera(), &ev, &fl, Some(W.into()))
+                .unwrap()
+                .residuals
+                .model
+        };
+        (model(), model())
     };
+    let first = |start_centre_weight: f64| twice(start_centre_weight, 1.0);
     let (plain, plain_next) = first(1.0);
     let (ramped, ramped_next) = first(0.25);
     // The object (a square right of the centre) pulls the ramped fit less.
@@ -768,36 +770,12 @@ fn the_first_fit_weighs_the_view_border_more() {
         model_error(&ramped),
         model_error(&plain)
     );
-    let fresh = PlanarSegmenter::new(PlanarParams {
-        start_centre_weight: 1.0,
-        fit_memory: 0.0,
-        ..ls()
-    })
-    .unwrap()
-    .segment(&camera(), &ev, &fl, Some(W.into()))
-    .unwrap()
-    .residuals
-    .model;
+    let fresh = twice(1.0, 0.0).0;
     assert_eq!(plain, fresh);
     // The second slices differ only through their priors (the first fits).
     assert_ne!(plain_next, ramped_next);
     // Without the memory the ramp still weighs the first slice only.
-    let mut seg = PlanarSegmenter::new(PlanarParams {
-        start_centre_weight: 0.25,
-        fit_memory: 0.0,
-        ..ls()
-    })
-    .unwrap();
-    let a = seg
-        .segment(&camera(), &ev, &fl, Some(W.into()))
-        .unwrap()
-        .residuals
-        .model;
-    let b = seg
-        .segment(&camera(), &ev, &fl, Some(W.into()))
-        .unwrap()
-        .residuals
-        .model;
+    let (a, b) = twice(0.25, 0.0);
     assert_eq!(a, ramped);
     assert_eq!(b, fresh);
 }
