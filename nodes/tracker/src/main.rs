@@ -176,6 +176,16 @@ fn description() -> NodeDescription {
         d.merge_keeps_most_hits,
         "of two merged tracks, the one matched in more slices keeps its id (off: the older one)",
     )
+    .param(
+        "split_yields_to_tracks",
+        d.split_yields_to_tracks,
+        "a group of a track's segments apart from the rest that touches another track's segment goes to that track",
+    )
+    .param(
+        "split_yield_min_share",
+        d.split_yield_min_share,
+        "fewest events of the group a track keeps when it hands another over, as a fraction of its largest group's",
+    )
 
     .build()
 }
@@ -208,6 +218,8 @@ fn main() -> ExitCode {
             split_after_slices: cfg.param("split_after_slices")?,
             matching_cascade: cfg.param("matching_cascade")?,
             merge_keeps_most_hits: cfg.param("merge_keeps_most_hits")?,
+            split_yields_to_tracks: cfg.param("split_yields_to_tracks")?,
+            split_yield_min_share: cfg.param("split_yield_min_share")?,
         };
         Ok(Node(Tracker::new(params)?))
     })
@@ -259,6 +271,8 @@ mod tests {
                 "split_after_slices",
                 "matching_cascade",
                 "merge_keeps_most_hits",
+                "split_yields_to_tracks",
+                "split_yield_min_share",
             ]
         );
         let default_of = |n: &str| d.params.iter().find(|p| p.name == n).map(|p| p.default.clone());

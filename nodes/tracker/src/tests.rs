@@ -622,6 +622,14 @@ fn invalid_parameters_are_refused() {
             split_min_share: f64::INFINITY,
             ..Default::default()
         },
+        TrackerParams {
+            split_yield_min_share: 1.5,
+            ..Default::default()
+        },
+        TrackerParams {
+            split_yield_min_share: f64::NAN,
+            ..Default::default()
+        },
     ];
     for p in bad {
         assert!(
@@ -1177,4 +1185,73 @@ fn tentative_events_names_round_trip_and_a_bad_one_lists_the_valid_ones() {
         err.contains("tentative_events") && err.contains("`label`") && err.contains("unconfirmed"),
         "{err}"
     );
+}
+
+/// Object A (label 1, still at (145, 300), box x 130-160) and object B (label 2, still at
+/// (300, 300), wide box x 170-435) for three slices, then a slice in which B's track gets
+/// its own segment (150 events, box x 280-320) and, through its wide predicted box, a larger
+/// piece P (label 3, 400 events, box x 158-188) lying apart from it but overlapping A's
+/// segment. Returns the ids of A's, B's and P's events in that slice and the live tracks, with
+/// `split_yields_to_tracks` = `yields` and `split_yield_min_share` = `yield_min_share`.
+fn piece_beside_another_track(
+    yields: bool,
+    yield_min_share: f64,
+) -> Result<(u32, u32, u32, usize), TrackerError> {
+    let mut tracker = Tracker::new(TrackerParams {
+        split_after_slices: 1,
+        merge_velocity_px_s: 0.0,
+        split_yields_to_tracks: yields,
+        split_yield_min_share: yield_min_share,
+        ..confirmed_at_once()
+    })?;
+    let set_box = |seg: &mut Segmentation, k: usize, x0: f32, x1: f32| {
+        let b = &mut seg.segments[k].bbox;
+        (b[0], b[2]) = (x0, x1);
+    };
+    let a = |events| Obj {
+        label: 1,
+        centroid: [145.0, 300.0],
+        events,
+    };
+    let b = |events| Obj {
+        label: 2,
+        centroid: [300.0, 300.0],
+        events,
+    };
+    for k in 0..3 {
+        let (n, mut seg) = frame(&[a(200), b(300)], 50);
+        set_box(&mut seg, 0, 130.0, 160.0);
+        set_box(&mut seg, 1, 170.0, 435.0);
+        let out = tracker.update(span(k), n, &seg)?;
+        assert_eq!((id_of(&seg, &out, 1), id_of(&seg, &out, 2)), (1, 2));
+    }
+    let piece = Obj {
+        label: 3,
+        centroid: [173.0, 300.0],
+        events: 400,
+    };
+    let (n, mut seg) = frame(&[a(200), b(150), piece], 50);
+    set_box(&mut seg, 0, 130.0, 160.0);
+    set_box(&mut seg, 1, 280.0, 320.0);
+    set_box(&mut seg, 2, 158.0, 188.0);
+    let out = tracker.update(span(3), n, &seg)?;
+    Ok((
+        id_of(&seg, &out, 1),
+        id_of(&seg, &out, 2),
+        id_of(&seg, &out, 3),
+        tracker.live_tracks(),
+    ))
+}
+
+#[test]
+fn a_group_apart_that_touches_another_track_goes_to_it() -> Result<(), TrackerError> {
+    // With the rule the piece is A's and B keeps its own segment; without it B's track keeps
+    // the larger group (the piece beside A) and B's own segment splits off under a new id.
+    let share = TrackerParams::default().split_yield_min_share;
+    assert_eq!(piece_beside_another_track(true, share)?, (1, 2, 1, 2));
+    assert_eq!(piece_beside_another_track(false, share)?, (1, 3, 2, 3));
+    // B's own segment holds 150 / 400 of the largest group's events: below a share of 0.5
+    // nothing is handed over.
+    assert_eq!(piece_beside_another_track(true, 0.5)?, (1, 3, 2, 3));
+    Ok(())
 }

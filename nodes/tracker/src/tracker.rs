@@ -125,8 +125,9 @@ fn bbox_f64(b: [f32; 4]) -> [f64; 4] {
 /// 5. each unmatched segment with at least `min_events` events opens a track with a new id
 ///    (1, 2, 3, ...; ids are never reused);
 /// 6. tracks that are pieces of one object merge (`merge_inside`, `merge_velocity_px_s`); a
-///    track whose segments form groups lying apart keeps the largest group, and each other
-///    large enough group opens a track of its own (`split_gap_px`);
+///    track whose segments form groups lying apart hands a group touching another established
+///    track's segment to that track (`split_yields_to_tracks`), keeps the largest other group,
+///    and each other large enough group opens a track of its own (`split_gap_px`);
 /// 7. every event of a segment takes the id of the segment's track; events of label 0 and of
 ///    small unmatched segments (no track) are background, 0.
 ///
@@ -510,7 +511,9 @@ impl Tracker {
     }
 
     /// Splits a track whose segments form groups lying apart (see
-    /// `TrackerParams::split_gap_px`): the group with the most events keeps the track (if that
+    /// `TrackerParams::split_gap_px`): groups touching another established track's segments
+    /// are handed to that track as fragments (`TrackerParams::split_yields_to_tracks`, when a
+    /// group of the size to keep is left); of the rest, the group with the most events keeps the track (if that
     /// is not the group of the segment that corrected it, the track is restored from `before`,
     /// its state as predicted, and corrected with that group's largest segment instead); every
     /// other group with at least `split_min_events` events opens a new track on its largest
@@ -531,6 +534,7 @@ impl Tracker {
         let p = &self.params;
         let (gap, min_events, min_share) = (p.split_gap_px, p.split_min_events, p.split_min_share);
         let split_after = p.split_after_slices;
+        let (yield_to_tracks, yield_min_share) = (p.split_yields_to_tracks, p.split_yield_min_share);
         let mut opened = 0;
         for (ti, first) in primary.iter().enumerate() {
             let Some(first) = *first else { continue };
@@ -561,9 +565,30 @@ impl Tracker {
             }
             let largest = |g: &[usize]| g.iter().copied().max_by_key(|&k| counts[k]);
             let first_group = groups.iter().position(|g| g.contains(&first)).unwrap_or(0);
-            let mut keep = first_group;
+            // Groups touching another established track's segments of this slice belong to
+            // that track (`split_yields_to_tracks`), if a group of the split-off size is left.
+            let owner: Vec<Option<usize>> = if yield_to_tracks {
+                groups
+                    .iter()
+                    .map(|g| self.touching_track(segments, track_of_segment, ti, g))
+                    .collect()
+            } else {
+                vec![None; groups.len()]
+            };
+            let most = events.iter().copied().max().unwrap_or(0);
+            let free = |g: usize| {
+                owner[g].is_none()
+                    && events[g] >= min_events
+                    && f64::from(events[g]) >= yield_min_share * f64::from(most)
+            };
+            let yields = (0..groups.len()).any(|g| owner[g].is_some()) && (0..groups.len()).any(free);
+            let mut keep = if yields {
+                (0..groups.len()).find(|&g| free(g)).unwrap_or(first_group)
+            } else {
+                first_group
+            };
             for (g, &e) in events.iter().enumerate() {
-                if e > events[keep] {
+                if e > events[keep] && (!yields || free(g)) {
                     keep = g;
                 }
             }
@@ -576,9 +601,25 @@ impl Tracker {
                 absorbed[main] = false;
                 absorbed[first] = true;
             }
+            if yields {
+                for (g, group) in groups.iter().enumerate() {
+                    let Some(tj) = owner[g] else { continue };
+                    tracing::debug!(
+                        t,
+                        from = self.tracks[ti].id,
+                        to = self.tracks[tj].id,
+                        events = events[g],
+                        "group handed to the track it touches"
+                    );
+                    for &k in group {
+                        track_of_segment[k] = Some(tj);
+                        absorbed[k] = true;
+                    }
+                }
+            }
             let splits = |g: usize| {
                 let share = f64::from(events[g]) / f64::from(events[keep].max(1));
-                g != keep && events[g] >= min_events && share >= min_share
+                g != keep && owner[g].is_none() && events[g] >= min_events && share >= min_share
             };
             if !(0..groups.len()).any(splits) {
                 self.tracks[ti].apart_slices = 0;
@@ -612,6 +653,38 @@ impl Tracker {
             }
         }
         opened
+    }
+
+    /// The established track (opened before this slice and matched in at least as many slices
+    /// as track `ti`, other than `ti`) one of whose segments in this slice has a box touching or overlapping the box of a segment of
+    /// `group` (indices into `segments`); of several, the one with the most such segments.
+    fn touching_track(
+        &self,
+        segments: &[Segment],
+        track_of_segment: &[Option<usize>],
+        ti: usize,
+        group: &[usize],
+    ) -> Option<usize> {
+        let mut touches: HashMap<usize, usize> = HashMap::new();
+        for (k, m) in track_of_segment.iter().enumerate() {
+            let Some(tj) = *m else { continue };
+            let established =
+                |tr: &TrackState| tr.created_slice < self.slices && tr.hits >= self.tracks[ti].hits;
+            if tj == ti || !self.tracks.get(tj).is_some_and(established) {
+                continue;
+            }
+            let b = bbox_f64(segments[k].bbox);
+            if group
+                .iter()
+                .any(|&g| box_gap(bbox_f64(segments[g].bbox), b) <= 0.0)
+            {
+                *touches.entry(tj).or_default() += 1;
+            }
+        }
+        touches
+            .into_iter()
+            .max_by_key(|&(tj, n)| (n, std::cmp::Reverse(tj)))
+            .map(|(tj, _)| tj)
     }
 
     /// Merges tracks that are pieces of one object (see `TrackerParams::merge_velocity_px_s`
