@@ -655,8 +655,8 @@ impl Tracker {
         opened
     }
 
-    /// The established track (opened before this slice and matched in at least as many slices
-    /// as track `ti`, other than `ti`) one of whose segments in this slice has a box touching or overlapping the box of a segment of
+    /// The established track (confirmed, opened before this slice and matched in at least as
+    /// many slices as track `ti`, other than `ti`) one of whose segments in this slice has a box touching or overlapping the box of a segment of
     /// `group` (indices into `segments`); of several, the one with the most such segments.
     fn touching_track(
         &self,
@@ -668,8 +668,9 @@ impl Tracker {
         let mut touches: HashMap<usize, usize> = HashMap::new();
         for (k, m) in track_of_segment.iter().enumerate() {
             let Some(tj) = *m else { continue };
-            let established =
-                |tr: &TrackState| tr.created_slice < self.slices && tr.hits >= self.tracks[ti].hits;
+            let established = |tr: &TrackState| {
+                tr.created_slice < self.slices && tr.hits >= self.tracks[ti].hits.max(self.params.min_hits)
+            };
             if tj == ti || !self.tracks.get(tj).is_some_and(established) {
                 continue;
             }
