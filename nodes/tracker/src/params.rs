@@ -289,26 +289,25 @@ pub struct TrackerParams {
     /// stay with the track).
     pub split_min_events: u32,
     /// See `split_gap_px`: when a track's segments form groups lying apart and a group's boxes
-    /// touch or overlap a segment of another track that is confirmed (`min_hits`), opened
-    /// before this slice and matched in at least as many slices (an object followed for longer
-    /// claims its neighbourhood), that group is a piece of the other track's object and is handed to it, and the track keeps the largest
-    /// of the other groups, if one has at least `split_min_events` events (else nothing is
-    /// handed over and the largest group keeps the track). Not in the paper. Found in
-    /// two-objects 102: where two objects crossed, one segment joined them for a slice and the
-    /// second object's track took it; in the next slices that track's larger group was the
-    /// first object, beside the first object's own track, so the second track followed the
+    /// touch or overlap a segment of another track that is confirmed (`min_hits`), opened before
+    /// this slice and matched in at least as many slices (an object followed for longer claims its
+    /// neighbourhood), that group is a piece of the other track's object and is handed to it, and
+    /// the track keeps the largest of the other groups, if one has at least `split_min_events`
+    /// events (else nothing is handed over and the largest group keeps the track). Not in the
+    /// paper. Found in two-objects 102: where two objects crossed, one segment joined them for a
+    /// slice and the second object's track took it; in the next slices that track's larger group
+    /// was the first object, beside the first object's own track, so the second track followed the
     /// first object and the second object got a new id (six switches). `evseg bench`
-    /// (evseg-bench-v3, b27e6a5's segmentation): 102 6 -> 0 switches, per-object IoU 50.16 ->
-    /// 53.71 %, nothing else moved by more than 0.01 point (mean per-object 78.92 -> 79.21 %,
-    /// worst-object switches 0.8 -> 0.2). Not fitted to the bench: on 24 sequences it has not
-    /// seen (`evseg run graph.yaml`, seeds 301-307, 401-407, 501-507, 601-607, 3 s) the means
-    /// are the same to the fourth digit; on 20 of two and three objects (seeds 701-710) the
-    /// switches are the same in the mean (2.35; three-objects 702 4 -> 3, 708 3 -> 4) and the
-    /// per-object IoU 50.69 -> 50.48 %; as EVIMO2 folders through `graphs/evimo2.yaml` (two-objects
-    /// 102 / 202, three-objects 11-14; `evseg bench --sequences`) per object 46.14 -> 46.16 %,
-    /// switches 1.3 -> 1.2. Without the `min_hits` condition a handover in the second slice of
-    /// three-objects 13, between tracks of one or two matches, set it on another course (1 -> 4
-    /// switches).
+    /// (evseg-bench-v3, b27e6a5's segmentation): 102 6 -> 0 switches, per-object IoU 50.16 -> 53.71
+    /// %, nothing else moved by more than 0.01 point (mean per-object 78.92 -> 79.21 %,
+    /// worst-object switches 0.8 -> 0.2). Not fitted to the bench: on 24 sequences it has not seen
+    /// (`evseg run graph.yaml`, seeds 301-307, 401-407, 501-507, 601-607, 3 s) the means are the
+    /// same to the fourth digit; on 20 of two and three objects (seeds 701-710) the switches are
+    /// the same in the mean (2.35; three-objects 702 4 -> 3, 708 3 -> 4) and the per-object IoU
+    /// 50.69 -> 50.48 %; as EVIMO2 folders through `graphs/evimo2.yaml` (two-objects 102 / 202,
+    /// three-objects 11-14; `evseg bench --sequences`) per object 46.14 -> 46.16 %, switches
+    /// 1.3 -> 1.2. Without the `min_hits` condition a handover in the second slice of three-objects
+    /// 13, between tracks of one or two matches, set it on another course (1 -> 4 switches).
     pub split_yields_to_tracks: bool,
     /// See `split_yields_to_tracks`: the group the track keeps when it hands another group
     /// over must hold at least this fraction of the events of the track's largest group, in

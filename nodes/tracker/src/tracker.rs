@@ -513,12 +513,12 @@ impl Tracker {
     /// Splits a track whose segments form groups lying apart (see
     /// `TrackerParams::split_gap_px`): groups touching another established track's segments
     /// are handed to that track as fragments (`TrackerParams::split_yields_to_tracks`, when a
-    /// group of the size to keep is left); of the rest, the group with the most events keeps the track (if that
-    /// is not the group of the segment that corrected it, the track is restored from `before`,
-    /// its state as predicted, and corrected with that group's largest segment instead); every
-    /// other group with at least `split_min_events` events opens a new track on its largest
-    /// segment, its other segments becoming that track's fragments. Returns the number of
-    /// tracks opened (appended to `self.tracks`).
+    /// group of the size to keep is left); of the rest, the group with the most events keeps
+    /// the track (if that is not the group of the segment that corrected it, the track is
+    /// restored from `before`, its state as predicted, and corrected with that group's largest
+    /// segment instead); every other group with at least `split_min_events` events opens a new
+    /// track on its largest segment, its other segments becoming that track's fragments.
+    /// Returns the number of tracks opened (appended to `self.tracks`).
     #[allow(clippy::too_many_arguments)]
     fn split_apart(
         &mut self,
@@ -656,8 +656,9 @@ impl Tracker {
     }
 
     /// The established track (confirmed, opened before this slice and matched in at least as
-    /// many slices as track `ti`, other than `ti`) one of whose segments in this slice has a box touching or overlapping the box of a segment of
-    /// `group` (indices into `segments`); of several, the one with the most such segments.
+    /// many slices as track `ti`, other than `ti`) one of whose segments in this slice has a
+    /// box touching or overlapping the box of a segment of `group` (indices into `segments`);
+    /// of several, the one with the most such segments.
     fn touching_track(
         &self,
         segments: &[Segment],
@@ -665,12 +666,11 @@ impl Tracker {
         ti: usize,
         group: &[usize],
     ) -> Option<usize> {
+        let min_hits = self.tracks[ti].hits.max(self.params.min_hits);
+        let established = |tr: &TrackState| tr.created_slice < self.slices && tr.hits >= min_hits;
         let mut touches: HashMap<usize, usize> = HashMap::new();
         for (k, m) in track_of_segment.iter().enumerate() {
             let Some(tj) = *m else { continue };
-            let established = |tr: &TrackState| {
-                tr.created_slice < self.slices && tr.hits >= self.tracks[ti].hits.max(self.params.min_hits)
-            };
             if tj == ti || !self.tracks.get(tj).is_some_and(established) {
                 continue;
             }
