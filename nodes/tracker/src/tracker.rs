@@ -566,8 +566,9 @@ impl Tracker {
             let largest = |g: &[usize]| g.iter().copied().max_by_key(|&k| counts[k]);
             let first_group = groups.iter().position(|g| g.contains(&first)).unwrap_or(0);
             // Groups touching another established track's segments of this slice belong to
-            // that track (`split_yields_to_tracks`), if a group of the split-off size is left.
-            let owner: Vec<Option<usize>> = if yield_to_tracks {
+            // that track (`split_yields_to_tracks`), if a group of the split-off size is left (one
+            // group alone has nothing to keep instead).
+            let owner: Vec<Option<usize>> = if yield_to_tracks && groups.len() > 1 {
                 groups
                     .iter()
                     .map(|g| self.touching_track(segments, track_of_segment, ti, g))
