@@ -390,73 +390,37 @@ impl PlanarSegmenter {
         if params.cell_px == 0 {
             return bad("cell_px", "0".into(), "must be >= 1");
         }
-        if !(params.residual_length_k.is_finite() && params.residual_length_k >= 0.0) {
-            return bad(
-                "residual_length_k",
-                params.residual_length_k.to_string(),
-                "must be finite and >= 0",
-            );
+        let q = params.previous;
+        let non_negative = [
+            ("residual_length_k", params.residual_length_k),
+            ("sigma_px", params.sigma_px),
+            ("sigma_reference_focal_px", params.sigma_reference_focal_px),
+            ("fit_memory", params.fit_memory),
+            ("fit_memory_gap_s", params.fit_memory_gap_s),
+            ("min_center_gap", params.min_center_gap),
+            ("ridge", params.fit.ridge),
+        ];
+        for (name, v) in non_negative {
+            if !(v.is_finite() && v >= 0.0) {
+                return bad(name, v.to_string(), "must be finite and >= 0");
+            }
         }
-        if !(params.sigma_px.is_finite() && params.sigma_px >= 0.0) {
-            return bad("sigma_px", params.sigma_px.to_string(), "must be finite and >= 0");
-        }
-        if !(params.sigma_reference_focal_px.is_finite() && params.sigma_reference_focal_px >= 0.0) {
-            return bad(
-                "sigma_reference_focal_px",
-                params.sigma_reference_focal_px.to_string(),
-                "must be finite and >= 0",
-            );
-        }
-        if !(params.fit_memory.is_finite() && params.fit_memory >= 0.0) {
-            return bad(
-                "fit_memory",
-                params.fit_memory.to_string(),
-                "must be finite and >= 0",
-            );
-        }
-        if !(params.fit_memory_gap_s.is_finite() && params.fit_memory_gap_s >= 0.0) {
-            return bad(
-                "fit_memory_gap_s",
-                params.fit_memory_gap_s.to_string(),
-                "must be finite and >= 0",
-            );
-        }
-        if !(params.start_centre_weight.is_finite() && (0.0..=1.0).contains(&params.start_centre_weight)) {
-            return bad(
-                "start_centre_weight",
-                params.start_centre_weight.to_string(),
-                "must be in [0, 1]",
-            );
-        }
-        if !(params.split_power.is_finite() && (0.0..=1.0).contains(&params.split_power)) {
-            return bad("split_power", params.split_power.to_string(), "must be in [0, 1]");
-        }
-        if !(params.min_center_gap.is_finite() && params.min_center_gap >= 0.0) {
-            return bad(
-                "min_center_gap",
-                params.min_center_gap.to_string(),
-                "must be finite and >= 0",
-            );
-        }
-        if !(params.fit.ridge.is_finite() && params.fit.ridge >= 0.0) {
-            return bad("ridge", params.fit.ridge.to_string(), "must be finite and >= 0");
+        let unit_interval = [
+            ("start_centre_weight", params.start_centre_weight),
+            ("split_power", params.split_power),
+            ("previous_weight", q.weight),
+            ("previous_min_free_share", q.min_free_share),
+        ];
+        for (name, v) in unit_interval {
+            if !(v.is_finite() && (0.0..=1.0).contains(&v)) {
+                return bad(name, v.to_string(), "must be in [0, 1]");
+            }
         }
         match params.fit.robust {
             Robust::Huber { k: v } | Robust::Tukey { c: v } if !(v.is_finite() && v > 0.0) => {
                 return bad("robust threshold", v.to_string(), "must be finite and > 0");
             }
             _ => {}
-        }
-        let q = params.previous;
-        if !(q.weight.is_finite() && (0.0..=1.0).contains(&q.weight)) {
-            return bad("previous_weight", q.weight.to_string(), "must be in [0, 1]");
-        }
-        if !(q.min_free_share.is_finite() && (0.0..=1.0).contains(&q.min_free_share)) {
-            return bad(
-                "previous_min_free_share",
-                q.min_free_share.to_string(),
-                "must be in [0, 1]",
-            );
         }
         if q.cell_px == 0 {
             return bad("previous_cell_px", "0".into(), "must be >= 1");
