@@ -12,6 +12,9 @@ use crate::params::MAX_RADIUS;
 /// Most points a neighbourhood can hold: the largest window, `(2 MAX_RADIUS + 1)^2`.
 pub const MAX_POINTS: usize = (2 * MAX_RADIUS + 1) * (2 * MAX_RADIUS + 1);
 
+// `fit_plane` keeps its inliers as the bits of a `u128`.
+const _: () = assert!(MAX_POINTS <= 128);
+
 /// Points of one fit, fixed size so that no event allocates.
 ///
 /// Offsets are whole pixels, so the sums of the normal equations that involve only offsets
@@ -336,8 +339,8 @@ pub fn fit_plane(
         sxt,
         syt,
     };
-    let mut used = [true; MAX_POINTS];
-    let used = &mut used[..n];
+    // Bit `i` set: point `i` is kept (an inlier of the current plane).
+    let mut used: u128 = if n == 128 { u128::MAX } else { (1u128 << n) - 1 };
     // Time residuals of the points against `sol`.
     let mut res = [0.0; MAX_POINTS];
     let res = &mut res[..n];
@@ -352,24 +355,33 @@ pub fn fit_plane(
     let mut fresh = false;
     for _ in 0..max_refits {
         residuals(&sol, res);
-        let mut changed = false;
-        for i in 0..n {
-            let inlier = res[i].abs() <= outlier_s;
-            if inlier != used[i] {
-                used[i] = inlier;
-                changed = true;
-                let sign = if inlier { 1.0 } else { -1.0 };
-                sums.add(dx[i], dy[i], dt[i], sign);
-                if inlier {
-                    kept += 1;
-                } else {
-                    kept -= 1;
-                }
+        // The inliers as bits, without a branch per point; then only the points that changed
+        // side are visited, in ascending order, as a point-by-point pass would add them.
+        let mut inliers: u128 = 0;
+        for (c, chunk) in res.chunks(64).enumerate() {
+            let mut bits: u64 = 0;
+            for (i, r) in chunk.iter().enumerate() {
+                bits |= u64::from(r.abs() <= outlier_s) << i;
             }
+            inliers |= u128::from(bits) << (64 * c);
         }
-        if !changed {
+        let mut changed = inliers ^ used;
+        if changed == 0 {
             fresh = true;
             break;
+        }
+        used = inliers;
+        while changed != 0 {
+            let i = changed.trailing_zeros() as usize;
+            changed &= changed - 1;
+            let inlier = (inliers >> i) & 1 == 1;
+            let sign = if inlier { 1.0 } else { -1.0 };
+            sums.add(dx[i], dy[i], dt[i], sign);
+            if inlier {
+                kept += 1;
+            } else {
+                kept -= 1;
+            }
         }
         if kept < min_points {
             return None;
@@ -380,9 +392,12 @@ pub fn fit_plane(
         residuals(&sol, res);
     }
     let mut ss = 0.0;
-    for i in 0..n {
-        if used[i] {
-            ss += res[i] * res[i];
+    for (c, chunk) in res.chunks(64).enumerate() {
+        let bits = (used >> (64 * c)) as u64;
+        for (i, r) in chunk.iter().enumerate() {
+            // Adding +0 for a rejected point leaves the sum as it is (it starts at +0).
+            let kept_r = if (bits >> i) & 1 == 1 { *r } else { 0.0 };
+            ss += kept_r * kept_r;
         }
     }
     Some(plane_fit(sol, &sums, kept, n, ss))
