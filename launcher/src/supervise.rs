@@ -15,6 +15,19 @@ use std::time::{Duration, Instant};
 /// How long nodes get to stop after SIGTERM before they are killed.
 pub const STOP_GRACE: Duration = Duration::from_secs(3);
 
+/// Environment variable through which Zenoh reads the sizes of its runtime's thread pools (RON).
+pub const ZENOH_RUNTIME_VAR: &str = "ZENOH_RUNTIME";
+
+/// The thread pools of Zenoh's runtime in every node the launcher starts, when its own
+/// environment has no [`ZENOH_RUNTIME_VAR`] (set it to choose others; nodes started by hand
+/// on another machine keep Zenoh's defaults unless it is set there). One receive worker
+/// instead of Zenoh 1.10's two: a node receives a few messages per slice, and with nine
+/// processes on two cores the second worker only adds context switches. `evseg bench
+/// pipeline`, 16 interleaved pairs of single runs on the 2-core AMD EPYC VM (2026-12-06):
+/// 0.965 -> 0.998 M events/s in the mean (better in 11 pairs, the same in 2), CPU time of a run
+/// 6.55 / 6.70 / 6.34 -> 6.48 / 6.26 / 5.83 s (user + system, three of the pairs).
+pub const NODE_ZENOH_RUNTIME: &str = "(rx: (worker_threads: 1))";
+
 /// A running (or finished) node process.
 pub struct NodeProcess {
     /// Node id.
@@ -89,6 +102,9 @@ impl NodeProcess {
             .stdin(Stdio::null())
             .stdout(out)
             .stderr(err);
+        if std::env::var_os(ZENOH_RUNTIME_VAR).is_none() {
+            cmd.env(ZENOH_RUNTIME_VAR, NODE_ZENOH_RUNTIME);
+        }
         // SAFETY: only async-signal-safe calls between fork and exec.
         unsafe {
             cmd.pre_exec(move || {
@@ -270,5 +286,34 @@ mod tail_tests {
         assert!(!is_backtrace_frame("12: not indented"));
         assert!(is_backtrace_frame("   4: core::panicking::panic_fmt"));
         assert!(is_backtrace_frame("             at /rustc/x/panicking.rs:80:14"));
+    }
+}
+
+#[cfg(test)]
+mod env_tests {
+    use super::*;
+    use std::os::unix::fs::PermissionsExt;
+
+    #[test]
+    fn nodes_get_the_launchers_zenoh_runtime_or_its_default() {
+        let dir = tempfile::tempdir().unwrap();
+        let script = dir.path().join("print-runtime");
+        std::fs::write(&script, "#!/bin/sh\necho \"runtime=[$ZENOH_RUNTIME]\"\n").unwrap();
+        std::fs::set_permissions(&script, std::fs::Permissions::from_mode(0o755)).unwrap();
+        let (config, log) = (dir.path().join("node.yaml"), dir.path().join("node.log"));
+        let mut fleet = Fleet(vec![
+            NodeProcess::spawn("printer", &script, &config, &log, "test".into()).unwrap(),
+        ]);
+        let start = Instant::now();
+        while fleet.0[0].poll().is_none() {
+            assert!(
+                start.elapsed() < Duration::from_secs(10),
+                "the script did not end"
+            );
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        let expected = std::env::var(ZENOH_RUNTIME_VAR).unwrap_or_else(|_| NODE_ZENOH_RUNTIME.to_string());
+        let printed = std::fs::read_to_string(&log).unwrap();
+        assert_eq!(printed.trim(), format!("runtime=[{expected}]"));
     }
 }
