@@ -24,7 +24,7 @@ pub const ZENOH_RUNTIME_VAR: &str = "ZENOH_RUNTIME";
 /// instead of Zenoh 1.10's two: a node receives a few messages per slice, and with nine
 /// processes on two cores the second worker only adds context switches. `evseg bench
 /// pipeline`, 16 interleaved pairs of single runs on the 2-core AMD EPYC VM (2026-12-06):
-/// 0.965 -> 0.998 M events/s in the mean (better in 11 pairs, the same in 2), CPU time of a run
+/// 0.966 -> 1.006 M events/s in the mean (better in 12 pairs, the same in 2), CPU time of a run
 /// 6.55 / 6.70 / 6.34 -> 6.48 / 6.26 / 5.83 s (user + system, three of the pairs).
 pub const NODE_ZENOH_RUNTIME: &str = "(rx: (worker_threads: 1))";
 
