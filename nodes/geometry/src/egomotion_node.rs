@@ -81,6 +81,7 @@ pub fn egomotion_from_config(cfg: &NodeConfig) -> Result<EgomotionParams, Runtim
         magnitude_weighting: cfg.param("egomotion_magnitude_weighting")?,
         clear_px: cfg.param("egomotion_clear_px")?,
         max_samples: cfg.param("egomotion_max_samples")?,
+        ..EgomotionParams::default()
     })
 }
 

@@ -39,10 +39,13 @@ pub use cell_grid::CellGrid;
 pub use density::density_weights;
 pub use direction::{FlowDirection, flow_direction};
 pub use egomotion::{
-    EgomotionParams, clear_of_foreground, estimate_background_translation, estimate_translation,
+    EgomotionParams, clear_of_foreground, estimate_background_translation,
+    estimate_background_translation_with_memory, estimate_translation, estimate_translation_with_memory,
 };
 pub use motion::{a_matrix, b_matrix, c_matrix, planar_flow, rotational_flow, translational_flow};
-pub use refine::{grid_regions, refine_direction, refine_direction_robust};
+pub use refine::{
+    DepthMemory, grid_regions, refine_direction, refine_direction_robust, refine_direction_with_memory,
+};
 pub use rotation::RotationRate;
 pub use samples::{FlowSample, flow_samples, median_length};
 pub use svm::{SvmDirection, SvmParams, translation_direction};

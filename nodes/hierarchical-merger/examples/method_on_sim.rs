@@ -149,6 +149,7 @@ fn apply(
                 bg.egomotion.huber_k = f;
                 hier.egomotion.huber_k = f;
             }
+            "depth_memory" => hier.egomotion.depth_memory = f,
             "grid_cols" => {
                 bg.egomotion.grid_cols = f as usize;
                 hier.egomotion.grid_cols = f as usize;

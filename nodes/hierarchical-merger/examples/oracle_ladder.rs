@@ -297,6 +297,16 @@ fn main() -> anyhow::Result<()> {
         let (mut ego_est, mut ego_true) = (Vec::new(), Vec::new());
         let (mut ego_scaled, mut scales) = (Vec::new(), Vec::new());
         let mut variants: [Vec<f64>; 7] = Default::default();
+        // R7: the direction with the depth known (per event / per 80 px cell, unweighted / Huber).
+        let mut depth_known: [Vec<f64>; 4] = Default::default();
+        // R8: the egomotion estimate with the previous slices' cell depths as a prior (weights
+        // in DEPTH_MEM, comma-separated; default 0.25,1,4).
+        let mut mems: Vec<(f64, evseg_geometry::DepthMemory, Vec<f64>)> = std::env::var("DEPTH_MEM")
+            .unwrap_or_else(|_| "0.25,1,4".into())
+            .split(',')
+            .filter_map(|w| w.parse().ok())
+            .map(|w| (w, evseg_geometry::DepthMemory::default(), Vec::new()))
+            .collect();
         let mut r1i = Iou::default();
         let (mut r3u, mut r3t, mut r3e) = (Iou::default(), Iou::default(), Iou::default());
         let (mut r4t, mut r4e) = (Iou::default(), Iou::default());
@@ -488,6 +498,106 @@ fn main() -> anyhow::Result<()> {
                             if let Some(d) = rr(&regions_w, svm_w.direction, it, m, Some(1.5)) {
                                 variants[6].push(err(d));
                             }
+                        }
+                    }
+                }
+                // R7: the translation fitted with each sample's inverse depth known from the truth
+                // (`rho = d . A t / |A t|^2`, `d` the true derotated flow), linear in `t`:
+                // `n_derot ~ rho n0^T A(x) t`; per event, and per 80 px cell (the median rho of
+                // the cell's samples, as a depth prior per cell would give), plain least squares
+                // and 5 rounds of Huber weights (k 1.5, as the egomotion's refinement).
+                {
+                    let p = evseg_geometry::EgomotionParams::default();
+                    let mut rows: Vec<([f64; 3], f64, f64, usize)> = Vec::new();
+                    for sm in bg.iter().filter(|sm| sm.confidence > p.min_confidence) {
+                        let (u, v) = (s.events.x[sm.index], s.events.y[sm.index]);
+                        let j = jac[usize::from(v) * w + usize::from(u)];
+                        let (fu, fv) = (
+                            f64::from(truth.flow_x[sm.index]),
+                            f64::from(truth.flow_y[sm.index]),
+                        );
+                        let uf = [j[0] * fu + j[1] * fv, j[2] * fu + j[3] * fv];
+                        let rot = mul2x3(&b_matrix(sm.x, sm.y), w_true);
+                        let d = [uf[0] - rot[0], uf[1] - rot[1]];
+                        let tr = mul2x3(&a_matrix(sm.x, sm.y), t_true);
+                        let tt = dot2(tr, tr);
+                        if tt <= 0.0 {
+                            continue;
+                        }
+                        let rho = (dot2(d, tr) / tt).max(0.0);
+                        let a = a_matrix(sm.x, sm.y);
+                        let g = [
+                            sm.n0[0] * a[0][0] + sm.n0[1] * a[1][0],
+                            sm.n0[0] * a[0][1] + sm.n0[1] * a[1][1],
+                            sm.n0[0] * a[0][2] + sm.n0[1] * a[1][2],
+                        ];
+                        let cell = usize::from(v) / 80 * 64 + usize::from(u) / 80;
+                        rows.push((g, sm.n_derot, rho, cell));
+                    }
+                    let mut cell_rho: std::collections::HashMap<usize, Vec<f64>> = Default::default();
+                    for r in &rows {
+                        cell_rho.entry(r.3).or_default().push(r.2);
+                    }
+                    let cell_med: std::collections::HashMap<usize, f64> = cell_rho
+                        .into_iter()
+                        .map(|(c, mut v)| (c, median(&mut v)))
+                        .collect();
+                    let err = |d: [f64; 3]| {
+                        let c = (d[0] * t_true[0] + d[1] * t_true[1] + d[2] * t_true[2])
+                            / (d[0].hypot(d[1]).hypot(d[2]) * t_true[0].hypot(t_true[1]).hypot(t_true[2]));
+                        c.clamp(-1.0, 1.0).acos().to_degrees()
+                    };
+                    for (mode, per_cell) in [(0usize, false), (2, true)] {
+                        let rho_of =
+                            |r: &([f64; 3], f64, f64, usize)| if per_cell { cell_med[&r.3] } else { r.2 };
+                        let mut wts = vec![1.0; rows.len()];
+                        for round in 0..6 {
+                            let mut m = nalgebra::Matrix3::<f64>::zeros();
+                            let mut b = nalgebra::Vector3::<f64>::zeros();
+                            for (r, &wt) in rows.iter().zip(&wts) {
+                                let g = nalgebra::Vector3::from(r.0) * rho_of(r);
+                                m += wt * g * g.transpose();
+                                b += wt * r.1 * g;
+                            }
+                            let Some(t) = m.try_inverse().map(|mi| mi * b) else {
+                                break;
+                            };
+                            if round == 0 {
+                                depth_known[mode].push(err([t[0], t[1], t[2]]));
+                            }
+                            let res: Vec<f64> = rows
+                                .iter()
+                                .map(|r| (r.1 - rho_of(r) * nalgebra::Vector3::from(r.0).dot(&t)).abs())
+                                .collect();
+                            let mut sorted = res.clone();
+                            let scale = (1.4826 * median(&mut sorted)).max(f64::MIN_POSITIVE);
+                            if round == 5 {
+                                depth_known[mode + 1].push(err([t[0], t[1], t[2]]));
+                                break;
+                            }
+                            for (wt, e) in wts.iter_mut().zip(&res) {
+                                *wt = if *e > 1.5 * scale { 1.5 * scale / e } else { 1.0 };
+                            }
+                        }
+                    }
+                }
+                {
+                    let refs: Vec<&evseg_geometry::FlowSample> = bg.iter().collect();
+                    let p = evseg_geometry::EgomotionParams::default();
+                    for (wt, mem, out) in mems.iter_mut() {
+                        if let Some(d) = evseg_geometry::estimate_translation_with_memory(
+                            &refs,
+                            &s.events.x,
+                            &s.events.y,
+                            camera.width,
+                            camera.height,
+                            &p,
+                            Some((mem, *wt)),
+                        ) {
+                            let c = (d[0] * t_true[0] + d[1] * t_true[1] + d[2] * t_true[2])
+                                / (d[0].hypot(d[1]).hypot(d[2])
+                                    * t_true[0].hypot(t_true[1]).hypot(t_true[2]));
+                            out.push(c.clamp(-1.0, 1.0).acos().to_degrees());
                         }
                     }
                 }
@@ -793,6 +903,19 @@ fn main() -> anyhow::Result<()> {
             median(&mut ego_scaled),
             ego_est.len(),
             ego_true.len()
+        );
+        for (wt, _, out) in mems.iter_mut() {
+            println!(
+                "  R8 depth memory weight {wt}: median direction error {:.1} deg",
+                median(out)
+            );
+        }
+        println!(
+            "  R7 depth known (est normal flow, true background): per event LS {:.1} deg, Huber {:.1}; per 80 px cell LS {:.1}, Huber {:.1}",
+            median(&mut depth_known[0]),
+            median(&mut depth_known[1]),
+            median(&mut depth_known[2]),
+            median(&mut depth_known[3])
         );
         println!(
             "  R6 est flow variants: SVM alone {:.1} deg, Huber refine from SVM {:.1}, refine from the true t {:.1}, Huber from the true t {:.1}; weights 1/(n^2+n_med^2): Huber refine from SVM {:.1}, weighted SVM {:.1}, Huber from weighted SVM {:.1}",

@@ -29,7 +29,8 @@ pub mod fill;
 pub mod params;
 
 use evseg_geometry::{
-    FlowSample, RotationRate, TableCache, TranslationFit, estimate_background_translation, flow_samples,
+    DepthMemory, FlowSample, RotationRate, TableCache, TranslationFit,
+    estimate_background_translation_with_memory, flow_samples,
 };
 use evseg_schemas::align::AlignError;
 use evseg_schemas::{CameraInfo, CoarseSegmentation, Egomotion, Events, NormalFlow, Segment, Segmentation};
@@ -181,6 +182,8 @@ pub struct MergeStep {
 pub struct HierarchicalMerger {
     params: HierParams,
     table: TableCache,
+    /// The final egomotion's cell depths of the previous slices (`egomotion.depth_memory`).
+    depth_memory: DepthMemory,
 }
 
 impl HierarchicalMerger {
@@ -190,6 +193,7 @@ impl HierarchicalMerger {
         Ok(Self {
             params,
             table: TableCache::default(),
+            depth_memory: DepthMemory::default(),
         })
     }
 
@@ -406,12 +410,13 @@ impl HierarchicalMerger {
 
         // 5. Final egomotion on the final background.
         let bg_samples: Vec<&FlowSample> = samples.iter().filter(|s| label[s.index] == 0).collect();
-        let estimate = estimate_background_translation(
+        let estimate = estimate_background_translation_with_memory(
             &bg_samples,
             events,
             (camera.width, camera.height),
             &p.egomotion,
             |i| label[i] != 0,
+            Some(&mut self.depth_memory),
         );
         let egomotion = match estimate {
             Some(direction) => Egomotion {

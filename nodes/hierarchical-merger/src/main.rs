@@ -3,9 +3,9 @@
 
 use std::process::ExitCode;
 
-use evseg_geometry::RotationRate;
 use evseg_geometry::egomotion_node::{describe_egomotion, egomotion_from_config};
 use evseg_geometry::rotation::{SLOPE_DEFAULT, SLOPE_PARAM, SLOPE_PARAM_DOC};
+use evseg_geometry::{EgomotionParams, RotationRate};
 use evseg_hierarchical_merger::{HierParams, HierarchicalMerger};
 use evseg_runtime::describe::Describe;
 use evseg_runtime::{BoxError, Inputs, NodeConfig, Outputs, Stage, run_stage};
@@ -106,6 +106,11 @@ fn main() -> ExitCode {
         "fill_reach",
         d.fill_reach,
         "cells the fill looks out to where the 3x3 cells around an event without flow hold no labelled event",
+    )
+    .param(
+        "depth_memory",
+        d.egomotion.depth_memory,
+        "weight of the previous slices' cell depths as a prior in the final egomotion's depth refinement (0 = off)",
     );
     let description = describe_egomotion(description, &d.egomotion).build();
     run_stage(description, |cfg: &NodeConfig| {
@@ -122,7 +127,10 @@ fn main() -> ExitCode {
             min_segment_events: cfg.param("min_segment_events")?,
             fill_cell_px: cfg.param("fill_cell_px")?,
             fill_reach: cfg.param("fill_reach")?,
-            egomotion: egomotion_from_config(cfg)?,
+            egomotion: EgomotionParams {
+                depth_memory: cfg.param("depth_memory")?,
+                ..egomotion_from_config(cfg)?
+            },
         };
         Ok(Node {
             merger: HierarchicalMerger::new(params)?,
