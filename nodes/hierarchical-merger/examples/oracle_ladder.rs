@@ -30,7 +30,13 @@
 //!   (sweep), with the true and with the estimated normal flow;
 //! - R6: the egomotion estimate (`evseg_geometry::estimate_translation`, default settings) on
 //!   the true background events only: its direction error with the estimated normal flow and
-//!   with the true normal flow along the estimated n0.
+//!   with the true normal flow along the estimated n0;
+//! - R7: the translation fitted with the inverse depth known (from the true flow), linear in
+//!   `t`, on the estimated normal flow of the true background: per event and per 80 px cell,
+//!   least squares and Huber (how much the refinement's free depth per cell costs);
+//! - R8: the egomotion estimate of R6 with the previous slices' cell depths as a prior
+//!   (`evseg_geometry::estimate_translation_with_memory`), at the weights of DEPTH_MEM
+//!   (comma-separated, default 0.25,1,4).
 //!
 //! The IoU is per event over the events with a valid estimated flow (coverage printed), mean over
 //! the slices with a moving object.
