@@ -125,7 +125,8 @@ pub fn refine_direction_with_memory(
             let (mut num, mut den, mut info) = (0.0, 0.0, 0.0);
             for (&(rho, d), &k) in own.iter().zip(&ids) {
                 info += d;
-                if prior[k].is_finite() {
+                // A remembered depth of 0 (a cell without signal) is no prior.
+                if prior[k] > 0.0 {
                     num += d * rho * prior[k];
                     den += d * prior[k] * prior[k];
                 }
@@ -137,7 +138,7 @@ pub fn refine_direction_with_memory(
             own.iter()
                 .zip(&ids)
                 .map(|(&(rho, d), &k)| {
-                    if prior[k].is_finite() && d + lam > 0.0 {
+                    if prior[k] > 0.0 && d + lam > 0.0 {
                         ((d * rho + lam * scale_fit * prior[k]) / (d + lam)).max(0.0)
                     } else {
                         rho
@@ -181,8 +182,10 @@ pub fn refine_direction_with_memory(
         for (k, r) in mem.rho.iter_mut().enumerate() {
             *r = if fitted[k].is_finite() && fitted[k] > 0.0 {
                 fitted[k]
-            } else {
+            } else if scale_fit.is_finite() && scale_fit > 0.0 {
                 *r * scale_fit
+            } else {
+                *r
             };
         }
     }
