@@ -53,6 +53,9 @@ pub struct DepthMemory {
     /// Inverse depth per region, in the units of the last slice's unit translation (1/s:
     /// speed over depth); NaN where no slice has fitted the region yet.
     pub rho: Vec<f64>,
+    /// Slices whose estimate has updated the memory since it started (see
+    /// [`crate::EgomotionParams::depth_memory_ramp_slices`]).
+    pub slices: u32,
 }
 
 /// [`refine_direction_robust`] with a prior on each region's inverse depth from `memory`
@@ -72,6 +75,7 @@ pub fn refine_direction_with_memory(
         && mem.rho.len() != regions.len()
     {
         mem.rho = vec![f64::NAN; regions.len()];
+        mem.slices = 0;
     }
     let prior_weight = memory.as_ref().map_or(0.0, |(_, w)| *w);
     let prior: Vec<f64> = memory

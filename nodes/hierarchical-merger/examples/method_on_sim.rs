@@ -150,6 +150,7 @@ fn apply(
                 hier.egomotion.huber_k = f;
             }
             "depth_memory" => hier.egomotion.depth_memory = f,
+            "depth_memory_ramp" => hier.egomotion.depth_memory_ramp_slices = f as u32,
             "grid_cols" => {
                 bg.egomotion.grid_cols = f as usize;
                 hier.egomotion.grid_cols = f as usize;

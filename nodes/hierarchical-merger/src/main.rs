@@ -111,6 +111,11 @@ fn main() -> ExitCode {
         "depth_memory",
         d.egomotion.depth_memory,
         "weight of the previous slices' cell depths as a prior in the final egomotion's depth refinement (0 = off)",
+    )
+    .param(
+        "depth_memory_ramp_slices",
+        d.egomotion.depth_memory_ramp_slices,
+        "slices over which depth_memory's weight grows to its full value from the start (0 = at once)",
     );
     let description = describe_egomotion(description, &d.egomotion).build();
     run_stage(description, |cfg: &NodeConfig| {
@@ -129,6 +134,7 @@ fn main() -> ExitCode {
             fill_reach: cfg.param("fill_reach")?,
             egomotion: EgomotionParams {
                 depth_memory: cfg.param("depth_memory")?,
+                depth_memory_ramp_slices: cfg.param("depth_memory_ramp_slices")?,
                 ..egomotion_from_config(cfg)?
             },
         };
