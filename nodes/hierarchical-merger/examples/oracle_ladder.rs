@@ -67,6 +67,13 @@ fn mul2x3(m: &[[f64; 3]; 2], v: [f64; 3]) -> [f64; 2] {
     ]
 }
 
+/// Angle between an estimated direction `d` and the true translation `t`, degrees.
+fn direction_error_deg(d: [f64; 3], t: [f64; 3]) -> f64 {
+    let c = (d[0] * t[0] + d[1] * t[1] + d[2] * t[2])
+        / (d[0].hypot(d[1]).hypot(d[2]) * t[0].hypot(t[1]).hypot(t[2]));
+    c.clamp(-1.0, 1.0).acos().to_degrees()
+}
+
 fn dot2(a: [f64; 2], b: [f64; 2]) -> f64 {
     a[0] * b[0] + a[1] * b[1]
 }
@@ -376,6 +383,12 @@ fn main() -> anyhow::Result<()> {
             let clusters = overseg.segment(&s.camera, &s.events, &flow)?;
             let k = usize::from(clusters.count);
             let has_object = truth.event_object.iter().any(|&o| o != 0);
+            // The true optical flow of event `i`, normalized units/s.
+            let true_flow = |i: usize| {
+                let j = jac[usize::from(s.events.y[i]) * w + usize::from(s.events.x[i])];
+                let (fu, fv) = (f64::from(truth.flow_x[i]), f64::from(truth.flow_y[i]));
+                [j[0] * fu + j[1] * fv, j[2] * fu + j[3] * fv]
+            };
             // R6: the egomotion estimate on the true background only (slicer omega), with the
             // estimated normal flow and with the true normal flow along the estimated n0.
             {
@@ -409,13 +422,7 @@ fn main() -> anyhow::Result<()> {
                 let bg_true: Vec<evseg_geometry::FlowSample> = bg
                     .iter()
                     .map(|sm| {
-                        let (u, v) = (s.events.x[sm.index], s.events.y[sm.index]);
-                        let j = jac[usize::from(v) * w + usize::from(u)];
-                        let (fu, fv) = (
-                            f64::from(truth.flow_x[sm.index]),
-                            f64::from(truth.flow_y[sm.index]),
-                        );
-                        let uf = [j[0] * fu + j[1] * fv, j[2] * fu + j[3] * fv];
+                        let uf = true_flow(sm.index);
                         let n_t = dot2(uf, sm.n0);
                         let mut out = *sm;
                         out.n_derot = sm.n_derot + (n_t - sm.n);
@@ -452,11 +459,7 @@ fn main() -> anyhow::Result<()> {
                         .filter(|sm| sm.confidence > p.min_confidence)
                         .map(|sm| (sm, 1.0))
                         .collect();
-                    let err = |d: [f64; 3]| {
-                        let c = (d[0] * t_true[0] + d[1] * t_true[1] + d[2] * t_true[2])
-                            / (d[0].hypot(d[1]).hypot(d[2]) * t_true[0].hypot(t_true[1]).hypot(t_true[2]));
-                        c.clamp(-1.0, 1.0).acos().to_degrees()
-                    };
+                    let err = |d: [f64; 3]| direction_error_deg(d, t_true);
                     if let Some(svm) = evseg_geometry::translation_direction(conf.iter().copied(), &p.svm) {
                         let regions = evseg_geometry::grid_regions(
                             conf.iter().copied(),
@@ -516,27 +519,22 @@ fn main() -> anyhow::Result<()> {
                     let p = evseg_geometry::EgomotionParams::default();
                     let mut rows: Vec<([f64; 3], f64, f64, usize)> = Vec::new();
                     for sm in bg.iter().filter(|sm| sm.confidence > p.min_confidence) {
-                        let (u, v) = (s.events.x[sm.index], s.events.y[sm.index]);
-                        let j = jac[usize::from(v) * w + usize::from(u)];
-                        let (fu, fv) = (
-                            f64::from(truth.flow_x[sm.index]),
-                            f64::from(truth.flow_y[sm.index]),
-                        );
-                        let uf = [j[0] * fu + j[1] * fv, j[2] * fu + j[3] * fv];
+                        let uf = true_flow(sm.index);
                         let rot = mul2x3(&b_matrix(sm.x, sm.y), w_true);
                         let d = [uf[0] - rot[0], uf[1] - rot[1]];
-                        let tr = mul2x3(&a_matrix(sm.x, sm.y), t_true);
+                        let a = a_matrix(sm.x, sm.y);
+                        let tr = mul2x3(&a, t_true);
                         let tt = dot2(tr, tr);
                         if tt <= 0.0 {
                             continue;
                         }
                         let rho = (dot2(d, tr) / tt).max(0.0);
-                        let a = a_matrix(sm.x, sm.y);
                         let g = [
                             sm.n0[0] * a[0][0] + sm.n0[1] * a[1][0],
                             sm.n0[0] * a[0][1] + sm.n0[1] * a[1][1],
                             sm.n0[0] * a[0][2] + sm.n0[1] * a[1][2],
                         ];
+                        let (u, v) = (s.events.x[sm.index], s.events.y[sm.index]);
                         let cell = usize::from(v) / 80 * 64 + usize::from(u) / 80;
                         rows.push((g, sm.n_derot, rho, cell));
                     }
@@ -548,11 +546,7 @@ fn main() -> anyhow::Result<()> {
                         .into_iter()
                         .map(|(c, mut v)| (c, median(&mut v)))
                         .collect();
-                    let err = |d: [f64; 3]| {
-                        let c = (d[0] * t_true[0] + d[1] * t_true[1] + d[2] * t_true[2])
-                            / (d[0].hypot(d[1]).hypot(d[2]) * t_true[0].hypot(t_true[1]).hypot(t_true[2]));
-                        c.clamp(-1.0, 1.0).acos().to_degrees()
-                    };
+                    let err = |d: [f64; 3]| direction_error_deg(d, t_true);
                     for (mode, per_cell) in [(0usize, false), (2, true)] {
                         let rho_of =
                             |r: &([f64; 3], f64, f64, usize)| if per_cell { cell_med[&r.3] } else { r.2 };
@@ -600,10 +594,7 @@ fn main() -> anyhow::Result<()> {
                             &p,
                             Some((mem, *wt)),
                         ) {
-                            let c = (d[0] * t_true[0] + d[1] * t_true[1] + d[2] * t_true[2])
-                                / (d[0].hypot(d[1]).hypot(d[2])
-                                    * t_true[0].hypot(t_true[1]).hypot(t_true[2]));
-                            out.push(c.clamp(-1.0, 1.0).acos().to_degrees());
+                            out.push(direction_error_deg(d, t_true));
                         }
                     }
                 }
@@ -621,9 +612,7 @@ fn main() -> anyhow::Result<()> {
                         camera.height,
                         &p,
                     ) {
-                        let c = (d[0] * t_true[0] + d[1] * t_true[1] + d[2] * t_true[2])
-                            / (d[0].hypot(d[1]).hypot(d[2]) * t_true[0].hypot(t_true[1]).hypot(t_true[2]));
-                        out.push(c.clamp(-1.0, 1.0).acos().to_degrees());
+                        out.push(direction_error_deg(d, t_true));
                     }
                 }
             }
@@ -637,9 +626,7 @@ fn main() -> anyhow::Result<()> {
                     continue;
                 };
                 let (x, y) = (f64::from(x), f64::from(y));
-                let j = jac[usize::from(v) * w + usize::from(u)];
-                let (fu, fv) = (f64::from(truth.flow_x[i]), f64::from(truth.flow_y[i]));
-                let uf = [j[0] * fu + j[1] * fv, j[2] * fu + j[3] * fv];
+                let uf = true_flow(i);
                 let is_obj = truth.event_object[i] != 0;
                 let rot = mul2x3(&b_matrix(x, y), w_true);
                 let rot_i = mul2x3(&b_matrix(x, y), rate.at(s.events.t[i]));
