@@ -177,6 +177,11 @@ fn description() -> NodeDescription {
         "of two merged tracks, the one matched in more slices keeps its id (off: the older one)",
     )
     .param(
+        "merge_keeps_most_events",
+        d.merge_keeps_most_events,
+        "of two merged tracks, the one with more events in the slice keeps its id (a tie: merge_keeps_most_hits)",
+    )
+    .param(
         "split_yields_to_tracks",
         d.split_yields_to_tracks,
         "a group of a track's segments apart from the rest that touches another track's segment goes to that track",
@@ -218,6 +223,7 @@ fn main() -> ExitCode {
             split_after_slices: cfg.param("split_after_slices")?,
             matching_cascade: cfg.param("matching_cascade")?,
             merge_keeps_most_hits: cfg.param("merge_keeps_most_hits")?,
+            merge_keeps_most_events: cfg.param("merge_keeps_most_events")?,
             split_yields_to_tracks: cfg.param("split_yields_to_tracks")?,
             split_yield_min_share: cfg.param("split_yield_min_share")?,
         };
@@ -271,6 +277,7 @@ mod tests {
                 "split_after_slices",
                 "matching_cascade",
                 "merge_keeps_most_hits",
+                "merge_keeps_most_events",
                 "split_yields_to_tracks",
                 "split_yield_min_share",
             ]

@@ -1150,6 +1150,69 @@ fn of_two_merged_tracks_the_one_matched_more_often_keeps_its_id() -> Result<(), 
     Ok(())
 }
 
+/// An object seen in two pieces moving alike at 100 px/s: a 60-event leading piece (label 1)
+/// tracked from the first slice and the 400-event bulk (label 2) 32 px behind it (boxes 12 px
+/// apart), tracked from slice 3; after `apart` slices the bulk closes to 22 px (boxes 2 px
+/// apart) and the two tracks merge. Returns the bulk's id before and after the merge, and the
+/// piece's id before it.
+fn pieces_rejoin(params: TrackerParams, apart: usize) -> Result<(u32, u32, u32), TrackerError> {
+    let mut tracker = Tracker::new(params)?;
+    let at = |k: usize, gap: f64| {
+        let x = 100.0 + 3.0 * k as f64;
+        let piece = Obj {
+            label: 1,
+            centroid: [x, 100.0],
+            events: 60,
+        };
+        let bulk = Obj {
+            label: 2,
+            centroid: [x + gap, 100.0],
+            events: 400,
+        };
+        if k < 3 {
+            frame(&[piece], 50)
+        } else {
+            frame(&[piece, bulk], 50)
+        }
+    };
+    let (mut bulk_id, mut piece_id) = (0, 0);
+    for k in 0..apart {
+        let (n, seg) = at(k, 32.0);
+        let out = tracker.update(span(k), n, &seg)?;
+        if k >= 3 {
+            bulk_id = id_of(&seg, &out, 2);
+            piece_id = id_of(&seg, &out, 1);
+        }
+    }
+    let (n, seg) = at(apart, 22.0);
+    let out = tracker.update(span(apart), n, &seg)?;
+    assert_eq!(
+        id_of(&seg, &out, 1),
+        id_of(&seg, &out, 2),
+        "the touching pieces must merge"
+    );
+    Ok((bulk_id, id_of(&seg, &out, 2), piece_id))
+}
+
+#[test]
+fn of_two_established_tracks_merged_the_one_with_more_events_keeps_its_id() -> Result<(), TrackerError> {
+    // Both tracks matched more than `merge_inside_max_hits` (10) times: the bulk's id stays.
+    let (bulk, after, piece) = pieces_rejoin(confirmed_at_once(), 18)?;
+    assert_ne!(bulk, piece, "the pieces were tracked apart");
+    assert_eq!(after, bulk, "the bulk of the object keeps its id");
+    // Without the rule the piece, matched more often, keeps its.
+    let hits_only = TrackerParams {
+        merge_keeps_most_events: false,
+        ..confirmed_at_once()
+    };
+    let (bulk, after, piece) = pieces_rejoin(hits_only, 18)?;
+    assert_eq!((after, bulk == piece), (piece, false));
+    // A young track (here 5 matches) does not take the id by its events alone.
+    let (bulk, after, piece) = pieces_rejoin(confirmed_at_once(), 8)?;
+    assert_eq!((after, bulk == piece), (piece, false));
+    Ok(())
+}
+
 #[test]
 fn a_group_smaller_than_split_min_share_stays_with_its_track() -> Result<(), TrackerError> {
     // The scene of `a_split_track_stays_with_its_larger_group`: a 120-event piece 19 px from

@@ -370,7 +370,13 @@ impl Tracker {
         // ---- pieces of one object: tracks whose segments touch and move alike ----
         let mut ended = vec![false; self.tracks.len()];
         if self.params.merge_velocity_px_s > 0.0 {
-            self.merge_pieces(segments, &mut track_of_segment, &mut absorbed, &mut ended);
+            self.merge_pieces(
+                segments,
+                &counts,
+                &mut track_of_segment,
+                &mut absorbed,
+                &mut ended,
+            );
         }
         // ---- groups far from a track's matched segment: another object ----
         if self.params.split_gap_px > 0.0 {
@@ -698,6 +704,7 @@ impl Tracker {
     fn merge_pieces(
         &mut self,
         segments: &[Segment],
+        counts: &[u32],
         track_of_segment: &mut [Option<usize>],
         absorbed: &mut [bool],
         ended: &mut [bool],
@@ -742,10 +749,27 @@ impl Tracker {
             let Some((a, b, _)) = best else {
                 return;
             };
-            // The track matched more often keeps its id (`merge_keeps_most_hits`), else (and
-            // on a tie) the older one (smaller id).
+            // The track with more events in this slice keeps its id
+            // (`merge_keeps_most_events`), else the one matched more often
+            // (`merge_keeps_most_hits`), else (and on a tie) the older one (smaller id).
+            let events_of = |ti: usize| -> u64 {
+                track_of_segment
+                    .iter()
+                    .zip(counts)
+                    .filter(|(m, _)| **m == Some(ti))
+                    .map(|(_, &c)| u64::from(c))
+                    .sum()
+            };
+            let established = self.tracks[a].hits.min(self.tracks[b].hits) > p.merge_inside_max_hits;
+            let (ea, eb) = if p.merge_keeps_most_events && established {
+                (events_of(a), events_of(b))
+            } else {
+                (0, 0)
+            };
             let (ta, tb) = (&self.tracks[a], &self.tracks[b]);
-            let a_keeps = if p.merge_keeps_most_hits && ta.hits != tb.hits {
+            let a_keeps = if ea != eb {
+                ea > eb
+            } else if p.merge_keeps_most_hits && ta.hits != tb.hits {
                 ta.hits > tb.hits
             } else {
                 ta.id < tb.id
