@@ -151,6 +151,12 @@ fn apply(
             }
             "depth_memory" => hier.egomotion.depth_memory = f,
             "depth_memory_ramp" => hier.egomotion.depth_memory_ramp_slices = f as u32,
+            // The final egomotion's settings alone (the hierarchical merger's `egomotion`).
+            "final_huber_k" => hier.egomotion.huber_k = f,
+            "final_min_conf" => hier.egomotion.min_confidence = f as f32,
+            "final_clear_px" => hier.egomotion.clear_px = f as u16,
+            "final_min_cell_samples" => hier.egomotion.min_cell_samples = f as usize,
+            "final_max_samples" => hier.egomotion.max_samples = f as usize,
             "grid_cols" => {
                 bg.egomotion.grid_cols = f as usize;
                 hier.egomotion.grid_cols = f as usize;

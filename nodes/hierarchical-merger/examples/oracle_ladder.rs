@@ -30,7 +30,8 @@
 //!   (sweep), with the true and with the estimated normal flow;
 //! - R6: the egomotion estimate (`evseg_geometry::estimate_translation`, default settings) on
 //!   the true background events only: its direction error with the estimated normal flow and
-//!   with the true normal flow along the estimated n0;
+//!   with the true normal flow along the estimated n0 (R6_TRUE_OMEGA=1: derotated with the
+//!   slice's mean true rate instead of the slicer's; R8 too);
 //! - R7: the translation fitted with the inverse depth known (from the true flow), linear in
 //!   `t`, on the estimated normal flow of the true background: per event and per 80 px cell,
 //!   least squares and Huber (how much the refinement's free depth per cell costs);
@@ -392,7 +393,14 @@ fn main() -> anyhow::Result<()> {
             // R6: the egomotion estimate on the true background only (slicer omega), with the
             // estimated normal flow and with the true normal flow along the estimated n0.
             {
-                let samples = evseg_geometry::flow_samples(&table, &s.events, &flow, Some(&rate), 0.0)?;
+                // R6_TRUE_OMEGA=1: derotate with the slice's mean true rate instead of the
+                // slicer's (how much the gyro path costs the direction).
+                let rate6 = if env_or("R6_TRUE_OMEGA", 0u8)? == 1 {
+                    evseg_geometry::RotationRate::from(w_true)
+                } else {
+                    rate
+                };
+                let samples = evseg_geometry::flow_samples(&table, &s.events, &flow, Some(&rate6), 0.0)?;
                 // R6_BOUNDARY_PX=k (default 0 = keep all): leave out background events within k
                 // px (Chebyshev) of an object event of the slice.
                 let margin: usize = env_or("R6_BOUNDARY_PX", 0usize)?;
