@@ -179,7 +179,7 @@ fn description() -> NodeDescription {
     .param(
         "merge_keeps_most_events",
         d.merge_keeps_most_events,
-        "of two merged tracks, the one with more events in the slice keeps its id (a tie: merge_keeps_most_hits)",
+        "of two merged tracks both matched more than merge_inside_max_hits times, the one with more events in the slice keeps its id (else merge_keeps_most_hits decides)",
     )
     .param(
         "split_yields_to_tracks",

@@ -282,7 +282,8 @@ pub struct TrackerParams {
     /// one. Default true: a track opened on a stray segment earlier than the object's own track
     /// (the first slices of a sequence, before the egomotion has settled, segment pieces of the
     /// static scene) would otherwise take over the object's id when the two meet. Measured
-    /// with `matching_cascade` (above).
+    /// with `matching_cascade` (above). `merge_keeps_most_events` is asked first where both
+    /// tracks are established.
     pub merge_keeps_most_hits: bool,
     /// When two tracks merge (`merge_inside`, `merge_velocity_px_s`) and both have been matched
     /// more than `merge_inside_max_hits` times, the one whose segments hold more events in this
