@@ -62,7 +62,9 @@ enum Command {
         #[arg(long)]
         record: Option<PathBuf>,
         /// Restart a node of this machine that has received nothing this many seconds after
-        /// its producers began publishing (its subscriptions never reached them); 0 = never.
+        /// its producers began publishing (its subscriptions never reached them), or, in
+        /// lock-step, has processed nothing twice this long after every producer of its inputs
+        /// began publishing (one subscription never reached its producer); 0 = never.
         #[arg(long, default_value_t = watchdog::DEFAULT_STARTUP_S)]
         startup_timeout: f64,
         /// Stop a lock-step run in which no node made progress for this many seconds, naming

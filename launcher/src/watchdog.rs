@@ -18,12 +18,26 @@
 //!   after a 3 s limit before its first stats, having in fact consumed frames; the run then
 //!   waited forever). After a restart, the previous process's last stats (told apart by
 //!   [`Stats::up_s`]) are not judged either.
+//! - **start-up, one input missing** (lock-step only): a node of this machine that is up and
+//!   has processed nothing while *every* producer of its (non-feedback) inputs has published
+//!   for twice [`WatchdogSettings::startup`] is restarted the same way (the same restart
+//!   count). A lock-step node that has every input of its first slice processes it at once, so
+//!   one of its subscriptions never reached its producer; it may have received its other
+//!   inputs, which the first rule cannot tell from progress. Seen twice in about 136 runs of
+//!   `evseg bench pipeline`: the evaluator (or six consumers) never received the slicer's
+//!   frames while they received the other producers' (`docs/speed-history.md`, session 40).
+//!   Nothing is lost here either: a node acknowledges a frame only once it has processed it.
+//!   Twice the limit leaves room for a slow first slice in a debug build. A producer whose
+//!   own stats have not arrived (or are stale) counts as having published when a node
+//!   downstream of it has published, since no lock-step node publishes before all of its
+//!   inputs' producers have (seen in both stalls: the slicer's stats stopped reaching the
+//!   launcher).
 //! - **stall** (lock-step only): when no node's published, processed or finished counters
 //!   change for [`WatchdogSettings::stall`], the run stops with every node's counters, instead
 //!   of waiting forever. Receipts do not count: a stalled lock-step graph keeps receiving the
 //!   duplicates its idle producers publish again each second.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::time::{Duration, Instant};
 
 use evseg_graph::NodeSpec;
@@ -41,6 +55,8 @@ pub struct WatchdogSettings {
     /// a node receives its first frame within a second of its producer's first publication
     /// when the transport works, even in debug builds on a loaded 2-core machine).
     pub startup: Option<Duration>,
+    /// The second start-up rule (a lock-step node with every input's producer publishing that
+    /// has processed nothing) waits twice this.
     /// Start-up restarts per node before the run is stopped (default 2).
     pub startup_restarts: u32,
     /// How long a lock-step run may go with no counter of any node changing (default 120 s:
@@ -87,8 +103,8 @@ pub enum Action {
 /// The watchdog's memory between checks.
 pub struct Watchdog {
     settings: WatchdogSettings,
-    /// Node -> since when its producers have published while it had received nothing.
-    fed_since: BTreeMap<String, Instant>,
+    /// Node -> since when a start-up rule has held for it, and which.
+    fed_since: BTreeMap<String, (Instant, Starving)>,
     /// Start-up restarts done per node.
     restarts: BTreeMap<String, u32>,
     /// Node -> its [`Stats::up_s`] when it was restarted: stats that old or older are its
@@ -127,8 +143,14 @@ impl Watchdog {
     ) -> Vec<Action> {
         let mut actions = Vec::new();
         if let Some(limit) = self.settings.startup {
+            let published = published_nodes(nodes, stats);
             for node in nodes {
-                if let Some(a) = self.check_startup(now, limit, node, running_here, stats) {
+                let seen = Seen {
+                    stats,
+                    published: &published,
+                    lockstep,
+                };
+                if let Some(a) = self.check_startup(now, limit, node, running_here, &seen) {
                     actions.push(a);
                 }
             }
@@ -159,16 +181,18 @@ impl Watchdog {
         limit: Duration,
         node: &NodeSpec,
         running_here: &dyn Fn(&str) -> bool,
-        stats: &BTreeMap<String, Stats>,
+        seen: &Seen,
     ) -> Option<Action> {
         let id = node.id.as_str();
-        let producers: Vec<&str> = node
+        let mut producers: Vec<&str> = node
             .inputs
             .iter()
             .filter(|i| !i.feedback)
             .map(|i| i.from_node.as_str())
             .collect();
-        let Some(own) = stats.get(id) else {
+        producers.sort_unstable();
+        producers.dedup();
+        let Some(own) = seen.stats.get(id) else {
             self.fed_since.remove(id);
             return None;
         };
@@ -183,27 +207,60 @@ impl Watchdog {
         let fed: Vec<&str> = producers
             .iter()
             .copied()
-            .filter(|p| stats.get(*p).is_some_and(|s| s.published > 0))
+            .filter(|p| seen.published.contains(*p))
             .collect();
-        if !running_here(id) || producers.is_empty() || own.received > 0 || fed.is_empty() {
+        // A node known to have published has consumed input, whatever its (possibly stale)
+        // stats say: restarting it would lose what it consumed.
+        let starving = if !running_here(id) || fed.is_empty() || seen.published.contains(id) {
+            None
+        } else if own.received == 0 {
+            Some(Starving::NothingReceived)
+        } else if seen.lockstep && own.processed == 0 && fed.len() == producers.len() {
+            Some(Starving::NothingProcessed)
+        } else {
+            None
+        };
+        let Some(starving) = starving else {
             self.fed_since.remove(id);
             return None;
-        }
-        let since = *self.fed_since.entry(id.to_string()).or_insert(now);
+        };
+        let since = match self.fed_since.get(id) {
+            Some(&(t, kind)) if kind == starving => t,
+            _ => {
+                self.fed_since.insert(id.to_string(), (now, starving));
+                now
+            }
+        };
         let waited = now.duration_since(since);
+        let limit = match starving {
+            Starving::NothingReceived => limit,
+            Starving::NothingProcessed => limit * 2,
+        };
         if waited < limit {
             return None;
         }
         let done = self.restarts.entry(id.to_string()).or_insert(0);
-        let why = format!(
-            "node `{id}` received nothing in {:.0} s while {} published",
-            waited.as_secs_f64(),
-            fed.join(", ")
-        );
+        let secs = waited.as_secs_f64();
+        let (why, cause) = match starving {
+            Starving::NothingReceived => (
+                format!(
+                    "node `{id}` received nothing in {secs:.0} s while {} published",
+                    fed.join(", ")
+                ),
+                "its subscriptions never reached its producers",
+            ),
+            Starving::NothingProcessed => (
+                format!(
+                    "node `{id}` processed nothing in {secs:.0} s although every producer of its \
+                     inputs ({}) has published",
+                    fed.join(", ")
+                ),
+                "one of its subscriptions never reached its producer",
+            ),
+        };
         if *done >= self.settings.startup_restarts {
             return Some(Action::Stop(format!(
-                "{why}, after {done} restart(s); its subscriptions never reached its producers \
-                 (see its log)"
+                "{why}, after {done} restart(s); {cause} (see its log)"
             )));
         }
         *done += 1;
@@ -213,6 +270,48 @@ impl Watchdog {
             node: id.to_string(),
             why: format!("{why}; restarting it (start-up restart {done})"),
         })
+    }
+}
+
+/// Which start-up rule holds for a node.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Starving {
+    /// It has received nothing while a producer of its inputs has published.
+    NothingReceived,
+    /// Lock-step: it has processed nothing while every producer of its inputs has published.
+    NothingProcessed,
+}
+
+/// What the start-up rules read of the run at one check.
+struct Seen<'a> {
+    stats: &'a BTreeMap<String, Stats>,
+    /// [`published_nodes`].
+    published: &'a BTreeSet<String>,
+    lockstep: bool,
+}
+
+/// The nodes known to have published: those whose stats say so, and every producer of a
+/// (non-feedback) input of such a node, transitively (a node publishes a slice only once it
+/// has that slice of every such input, so its producers published first, whatever their own
+/// stats, which may be late or lost, say).
+fn published_nodes(nodes: &[NodeSpec], stats: &BTreeMap<String, Stats>) -> BTreeSet<String> {
+    let mut published: BTreeSet<String> = stats
+        .iter()
+        .filter(|(_, s)| s.published > 0)
+        .map(|(id, _)| id.clone())
+        .collect();
+    loop {
+        let before = published.len();
+        let upstream: Vec<String> = nodes
+            .iter()
+            .filter(|n| published.contains(&n.id))
+            .flat_map(|n| n.inputs.iter().filter(|i| !i.feedback))
+            .map(|i| i.from_node.clone())
+            .collect();
+        published.extend(upstream);
+        if published.len() == before {
+            return published;
+        }
     }
 }
 
@@ -369,12 +468,14 @@ mod tests {
         let t0 = Instant::now();
         let later = t0 + Duration::from_secs(100);
         let all = |_: &str| true;
-        let fed: BTreeMap<String, Stats> = [stats("src", 0, 5), stats("a", 1, 0), stats("b", 0, 0)].into();
+        let mut progressing = stats("a", 1, 0);
+        progressing.1.processed = 1;
+        let fed: BTreeMap<String, Stats> = [stats("src", 0, 5), progressing, stats("b", 0, 0)].into();
         let mut w = Watchdog::new(settings(), t0);
         w.check(t0, &nodes, &all, &fed, true);
         assert!(
             w.check(later, &nodes, &all, &fed, true).is_empty(),
-            "a received, b is feedback only"
+            "a received and processed, b is feedback only"
         );
         let starving: BTreeMap<String, Stats> = [stats("src", 0, 5), stats("a", 0, 0)].into();
         let not_here = |id: &str| id != "a";
@@ -390,6 +491,91 @@ mod tests {
         assert!(
             w.check(later, &nodes, &all, &no_stats, false).is_empty(),
             "live, no stats"
+        );
+    }
+
+    /// The stalls of `evseg bench pipeline` (session 40): the evaluator received the tracker's
+    /// frames but never the slicer's, and the slicer's stats had stopped reaching the launcher
+    /// (it looked as if it had published nothing) while the flow, downstream of it, published.
+    #[test]
+    fn a_lockstep_node_with_every_producer_publishing_that_processes_nothing_is_restarted() {
+        let nodes = [
+            node("src", &[]),
+            node("slicer", &[("src", false)]),
+            node("flow", &[("slicer", false)]),
+            node("eval", &[("slicer", false), ("flow", false), ("eval", true)]),
+        ];
+        let t0 = Instant::now();
+        let all = |_: &str| true;
+        let mut eval = up("eval", 40, 1.0);
+        eval.processed = 0;
+        let st: BTreeMap<String, Stats> = [
+            stats("slicer", 1, 0),
+            stats("flow", 4, 3),
+            ("eval".to_string(), eval.clone()),
+        ]
+        .into();
+        let mut w = Watchdog::new(settings(), t0);
+        assert!(w.check(t0, &nodes, &all, &st, true).is_empty());
+        assert!(
+            w.check(t0 + Duration::from_secs(39), &nodes, &all, &st, true)
+                .is_empty(),
+            "twice the start-up limit"
+        );
+        let a = w.check(t0 + Duration::from_secs(40), &nodes, &all, &st, true);
+        assert!(
+            matches!(&a[..], [Action::Restart { node, why }]
+                if node == "eval" && why.contains("processed nothing") && why.contains("flow, slicer")),
+            "{a:?}"
+        );
+        // Not while a producer has not published yet (the flow still on its first slice), not
+        // in live mode (a live node may drop what it cannot join), and not once it processed.
+        let waiting: BTreeMap<String, Stats> = [
+            stats("slicer", 1, 2),
+            stats("flow", 4, 0),
+            ("eval".to_string(), eval.clone()),
+        ]
+        .into();
+        let mut w = Watchdog::new(settings(), t0);
+        w.check(t0, &nodes, &all, &waiting, true);
+        let a = w.check(t0 + Duration::from_secs(100), &nodes, &all, &waiting, true);
+        assert!(
+            !a.iter()
+                .any(|a| matches!(a, Action::Restart { node, .. } if node == "eval")),
+            "{a:?}"
+        );
+        let mut w = Watchdog::new(settings(), t0);
+        w.check(t0, &nodes, &all, &st, false);
+        assert!(
+            w.check(t0 + Duration::from_secs(100), &nodes, &all, &st, false)
+                .is_empty()
+        );
+        let mut done = st.clone();
+        if let Some(e) = done.get_mut("eval") {
+            e.processed = 1;
+        }
+        let mut w = Watchdog::new(settings(), t0);
+        w.check(t0, &nodes, &all, &done, true);
+        assert!(
+            w.check(t0 + Duration::from_secs(100), &nodes, &all, &done, true)
+                .is_empty()
+        );
+    }
+
+    #[test]
+    fn a_producer_counts_as_published_when_a_node_downstream_of_it_has() {
+        let nodes = [
+            node("src", &[]),
+            node("slicer", &[("src", false)]),
+            node("flow", &[("slicer", false), ("back", true)]),
+            node("back", &[("flow", false)]),
+        ];
+        let st: BTreeMap<String, Stats> = [stats("flow", 1, 2), stats("back", 0, 0)].into();
+        let p = published_nodes(&nodes, &st);
+        assert_eq!(
+            p.into_iter().collect::<Vec<_>>(),
+            ["flow", "slicer", "src"],
+            "not `back`: feedback"
         );
     }
 

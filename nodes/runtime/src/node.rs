@@ -173,25 +173,37 @@ pub const DROP_FRAME_ENV: &str = "EVSEG_TEST_DROP_FRAME";
 pub const DROP_DONE_ENV: &str = "EVSEG_TEST_DROP_DONE";
 
 /// Environment variable that makes a node declare none of its input subscriptions once
-/// (`node=marker-file`: deaf while the marker file does not exist; the node creates it, so the
-/// node started again after it subscribes normally), as if its subscriptions had never reached
-/// its producers: for tests of the launcher's start-up watchdog.
+/// (`node=marker-file`), or none for one input port (`node/port=marker-file`): deaf while the
+/// marker file does not exist; the node creates it, so the node started again after it
+/// subscribes normally. As if its subscriptions (or one of them) had never reached its
+/// producers: for tests of the launcher's start-up watchdog.
 pub const DEAF_ONCE_ENV: &str = "EVSEG_TEST_DEAF_ONCE";
 
-/// True when [`DEAF_ONCE_ENV`] names this node and its marker did not exist yet (it is created).
-fn deaf_once_from_env(node: &str) -> bool {
-    let Ok(v) = std::env::var(DEAF_ONCE_ENV) else {
-        return false;
+/// Which input subscriptions [`DEAF_ONCE_ENV`] leaves undeclared.
+#[derive(Debug, PartialEq)]
+enum Deaf {
+    /// Every input.
+    All,
+    /// The input port of this name.
+    Port(String),
+}
+
+/// What [`DEAF_ONCE_ENV`] makes this node deaf to, when it names this node (or one of its
+/// ports) and its marker did not exist yet (it is created).
+fn deaf_once_from_env(node: &str) -> Option<Deaf> {
+    let v = std::env::var(DEAF_ONCE_ENV).ok()?;
+    let (target, marker) = v.split_once('=')?;
+    let deaf = match target.split_once('/') {
+        Some((n, port)) if n == node => Deaf::Port(port.to_string()),
+        None if target == node => Deaf::All,
+        _ => return None,
     };
-    let Some((n, marker)) = v.split_once('=') else {
-        return false;
-    };
-    n == node
-        && std::fs::OpenOptions::new()
-            .write(true)
-            .create_new(true)
-            .open(marker)
-            .is_ok()
+    std::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .open(marker)
+        .is_ok()
+        .then_some(deaf)
 }
 
 /// The input port of this node named by [`DROP_DONE_ENV`], if any.
@@ -309,9 +321,8 @@ impl Outputs {
         let (mode, window, node) = (self.mode, self.window, self.node.clone());
         let book = self.book.clone();
         let watch = self.watch_list();
-        let p = self.port_mut(port)?;
+        let consumers = self.port_mut(port)?.consumers.clone();
         if mode == Mode::Lockstep {
-            let consumers = p.consumers.clone();
             // A frame or a progress message lost in transit would stop a lock-step graph for
             // good (every producer waiting for credit, every consumer for input): when no
             // credit comes for RESEND_AFTER, the frames the slowest consumer has not consumed
@@ -330,7 +341,12 @@ impl Outputs {
                     1
                 };
                 last_from = Some(from);
-                let frames = p.publish_recent_again(from)?;
+                let frames = self.port_mut(port)?.publish_recent_again(from)?;
+                // The other ports' unconsumed frames too: a consumer restarted by the launcher
+                // (its first process consumed nothing) needs every input again, and a producer
+                // waiting here publishes nothing else (seen: a restarted evaluator never got the
+                // slicer's `truth` frames its first process had received).
+                self.publish_other_ports_again(port)?;
                 if frames > 0 && resends_from_same == STALL_HINT_AFTER_RESENDS {
                     tracing::warn!(
                         node = %node,
@@ -356,6 +372,7 @@ impl Outputs {
                     );
                 }
             }
+            let p = self.port_mut(port)?;
             p.recent.push_back((seq, payload.clone()));
             while p.recent.len() as u64 > window {
                 p.recent.pop_front();
@@ -383,6 +400,25 @@ impl Outputs {
         self.waited_ns += waited;
         self.published.fetch_add(1, Ordering::Relaxed);
         Ok(())
+    }
+
+    /// Lock-step: publishes again, on every port but `blocked`, the recent frames some consumer
+    /// has not consumed yet; for a node waiting for credit on `blocked`. Returns the number of
+    /// frames published.
+    fn publish_other_ports_again(&self, blocked: &str) -> Result<usize, RuntimeError> {
+        let mut total = 0;
+        for (port, p) in self.ports.iter().filter(|(name, _)| name != blocked) {
+            let from = self.book.check_min(&p.consumers);
+            if from >= p.sent {
+                continue;
+            }
+            let frames = p.publish_recent_again(from)?;
+            if frames > 0 {
+                tracing::debug!(node = %self.node, port = %port, from, frames, blocked, "published the unconsumed frames again");
+            }
+            total += frames;
+        }
+        Ok(total)
     }
 
     /// Lock-step: publishes again, on every port, the recent frames some consumer has not
@@ -980,10 +1016,22 @@ pub(crate) fn connect(cfg: NodeConfig) -> Result<Running, RuntimeError> {
         Mode::Live => Some(cfg.queue),
     };
     let inbox = Inbox::new(cfg.inputs.len(), bound);
-    if deaf_once_from_env(&cfg.node) {
-        tracing::warn!(node = %cfg.node, "input subscriptions not declared ({DEAF_ONCE_ENV})");
-    } else {
-        for s in subscribe_inputs(&session, &cfg, &inbox)? {
+    let deaf = deaf_once_from_env(&cfg.node);
+    match &deaf {
+        Some(Deaf::All) => {
+            tracing::warn!(node = %cfg.node, "input subscriptions not declared ({DEAF_ONCE_ENV})")
+        }
+        Some(Deaf::Port(port)) => {
+            tracing::warn!(node = %cfg.node, %port, "input subscription not declared ({DEAF_ONCE_ENV})")
+        }
+        None => {}
+    }
+    if deaf != Some(Deaf::All) {
+        let skip = match &deaf {
+            Some(Deaf::Port(port)) => Some(port.as_str()),
+            _ => None,
+        };
+        for s in subscribe_inputs(&session, &cfg, &inbox, skip)? {
             handles.push(Box::new(s));
         }
     }

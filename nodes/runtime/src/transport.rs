@@ -189,14 +189,19 @@ impl SeqGaps {
     }
 }
 
-/// Declares one subscriber per input port, each feeding `inbox`.
+/// Declares one subscriber per input port, each feeding `inbox`; none for `skip_port` (a test
+/// hook: [`crate::node::DEAF_ONCE_ENV`]).
 pub fn subscribe_inputs(
     session: &zenoh::Session,
     cfg: &NodeConfig,
     inbox: &Arc<Inbox>,
+    skip_port: Option<&str>,
 ) -> Result<Vec<zenoh::pubsub::Subscriber<()>>, RuntimeError> {
     let mut subs = Vec::new();
     for (i, input) in cfg.inputs.iter().enumerate() {
+        if skip_port == Some(input.port.as_str()) {
+            continue;
+        }
         let inbox = inbox.clone();
         let sub = session
             .declare_subscriber(input.key.clone())
