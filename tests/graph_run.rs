@@ -945,7 +945,12 @@ fn repo_graph_with_pool(name: &str, pool_mib: u32) -> String {
 /// completes too (this checks the launcher's estimate of what Zenoh locks).
 #[test]
 fn shared_memory_beyond_the_users_locked_memory_limit_is_turned_off_not_a_stall() {
-    let four_mib = repo_graph_with_pool("graph.yaml", 4).replace("seconds: 1.0", "seconds: 0.3");
+    let graph = repo_graph_with_pool("graph.yaml", 4);
+    assert!(
+        graph.contains("seconds: 3.0"),
+        "graph.yaml's source length changed: update this test's replacement"
+    );
+    let four_mib = graph.replace("seconds: 3.0", "seconds: 0.3");
     let Some((check, run, out, _dir)) = check_and_run_as_normal_user(&four_mib) else {
         return;
     };
