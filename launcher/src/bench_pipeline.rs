@@ -47,6 +47,9 @@ pub struct PipelineRow {
     pub events_per_s_after_start_up: Option<f64>,
     /// Per node, in graph order of the statistics.
     pub stages: Vec<StageTime>,
+    /// Restarts during the run ([`crate::run::RunOutcome::restarts`]): its rate includes
+    /// their waits, so it says little of the pipeline's speed.
+    pub restarts: Vec<String>,
 }
 
 /// Options of the pipeline benchmark.
@@ -124,6 +127,7 @@ pub fn bench(o: &PipelineOptions) -> anyhow::Result<PipelineRow> {
         start_up_s,
         events_per_s_after_start_up,
         stages,
+        restarts: outcome.restarts,
     })
 }
 
@@ -154,6 +158,13 @@ pub fn markdown(r: &PipelineRow, graph: &Path) -> String {
             st.busy_s,
             100.0 * st.busy_s / total.max(1e-12),
             st.processed
+        ));
+    }
+    if !r.restarts.is_empty() {
+        s.push_str(&format!(
+            "\n**This run restarted {} node(s)**, and its wall time includes the wait: {}\n",
+            r.restarts.len(),
+            r.restarts.join("; ")
         ));
     }
     s
@@ -214,8 +225,14 @@ pub fn summary(rows: &[PipelineRow]) -> Option<String> {
     } else {
         format!("; median start-up {:.2} s", median(start_ups))
     };
+    let restarted = rows.iter().filter(|r| !r.restarts.is_empty()).count();
+    let restarted = if restarted == 0 {
+        String::new()
+    } else {
+        format!("; {restarted} run(s) restarted a node (their rates count the wait)")
+    };
     Some(format!(
-        "{} runs: median **{:.2} M events/s** end to end (lowest {lo:.2}, highest {hi:.2}){start_up}",
+        "{} runs: median **{:.2} M events/s** end to end (lowest {lo:.2}, highest {hi:.2}){start_up}{restarted}",
         rows.len(),
         median(rates)
     ))
@@ -235,6 +252,7 @@ mod tests {
             start_up_s: start_up,
             events_per_s_after_start_up: None,
             stages: vec![],
+            restarts: vec![],
         }
     }
 
@@ -250,5 +268,24 @@ mod tests {
         );
         let even = summary(&[row(0.9, None), row(1.0, None)]).unwrap_or_default();
         assert!(even.contains("median **0.95 M events/s**"), "{even}");
+        assert!(!even.contains("restarted"), "{even}");
+    }
+
+    /// A run in which the launcher restarted a node is no measure of the pipeline's speed: its
+    /// table and the summary say so.
+    #[test]
+    fn a_run_that_restarted_a_node_is_marked() {
+        let mut slow = row(0.1, None);
+        slow.restarts = vec!["node `evaluator` processed nothing in 40 s".into()];
+        let md = markdown(&slow, Path::new("graphs/evimo2.yaml"));
+        assert!(
+            md.contains("restarted 1 node(s)") && md.contains("`evaluator`"),
+            "{md}"
+        );
+        let s = summary(&[row(1.0, None), slow, row(1.1, None)]).unwrap_or_default();
+        assert!(
+            s.ends_with("; 1 run(s) restarted a node (their rates count the wait)"),
+            "{s}"
+        );
     }
 }

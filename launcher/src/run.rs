@@ -69,6 +69,10 @@ pub struct RunOutcome {
     /// Whether this machine's nodes ran with shared memory (the graph's setting, unless the
     /// locked-memory limit turned it off; see [`crate::shm_limit`]).
     pub shared_memory: bool,
+    /// What the launcher restarted during the run (a failed node under its restart policy, or
+    /// a starving one by the start-up watchdog), one message each; the run's wall time
+    /// includes their waits.
+    pub restarts: Vec<String>,
 }
 
 /// Loads and checks `path`, asking each binary for its description.
@@ -417,6 +421,7 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
     let policies: BTreeMap<String, evseg_graph::RestartPolicy> =
         nodes.iter().map(|n| (n.id.clone(), n.restart)).collect();
     let mut watchdog = crate::watchdog::Watchdog::new(opts.watchdog, start);
+    let mut restarts: Vec<String> = Vec::new();
     let lockstep = graph.mode == evseg_graph::Mode::Lockstep;
     loop {
         if signals::stop_requested() {
@@ -440,6 +445,7 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
                         p.restarts + 1,
                         policy.max
                     );
+                    restarts.push(format!("node `{}` failed ({})", p.id, describe_status(&status)));
                     p.restart()
                         .with_context(|| format!("cannot restart node `{}`", p.id))?;
                 } else {
@@ -482,6 +488,7 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
                     display.clear();
                     tracing::warn!(node = %node, "{why}");
                     eprintln!("{why}");
+                    restarts.push(why);
                     if let Some(p) = fleet.0.iter_mut().find(|p| p.id == node) {
                         p.respawn()
                             .with_context(|| format!("cannot restart node `{node}`"))?;
@@ -519,6 +526,7 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
         started_unix_ns,
         recording: recorder_here,
         shared_memory: graph.shared_memory.enabled,
+        restarts,
     })
 }
 
