@@ -473,6 +473,43 @@ fn a_node_missing_one_input_at_start_up_is_restarted_and_the_run_completes() {
     );
 }
 
+/// A producer blocked waiting for credit keeps its stats current: in the stalled `bench
+/// pipeline` runs the launcher showed the slicer as "published 0" (its stats from before it
+/// blocked) although it had published its window of slices. With the start-up rules off, a
+/// consumer deaf to the slicer's slices stalls the run; the stall message must show what the
+/// slicer has published (a window of 4 slices and 4 truth frames).
+#[test]
+fn a_producer_blocked_for_credit_keeps_its_stats_current() {
+    let dir = tempfile::tempdir().unwrap();
+    let marker = dir.path().join("deaf-once");
+    let deaf = format!("evaluator/slices={}", marker.display());
+    let env = [("EVSEG_TEST_DEAF_ONCE", deaf.as_str())];
+    let (run, _) = run_default_graph_with(
+        dir.path(),
+        0.3,
+        &env,
+        &["--startup-timeout", "0", "--stall-timeout", "8"],
+        Duration::from_secs(120),
+    );
+    assert!(
+        !run.status.success(),
+        "the run should have stalled:\n{}",
+        run.stderr
+    );
+    let line = run
+        .stderr
+        .lines()
+        .find(|l| l.trim_start().starts_with("slicer:"))
+        .unwrap_or_else(|| panic!("no slicer counters:\n{}", run.stderr));
+    let published: u64 = line
+        .split("published ")
+        .nth(1)
+        .and_then(|rest| rest.split(',').next())
+        .and_then(|n| n.trim().parse().ok())
+        .unwrap_or_else(|| panic!("cannot read `{line}`"));
+    assert!(published >= 8, "{line}\n{}", run.stderr);
+}
+
 /// A feedback consumer whose final progress never arrives (the planar segmenter, which never
 /// needs the background merger's last slice) and which then exits must not fail the run: the
 /// producer counts a consumer that left during its drain as finished (seen once in `evseg

@@ -30,8 +30,9 @@
 //!   Twice the limit leaves room for a slow first slice in a debug build. A producer whose
 //!   own stats have not arrived (or are stale) counts as having published when a node
 //!   downstream of it has published, since no lock-step node publishes before all of its
-//!   inputs' producers have (seen in both stalls: the slicer's stats stopped reaching the
-//!   launcher).
+//!   inputs' producers have (in both stalls the launcher had the slicer's stats from before
+//!   it blocked waiting for credit, "published 0": a blocked producer sent none until
+//!   2026-12-07, and a stats message can still be lost).
 //! - **stall** (lock-step only): when no node's published, processed or finished counters
 //!   change for [`WatchdogSettings::stall`], the run stops with every node's counters, instead
 //!   of waiting forever. Receipts do not count: a stalled lock-step graph keeps receiving the

@@ -161,6 +161,10 @@ pub struct Outputs {
     /// publishing again but not published the first time, from the environment variable
     /// [`DROP_FRAME_ENV`] (`node/port/seq`, this node's entry only).
     drop_once: Option<(String, u64)>,
+    /// The node's stats, published again each time a lock-step wait for credit times out: a
+    /// producer blocked there runs no loop that would publish them, and the launcher then saw
+    /// its counters from before the block (a slicer that "published 0" in a stalled run).
+    stats_while_blocked: Option<StatsSource>,
 }
 
 /// Environment variable that makes a node lose one frame of its own in lock-step mode, as a
@@ -341,6 +345,9 @@ impl Outputs {
                     1
                 };
                 last_from = Some(from);
+                if let Some(stats) = &self.stats_while_blocked {
+                    stats.publish(false);
+                }
                 let frames = self.port_mut(port)?.publish_recent_again(from)?;
                 // The other ports' unconsumed frames too: a consumer restarted by the launcher
                 // (its first process consumed nothing) needs every input again, and a producer
@@ -767,27 +774,27 @@ pub(crate) struct Counters {
     pub(crate) busy_ns: AtomicU64,
 }
 
-pub(crate) struct Running {
-    pub(crate) cfg: NodeConfig,
+/// What a node's [`Stats`] are read from, and where they go: shared by the node's loop and its
+/// outputs' lock-step wait for credit.
+#[derive(Clone)]
+struct StatsSource {
+    node: String,
     session: zenoh::Session,
-    outputs: Outputs,
-    pub(crate) counters: Arc<Counters>,
-    schemas: HashMap<String, String>,
-    pub(crate) inbox: Arc<Inbox>,
+    key: String,
+    counters: Arc<Counters>,
+    published: Arc<AtomicU64>,
     /// When the node started (subscriptions declared): [`Stats::up_s`].
     started: Instant,
-    _handles: Vec<Box<dyn std::any::Any + Send>>,
-    _token: zenoh::liveliness::LivelinessToken,
 }
 
-impl Running {
+impl StatsSource {
     fn stats(&self, finished: bool) -> Stats {
         let c = &self.counters;
         let last = c.last_seq.load(Ordering::Relaxed);
         Stats {
-            node: self.cfg.node.clone(),
+            node: self.node.clone(),
             received: c.received.load(Ordering::Relaxed),
-            published: self.outputs.published.load(Ordering::Relaxed),
+            published: self.published.load(Ordering::Relaxed),
             processed: c.processed.load(Ordering::Relaxed),
             dropped: c.dropped.load(Ordering::Relaxed),
             missed: c.missed.load(Ordering::Relaxed),
@@ -799,15 +806,33 @@ impl Running {
         }
     }
 
-    fn publish_stats(&self, finished: bool) {
+    fn publish(&self, finished: bool) {
         if let Ok(json) = serde_json::to_vec(&self.stats(finished)) {
             // Express: the final stats go out before the session closes, not in a batch.
-            let _ = self
-                .session
-                .put(self.cfg.stats_key.clone(), json)
-                .express(true)
-                .wait();
+            let _ = self.session.put(self.key.clone(), json).express(true).wait();
         }
+    }
+}
+
+pub(crate) struct Running {
+    pub(crate) cfg: NodeConfig,
+    session: zenoh::Session,
+    outputs: Outputs,
+    pub(crate) counters: Arc<Counters>,
+    schemas: HashMap<String, String>,
+    pub(crate) inbox: Arc<Inbox>,
+    stats_source: StatsSource,
+    _handles: Vec<Box<dyn std::any::Any + Send>>,
+    _token: zenoh::liveliness::LivelinessToken,
+}
+
+impl Running {
+    fn stats(&self, finished: bool) -> Stats {
+        self.stats_source.stats(finished)
+    }
+
+    fn publish_stats(&self, finished: bool) {
+        self.stats_source.publish(finished);
     }
 
     /// The last stats, once the launcher's subscriber is known to this session (at most
@@ -1004,6 +1029,7 @@ pub(crate) fn connect(cfg: NodeConfig) -> Result<Running, RuntimeError> {
         waited_ns: 0,
         shm: shm_pool(&session, cfg.zenoh.shared_memory.enabled),
         drop_once: drop_once_from_env(&cfg.node),
+        stats_while_blocked: None,
     };
     let counters = Arc::new(Counters {
         last_seq: AtomicU64::new(u64::MAX),
@@ -1041,6 +1067,16 @@ pub(crate) fn connect(cfg: NodeConfig) -> Result<Running, RuntimeError> {
         .wait()
         .map_err(|e| RuntimeError::Zenoh(e.to_string()))?;
     tracing::info!(node = %cfg.node, mode = ?cfg.mode, inputs = cfg.inputs.len(), outputs = cfg.outputs.len(), "started");
+    let stats_source = StatsSource {
+        node: cfg.node.clone(),
+        session: session.clone(),
+        key: cfg.stats_key.clone(),
+        counters: counters.clone(),
+        published: outputs.published.clone(),
+        started: Instant::now(),
+    };
+    let mut outputs = outputs;
+    outputs.stats_while_blocked = Some(stats_source.clone());
     Ok(Running {
         cfg,
         session,
@@ -1048,7 +1084,7 @@ pub(crate) fn connect(cfg: NodeConfig) -> Result<Running, RuntimeError> {
         counters,
         schemas,
         inbox,
-        started: Instant::now(),
+        stats_source,
         _handles: handles,
         _token: token,
     })
