@@ -411,31 +411,18 @@ fn a_lost_feedback_frame_is_published_again_and_the_run_completes() {
 /// watchdog, and the run completes with every slice.
 #[test]
 fn a_node_that_receives_nothing_at_start_up_is_restarted_and_the_run_completes() {
-    let dir = tempfile::tempdir().unwrap();
-    let marker = dir.path().join("deaf-once");
-    // evseg_runtime::node::DEAF_ONCE_ENV
-    let deaf = format!("background={}", marker.display());
-    let env = [("EVSEG_TEST_DEAF_ONCE", deaf.as_str())];
-    let (run, out) = run_default_graph_with(
-        dir.path(),
+    let (run, out, _dir) = run_default_graph_deaf_once(
+        "background",
         0.2,
-        &env,
         &["--startup-timeout", "5"],
         Duration::from_secs(180),
     );
-    assert!(run.status.success(), "run failed:\n{}", run.stderr);
-    assert!(marker.exists(), "the hook did not fire");
-    assert!(
-        run.stderr.contains("node `background` received nothing") && run.stderr.contains("restarting it"),
-        "{}",
-        run.stderr
-    );
-    let log = std::fs::read_to_string(out.join("logs").join("background.log")).unwrap_or_default();
-    assert!(log.contains("input subscriptions not declared"), "{log}");
-    let report = read_json(&out.join("report").join("report.json"));
-    assert!(
-        report["sequence"]["windows"].as_u64().unwrap_or(0) >= 5,
-        "{report}"
+    assert_restarted_and_completed(
+        &run,
+        &out,
+        "background",
+        "received nothing",
+        "input subscriptions not declared",
     );
 }
 
@@ -445,27 +432,50 @@ fn a_node_that_receives_nothing_at_start_up_is_restarted_and_the_run_completes()
 /// stopped it) is restarted by the launcher's second start-up rule, and the run completes.
 #[test]
 fn a_node_missing_one_input_at_start_up_is_restarted_and_the_run_completes() {
-    let dir = tempfile::tempdir().unwrap();
-    let marker = dir.path().join("deaf-once");
-    // evseg_runtime::node::DEAF_ONCE_ENV, one port
-    let deaf = format!("evaluator/slices={}", marker.display());
-    let env = [("EVSEG_TEST_DEAF_ONCE", deaf.as_str())];
-    let (run, out) = run_default_graph_with(
-        dir.path(),
+    let (run, out, _dir) = run_default_graph_deaf_once(
+        "evaluator/slices",
         0.2,
-        &env,
         &["--startup-timeout", "5"],
         Duration::from_secs(180),
     );
+    assert_restarted_and_completed(
+        &run,
+        &out,
+        "evaluator",
+        "processed nothing",
+        "input subscription not declared",
+    );
+}
+
+/// Runs `seconds` of the default graph with `evseg run` arguments `args`, one node deaf once
+/// (`evseg_runtime::node::DEAF_ONCE_ENV`; `target` is `node` or `node/port`). Returns the run,
+/// its folder and the temporary folder holding both. Panics when the hook did not fire.
+fn run_default_graph_deaf_once(
+    target: &str,
+    seconds: f64,
+    args: &[&str],
+    timeout: Duration,
+) -> (Finished, PathBuf, tempfile::TempDir) {
+    let dir = tempfile::tempdir().unwrap();
+    let marker = dir.path().join("deaf-once");
+    let deaf = format!("{target}={}", marker.display());
+    let env = [("EVSEG_TEST_DEAF_ONCE", deaf.as_str())];
+    let (run, out) = run_default_graph_with(dir.path(), seconds, &env, args, timeout);
+    assert!(marker.exists(), "the hook did not fire:\n{}", run.stderr);
+    (run, out, dir)
+}
+
+/// The run completed with every slice after the start-up watchdog restarted `node`, saying
+/// `why`; the node's log shows the test hook's `hook_says`.
+fn assert_restarted_and_completed(run: &Finished, out: &Path, node: &str, why: &str, hook_says: &str) {
     assert!(run.status.success(), "run failed:\n{}", run.stderr);
-    assert!(marker.exists(), "the hook did not fire");
     assert!(
-        run.stderr.contains("node `evaluator` processed nothing") && run.stderr.contains("restarting it"),
+        run.stderr.contains(&format!("node `{node}` {why}")) && run.stderr.contains("restarting it"),
         "{}",
         run.stderr
     );
-    let log = std::fs::read_to_string(out.join("logs").join("evaluator.log")).unwrap_or_default();
-    assert!(log.contains("input subscription not declared"), "{log}");
+    let log = std::fs::read_to_string(out.join("logs").join(format!("{node}.log"))).unwrap_or_default();
+    assert!(log.contains(hook_says), "{log}");
     let report = read_json(&out.join("report").join("report.json"));
     assert!(
         report["sequence"]["windows"].as_u64().unwrap_or(0) >= 5,
@@ -480,14 +490,9 @@ fn a_node_missing_one_input_at_start_up_is_restarted_and_the_run_completes() {
 /// slicer has published (a window of 4 slices and 4 truth frames).
 #[test]
 fn a_producer_blocked_for_credit_keeps_its_stats_current() {
-    let dir = tempfile::tempdir().unwrap();
-    let marker = dir.path().join("deaf-once");
-    let deaf = format!("evaluator/slices={}", marker.display());
-    let env = [("EVSEG_TEST_DEAF_ONCE", deaf.as_str())];
-    let (run, _) = run_default_graph_with(
-        dir.path(),
+    let (run, _, _dir) = run_default_graph_deaf_once(
+        "evaluator/slices",
         0.3,
-        &env,
         &["--startup-timeout", "0", "--stall-timeout", "8"],
         Duration::from_secs(120),
     );

@@ -105,7 +105,7 @@ pub enum Action {
 pub struct Watchdog {
     settings: WatchdogSettings,
     /// Node -> since when a start-up rule has held for it, and which.
-    fed_since: BTreeMap<String, (Instant, Starving)>,
+    starving_since: BTreeMap<String, (Instant, Starving)>,
     /// Start-up restarts done per node.
     restarts: BTreeMap<String, u32>,
     /// Node -> its [`Stats::up_s`] when it was restarted: stats that old or older are its
@@ -121,7 +121,7 @@ impl Watchdog {
     pub fn new(settings: WatchdogSettings, now: Instant) -> Self {
         Self {
             settings,
-            fed_since: BTreeMap::new(),
+            starving_since: BTreeMap::new(),
             restarts: BTreeMap::new(),
             restarted_up_s: BTreeMap::new(),
             last_counters: Vec::new(),
@@ -145,12 +145,12 @@ impl Watchdog {
         let mut actions = Vec::new();
         if let Some(limit) = self.settings.startup {
             let published = published_nodes(nodes, stats);
+            let seen = Seen {
+                stats,
+                published: &published,
+                lockstep,
+            };
             for node in nodes {
-                let seen = Seen {
-                    stats,
-                    published: &published,
-                    lockstep,
-                };
                 if let Some(a) = self.check_startup(now, limit, node, running_here, &seen) {
                     actions.push(a);
                 }
@@ -194,13 +194,13 @@ impl Watchdog {
         producers.sort_unstable();
         producers.dedup();
         let Some(own) = seen.stats.get(id) else {
-            self.fed_since.remove(id);
+            self.starving_since.remove(id);
             return None;
         };
         if let Some(&before) = self.restarted_up_s.get(id) {
             if own.up_s >= before {
                 // The previous process's last stats: the new one is not up yet.
-                self.fed_since.remove(id);
+                self.starving_since.remove(id);
                 return None;
             }
             self.restarted_up_s.remove(id);
@@ -222,13 +222,13 @@ impl Watchdog {
             None
         };
         let Some(starving) = starving else {
-            self.fed_since.remove(id);
+            self.starving_since.remove(id);
             return None;
         };
-        let since = match self.fed_since.get(id) {
+        let since = match self.starving_since.get(id) {
             Some(&(t, kind)) if kind == starving => t,
             _ => {
-                self.fed_since.insert(id.to_string(), (now, starving));
+                self.starving_since.insert(id.to_string(), (now, starving));
                 now
             }
         };
@@ -265,7 +265,7 @@ impl Watchdog {
             )));
         }
         *done += 1;
-        self.fed_since.remove(id);
+        self.starving_since.remove(id);
         self.restarted_up_s.insert(id.to_string(), own.up_s);
         Some(Action::Restart {
             node: id.to_string(),

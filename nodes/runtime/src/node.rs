@@ -353,7 +353,9 @@ impl Outputs {
                 // (its first process consumed nothing) needs every input again, and a producer
                 // waiting here publishes nothing else (seen: a restarted evaluator never got the
                 // slicer's `truth` frames its first process had received).
-                self.publish_other_ports_again(port)?;
+                for (other, from, frames) in self.republish_unconsumed(Some(port))? {
+                    tracing::debug!(node = %node, port = other, from, frames, blocked = port, "published the unconsumed frames again");
+                }
                 if frames > 0 && resends_from_same == STALL_HINT_AFTER_RESENDS {
                     tracing::warn!(
                         node = %node,
@@ -409,23 +411,26 @@ impl Outputs {
         Ok(())
     }
 
-    /// Lock-step: publishes again, on every port but `blocked`, the recent frames some consumer
-    /// has not consumed yet; for a node waiting for credit on `blocked`. Returns the number of
-    /// frames published.
-    fn publish_other_ports_again(&self, blocked: &str) -> Result<usize, RuntimeError> {
-        let mut total = 0;
-        for (port, p) in self.ports.iter().filter(|(name, _)| name != blocked) {
+    /// Lock-step: publishes again, on every port but `except`, the recent frames some consumer
+    /// has not consumed yet. Returns `(port, first frame, frames)` of each port that published
+    /// any.
+    fn republish_unconsumed(&self, except: Option<&str>) -> Result<Vec<(&str, u64, usize)>, RuntimeError> {
+        let mut done = Vec::new();
+        for (port, p) in self
+            .ports
+            .iter()
+            .filter(|(name, _)| Some(name.as_str()) != except)
+        {
             let from = self.book.check_min(&p.consumers);
             if from >= p.sent {
                 continue;
             }
             let frames = p.publish_recent_again(from)?;
             if frames > 0 {
-                tracing::debug!(node = %self.node, port = %port, from, frames, blocked, "published the unconsumed frames again");
+                done.push((port.as_str(), from, frames));
             }
-            total += frames;
         }
-        Ok(total)
+        Ok(done)
     }
 
     /// Lock-step: publishes again, on every port, the recent frames some consumer has not
@@ -438,26 +443,18 @@ impl Outputs {
         if self.mode != Mode::Lockstep {
             return Ok(0);
         }
-        let mut total = 0;
-        for (port, p) in &self.ports {
-            let from = self.book.check_min(&p.consumers);
-            if from >= p.sent {
-                continue;
-            }
-            let frames = p.publish_recent_again(from)?;
-            if frames > 0 {
-                tracing::warn!(
-                    node = %self.node,
-                    port = %port,
-                    from,
-                    frames,
-                    "idle for {:?} with frames not consumed: published them again",
-                    RESEND_AFTER
-                );
-            }
-            total += frames;
+        let done = self.republish_unconsumed(None)?;
+        for &(port, from, frames) in &done {
+            tracing::warn!(
+                node = %self.node,
+                port = %port,
+                from,
+                frames,
+                "idle for {:?} with frames not consumed: published them again",
+                RESEND_AFTER
+            );
         }
-        Ok(total)
+        Ok(done.iter().map(|&(_, _, frames)| frames).sum())
     }
 
     /// True when publishing frame `seq` on `port` now would not wait: in lock-step mode every
