@@ -513,6 +513,14 @@ fn a_producer_blocked_for_credit_keeps_its_stats_current() {
         .and_then(|n| n.trim().parse().ok())
         .unwrap_or_else(|| panic!("cannot read `{line}`"));
     assert!(published >= 8, "{line}\n{}", run.stderr);
+    // The stall message names the input the evaluator never received.
+    assert!(
+        run.stderr
+            .lines()
+            .any(|l| l.trim_start().starts_with("evaluator:") && l.contains("nothing received on `slices`")),
+        "{}",
+        run.stderr
+    );
 }
 
 /// A feedback consumer whose final progress never arrives (the planar segmenter, which never

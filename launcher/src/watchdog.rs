@@ -253,8 +253,9 @@ impl Watchdog {
             Starving::NothingProcessed => (
                 format!(
                     "node `{id}` processed nothing in {secs:.0} s although every producer of its \
-                     inputs ({}) has published",
-                    fed.join(", ")
+                     inputs ({}) has published{}",
+                    fed.join(", "),
+                    silent_inputs(own)
                 ),
                 "one of its subscriptions never reached its producer",
             ),
@@ -316,6 +317,22 @@ fn published_nodes(nodes: &[NodeSpec], stats: &BTreeMap<String, Stats>) -> BTree
     }
 }
 
+/// `", nothing received on `a`, `b`"` for the input ports of `s` that have received nothing
+/// while others have; empty when none (or the node does not count per port).
+fn silent_inputs(s: &Stats) -> String {
+    let silent: Vec<String> = s
+        .received_by_port
+        .iter()
+        .filter(|&(_, &n)| n == 0)
+        .map(|(port, _)| format!("`{port}`"))
+        .collect();
+    if silent.is_empty() || silent.len() == s.received_by_port.len() {
+        String::new()
+    } else {
+        format!(", nothing received on {}", silent.join(", "))
+    }
+}
+
 /// The message of a stalled run: every node's counters.
 fn stall_message(limit: Duration, nodes: &[NodeSpec], stats: &BTreeMap<String, Stats>) -> String {
     let mut text = format!(
@@ -325,12 +342,13 @@ fn stall_message(limit: Duration, nodes: &[NodeSpec], stats: &BTreeMap<String, S
     for n in nodes {
         let line = match stats.get(&n.id) {
             Some(s) => format!(
-                "received {}, published {}, processed {}, last seq {}{}",
+                "received {}, published {}, processed {}, last seq {}{}{}",
                 s.received,
                 s.published,
                 s.processed,
                 s.last_seq.map_or("-".into(), |q| q.to_string()),
-                if s.finished { ", finished" } else { "" }
+                if s.finished { ", finished" } else { "" },
+                silent_inputs(s)
             ),
             None => "no stats received".into(),
         };
@@ -509,7 +527,7 @@ mod tests {
         let t0 = Instant::now();
         let all = |_: &str| true;
         let mut eval = up("eval", 40, 1.0);
-        eval.processed = 0;
+        eval.received_by_port = [("in0".to_string(), 40), ("in1".to_string(), 0)].into();
         let st: BTreeMap<String, Stats> = [
             stats("slicer", 1, 0),
             stats("flow", 4, 3),
@@ -526,7 +544,8 @@ mod tests {
         let a = w.check(t0 + Duration::from_secs(40), &nodes, &all, &st, true);
         assert!(
             matches!(&a[..], [Action::Restart { node, why }]
-                if node == "eval" && why.contains("processed nothing") && why.contains("flow, slicer")),
+                if node == "eval" && why.contains("processed nothing") && why.contains("flow, slicer")
+                    && why.contains("nothing received on `in1`")),
             "{a:?}"
         );
         // Not while a producer has not published yet (the flow still on its first slice), not
@@ -561,6 +580,18 @@ mod tests {
             w.check(t0 + Duration::from_secs(100), &nodes, &all, &done, true)
                 .is_empty()
         );
+    }
+
+    /// The inputs a waiting node never received are named; none when all or none arrived, or
+    /// when the node does not count per port.
+    #[test]
+    fn the_inputs_that_never_arrived_are_named() {
+        let mut s = stats("a", 5, 0).1;
+        assert_eq!(silent_inputs(&s), "");
+        s.received_by_port = [("slices".into(), 0), ("truth".into(), 5), ("tracks".into(), 0)].into();
+        assert_eq!(silent_inputs(&s), ", nothing received on `slices`, `tracks`");
+        s.received_by_port = [("slices".into(), 0), ("truth".into(), 0)].into();
+        assert_eq!(silent_inputs(&s), "", "nothing at all: the first rule's case");
     }
 
     #[test]
@@ -608,7 +639,8 @@ mod tests {
         );
         let a = w.check(t0 + Duration::from_secs(239), &nodes, &all, &st, true);
         assert!(
-            matches!(&a[..], [Action::Stop(m)] if m.contains("a: received 9, published 2") && m.contains("src:")),
+            matches!(&a[..], [Action::Stop(m)] if m.contains("a: received 9, published 2") && m.contains("src:")
+                && !m.contains("nothing received on")),
             "{a:?}"
         );
         let off = WatchdogSettings::from_seconds(0.0, 0.0).unwrap();

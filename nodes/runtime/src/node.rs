@@ -763,6 +763,8 @@ const FINAL_STATS_MATCH_WAIT: Duration = Duration::from_secs(2);
 #[derive(Default)]
 pub(crate) struct Counters {
     pub(crate) received: AtomicU64,
+    /// `received` per input port, in the order of the node's inputs.
+    pub(crate) received_by_port: Vec<AtomicU64>,
     pub(crate) processed: AtomicU64,
     pub(crate) refused: AtomicU64,
     pub(crate) dropped: AtomicU64,
@@ -771,11 +773,23 @@ pub(crate) struct Counters {
     pub(crate) busy_ns: AtomicU64,
 }
 
+impl Counters {
+    /// Counts a data message received on input `port`.
+    pub(crate) fn count_receipt(&self, port: usize) {
+        self.received.fetch_add(1, Ordering::Relaxed);
+        if let Some(c) = self.received_by_port.get(port) {
+            c.fetch_add(1, Ordering::Relaxed);
+        }
+    }
+}
+
 /// What a node's [`Stats`] are read from, and where they go: shared by the node's loop and its
 /// outputs' lock-step wait for credit.
 #[derive(Clone)]
 struct StatsSource {
     node: String,
+    /// The node's input port names, in order.
+    ports: Vec<String>,
     session: zenoh::Session,
     key: String,
     counters: Arc<Counters>,
@@ -791,6 +805,12 @@ impl StatsSource {
         Stats {
             node: self.node.clone(),
             received: c.received.load(Ordering::Relaxed),
+            received_by_port: self
+                .ports
+                .iter()
+                .zip(&c.received_by_port)
+                .map(|(port, n)| (port.clone(), n.load(Ordering::Relaxed)))
+                .collect(),
             published: self.published.load(Ordering::Relaxed),
             processed: c.processed.load(Ordering::Relaxed),
             dropped: c.dropped.load(Ordering::Relaxed),
@@ -1030,6 +1050,7 @@ pub(crate) fn connect(cfg: NodeConfig) -> Result<Running, RuntimeError> {
     };
     let counters = Arc::new(Counters {
         last_seq: AtomicU64::new(u64::MAX),
+        received_by_port: cfg.inputs.iter().map(|_| AtomicU64::new(0)).collect(),
         ..Counters::default()
     });
     // Input subscribers are declared before the liveliness token, so a producer that sees the
@@ -1066,6 +1087,7 @@ pub(crate) fn connect(cfg: NodeConfig) -> Result<Running, RuntimeError> {
     tracing::info!(node = %cfg.node, mode = ?cfg.mode, inputs = cfg.inputs.len(), outputs = cfg.outputs.len(), "started");
     let stats_source = StatsSource {
         node: cfg.node.clone(),
+        ports: cfg.inputs.iter().map(|i| i.port.clone()).collect(),
         session: session.clone(),
         key: cfg.stats_key.clone(),
         counters: counters.clone(),
@@ -1273,7 +1295,7 @@ fn stage_loop<S: Stage>(mut run: Running, stage: &mut S) -> Result<(), RuntimeEr
                         || envelope.kind == evseg_schemas::FrameKind::End =>
                 {
                     if envelope.kind == evseg_schemas::FrameKind::Data {
-                        run.counters.received.fetch_add(1, Ordering::Relaxed);
+                        run.counters.count_receipt(arrival.port);
                         gaps.data(arrival.port, envelope.seq);
                     } else {
                         gaps.end(arrival.port, envelope.seq);

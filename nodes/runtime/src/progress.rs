@@ -24,6 +24,11 @@ pub struct Stats {
     pub node: String,
     /// Data messages received (all inputs).
     pub received: u64,
+    /// Data messages received per input port (port name -> count, counted as `received`):
+    /// shows which input of a waiting node never arrives. Empty from a node that does not send
+    /// it.
+    #[serde(default)]
+    pub received_by_port: std::collections::BTreeMap<String, u64>,
     /// Data messages published (all outputs).
     pub published: u64,
     /// Joined slices processed (or, for a source, steps taken).
@@ -63,6 +68,7 @@ mod tests {
             "refused":0,"last_seq":0,"busy_s":0.5,"finished":false}"#;
         let s: Stats = serde_json::from_slice(old).unwrap();
         assert_eq!((s.node.as_str(), s.received, s.up_s), ("a", 3, 0.0));
+        assert!(s.received_by_port.is_empty());
         let with = br#"{"node":"a","received":0,"published":0,"processed":0,"dropped":0,
             "refused":0,"last_seq":null,"busy_s":0,"finished":false,"up_s":2.5}"#;
         assert_eq!(serde_json::from_slice::<Stats>(with).unwrap().up_s, 2.5);

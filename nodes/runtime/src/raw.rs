@@ -163,7 +163,7 @@ fn raw_loop<C: RawConsumer>(run: Running, consumer: &mut C) -> Result<(), Runtim
                     None
                 }
                 Ok((envelope, _)) if binding.schema.is_empty() || envelope.schema == binding.schema => {
-                    counters.received.fetch_add(1, Ordering::Relaxed);
+                    counters.count_receipt(arrival.port);
                     gaps.data(arrival.port, envelope.seq);
                     let t0 = Instant::now();
                     consumer
