@@ -474,6 +474,13 @@ fn assert_restarted_and_completed(run: &Finished, out: &Path, node: &str, why: &
         "{}",
         run.stderr
     );
+    // The run's last lines say so too, for a user who ran it quietly.
+    assert!(
+        run.stdout
+            .contains(&format!("restarted during the run: node `{node}` {why}")),
+        "{}",
+        run.stdout
+    );
     let log = std::fs::read_to_string(out.join("logs").join(format!("{node}.log"))).unwrap_or_default();
     assert!(log.contains(hook_says), "{log}");
     let report = read_json(&out.join("report").join("report.json"));

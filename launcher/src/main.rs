@@ -571,6 +571,9 @@ fn print_outcome(outcome: &run::RunOutcome) {
     if let Some(path) = &outcome.recording {
         println!("recorded to {}", path.display());
     }
+    for why in &outcome.restarts {
+        println!("restarted during the run: {why}");
+    }
     println!(
         "run finished in {:.2} s; folder {}",
         outcome.seconds,
