@@ -14,8 +14,8 @@ use evseg_schemas::{CameraMotion, Egomotion};
 use serde::Serialize;
 
 use crate::error::EvalError;
-use crate::geometry::{self, Quat, Vec3};
 use crate::outcome::{Outcome, Skip};
+use evseg_geometry::rigid::{self, Quat, Vec3};
 
 /// A rigid pose at one instant: `position` in metres and `orientation` a unit quaternion
 /// `[x, y, z, w]`, both in the convention of the message it came from.
@@ -66,8 +66,8 @@ pub fn interpolate_pose(
     }
     let s = (t - a.t) / gap_s;
     Ok((
-        geometry::lerp(a.position, b.position, s),
-        geometry::slerp(a.orientation, b.orientation, s),
+        rigid::lerp(a.position, b.position, s),
+        rigid::slerp(a.orientation, b.orientation, s),
     ))
 }
 
@@ -114,9 +114,9 @@ pub fn true_camera_velocity(
         .filter_map(|s| s.linear_velocity)
         .collect();
     if !inside.is_empty() {
-        let sum = inside.iter().fold([0.0; 3], |a, &v| geometry::add(a, v));
+        let sum = inside.iter().fold([0.0; 3], |a, &v| rigid::add(a, v));
         return Ok(TrueVelocity {
-            velocity_mps: geometry::scale(sum, 1.0 / inside.len() as f64),
+            velocity_mps: rigid::scale(sum, 1.0 / inside.len() as f64),
             source: VelocitySource::VelocitySamples,
         });
     }
@@ -130,7 +130,7 @@ pub fn true_camera_velocity(
         let ((ta, va), (tb, vb)) = (with_v[i - 1], with_v[i]);
         if tb - ta <= max_gap_s {
             return Ok(TrueVelocity {
-                velocity_mps: geometry::lerp(va, vb, (mid - ta) / (tb - ta)),
+                velocity_mps: rigid::lerp(va, vb, (mid - ta) / (tb - ta)),
                 source: VelocitySource::InterpolatedVelocity,
             });
         }
@@ -145,8 +145,8 @@ pub fn true_camera_velocity(
         .collect();
     let (p0, q0) = interpolate_pose(&poses, t0, max_gap_s).map_err(gap_skip)?;
     let (p1, _) = interpolate_pose(&poses, t1, max_gap_s).map_err(gap_skip)?;
-    let r_wc0 = geometry::quat_to_mat(q0);
-    let v = geometry::scale(geometry::mul_mtv(&r_wc0, geometry::sub(p1, p0)), 1.0 / (t1 - t0));
+    let r_wc0 = rigid::quat_to_mat(q0);
+    let v = rigid::scale(rigid::mul_mtv(&r_wc0, rigid::sub(p1, p0)), 1.0 / (t1 - t0));
     Ok(TrueVelocity {
         velocity_mps: v,
         source: VelocitySource::Poses,
@@ -186,7 +186,7 @@ pub fn score_egomotion(
         return Ok(Outcome::Skipped(Skip::NoPrediction));
     }
     let d = predicted.direction;
-    let n = geometry::norm(d);
+    let n = rigid::norm(d);
     if !(n.is_finite() && n > 0.0) {
         return Err(EvalError::BadDirection { seq, direction: d });
     }
@@ -194,12 +194,12 @@ pub fn score_egomotion(
         Ok(t) => t,
         Err(skip) => return Ok(Outcome::Skipped(skip)),
     };
-    let unit = geometry::scale(d, 1.0 / n);
+    let unit = rigid::scale(d, 1.0 / n);
     let v = truth.velocity_mps;
-    let speed = geometry::norm(v);
-    let scaled = geometry::scale(unit, speed);
+    let speed = rigid::norm(v);
+    let scaled = rigid::scale(unit, speed);
     let direction_error_deg = if speed >= min_speed_mps && speed > 0.0 {
-        Outcome::Scored(geometry::angle_between(unit, v).to_degrees())
+        Outcome::Scored(rigid::angle_between(unit, v).to_degrees())
     } else {
         Outcome::Skipped(Skip::SlowCamera { speed_mps: speed })
     };
@@ -210,14 +210,14 @@ pub fn score_egomotion(
         predicted_direction: unit,
         direction_error_deg,
         scaled_velocity_mps: scaled,
-        scaled_error_mps: geometry::sub(scaled, v),
+        scaled_error_mps: rigid::sub(scaled, v),
     }))
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::geometry::{mul_mv, quat_from_axis_angle, quat_to_mat};
+    use evseg_geometry::rigid::{mul_mv, quat_from_axis_angle, quat_to_mat};
 
     fn ego(direction: Vec3) -> Egomotion {
         Egomotion {
@@ -253,7 +253,7 @@ mod tests {
         assert!((e[1] - speed * a.sin()).abs() < 1e-12);
         assert_eq!(e[2], 0.0);
         // |error| = 2 v sin(a/2), the chord.
-        assert!((geometry::norm(e) - 2.0 * speed * (a / 2.0).sin()).abs() < 1e-12);
+        assert!((rigid::norm(e) - 2.0 * speed * (a / 2.0).sin()).abs() < 1e-12);
     }
 
     #[test]
@@ -302,7 +302,7 @@ mod tests {
             .map(|k| {
                 let t = k as f64 * 0.01;
                 let q = quat_from_axis_angle([0.0, 0.0, 1.0], 0.3 + rate * t);
-                pose(t, geometry::scale(vw, t), q)
+                pose(t, rigid::scale(vw, t), q)
             })
             .collect();
         // Window not aligned with samples: both ends interpolated.
@@ -311,14 +311,14 @@ mod tests {
         assert_eq!(v.source, VelocitySource::Poses);
         // Expected: R_wc(t0)^T vw, with the slerped rotation exact for a constant-rate yaw.
         let r0 = quat_to_mat(quat_from_axis_angle([0.0, 0.0, 1.0], 0.3 + rate * t0));
-        let want = geometry::mul_mtv(&r0, vw);
+        let want = rigid::mul_mtv(&r0, vw);
         assert!(
-            geometry::norm(geometry::sub(v.velocity_mps, want)) < 1e-9,
+            rigid::norm(rigid::sub(v.velocity_mps, want)) < 1e-9,
             "{v:?} vs {want:?}"
         );
         // And back in the world frame it is the world velocity.
         let back = mul_mv(&r0, v.velocity_mps);
-        assert!(geometry::norm(geometry::sub(back, vw)) < 1e-9);
+        assert!(rigid::norm(rigid::sub(back, vw)) < 1e-9);
     }
 
     #[test]

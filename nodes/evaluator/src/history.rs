@@ -11,7 +11,7 @@ use evseg_schemas::{CameraMotion, Mask, Truth};
 
 use crate::egomotion::PoseSample;
 use crate::error::EvalError;
-use crate::geometry;
+use evseg_geometry::rigid;
 
 /// Most recent mask-to-mask intervals kept for the mask period estimate.
 const PERIOD_WINDOW: usize = 64;
@@ -70,7 +70,7 @@ impl TruthHistory {
             if !(c.t.is_finite() && finite3(c.position)) {
                 return Err(bad("camera motion", index, "time or position not finite".into()));
             }
-            let q = geometry::quat_normalize(c.orientation)
+            let q = rigid::quat_normalize(c.orientation)
                 .ok_or_else(|| bad("camera motion", index, format!("quaternion {:?}", c.orientation)))?;
             if c.linear_velocity.is_some_and(|v| !finite3(v)) {
                 return Err(bad("camera motion", index, "linear velocity not finite".into()));
@@ -85,7 +85,7 @@ impl TruthHistory {
             if !(o.t.is_finite() && finite3(o.position)) {
                 return Err(bad("object pose", index, "time or position not finite".into()));
             }
-            let q = geometry::quat_normalize(o.orientation)
+            let q = rigid::quat_normalize(o.orientation)
                 .ok_or_else(|| bad("object pose", index, format!("quaternion {:?}", o.orientation)))?;
             objects.push((
                 o.id,

@@ -26,7 +26,6 @@
 pub mod egomotion;
 pub mod error;
 pub mod frames;
-pub mod geometry;
 pub mod history;
 pub mod iou;
 pub mod matching;

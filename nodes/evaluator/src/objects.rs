@@ -24,8 +24,8 @@ use evseg_schemas::Track;
 use serde::Serialize;
 
 use crate::egomotion::{InterpolationGap, PoseSample, interpolate_pose};
-use crate::geometry::{self, Vec3};
 use crate::outcome::Skip;
+use evseg_geometry::rigid::{self, Vec3};
 
 /// Relative twist of an object over a window, camera frame.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
@@ -50,14 +50,14 @@ pub fn object_twist(
     let (p0, q0) = interpolate_pose(poses, t0, max_gap_s)?;
     let (p1, q1) = interpolate_pose(poses, t1, max_gap_s)?;
     let (pm, _) = interpolate_pose(poses, 0.5 * (t0 + t1), max_gap_s)?;
-    let (r0, r1) = (geometry::quat_to_mat(q0), geometry::quat_to_mat(q1));
-    let r = geometry::mul_mm(&r1, &geometry::transpose(&r0));
-    let t = geometry::sub(p1, geometry::mul_mv(&r, p0));
-    let (rho, phi) = geometry::se3_log(&r, t);
+    let (r0, r1) = (rigid::quat_to_mat(q0), rigid::quat_to_mat(q1));
+    let r = rigid::mul_mm(&r1, &rigid::transpose(&r0));
+    let t = rigid::sub(p1, rigid::mul_mv(&r, p0));
+    let (rho, phi) = rigid::se3_log(&r, t);
     let dt = t1 - t0;
     Ok(ObjectTwist {
-        v_mps: geometry::scale(rho, 1.0 / dt),
-        w_radps: geometry::scale(phi, 1.0 / dt),
+        v_mps: rigid::scale(rho, 1.0 / dt),
+        w_radps: rigid::scale(phi, 1.0 / dt),
         position_m: pm,
     })
 }
@@ -114,7 +114,7 @@ pub fn score_object_motion(
     let (x, y) = (p[0] / z, p[1] / z);
     let v = twist.v_mps;
     let true_tr = [(v[0] - x * v[2]) / z, (v[1] - y * v[2]) / z];
-    let pdot = geometry::add(v, geometry::cross(twist.w_radps, p));
+    let pdot = rigid::add(v, rigid::cross(twist.w_radps, p));
     let true_img = [fx * (pdot[0] - x * pdot[2]) / z, fy * (pdot[1] - y * pdot[2]) / z];
     let nan = [f64::NAN; 2];
     let (pred_tr, pred_img) = match track {
@@ -142,7 +142,7 @@ pub fn score_object_motion(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::geometry::{quat_from_axis_angle, quat_to_mat};
+    use evseg_geometry::rigid::{quat_from_axis_angle, quat_to_mat};
 
     fn track(translation: Vec3, velocity: [f64; 2]) -> Track {
         Track {
@@ -169,7 +169,7 @@ mod tests {
             orientation: [0.0, 0.0, 0.0, 1.0],
         });
         let tw = object_twist(&ps, 0.02, 0.05, 0.01).unwrap();
-        assert!(geometry::norm(geometry::sub(tw.v_mps, [0.2, 0.0, 0.0])) < 1e-12);
+        assert!(rigid::norm(rigid::sub(tw.v_mps, [0.2, 0.0, 0.0])) < 1e-12);
         // The camera-equivalent translation with depth 1 is -v / Z.
         let good = track([-0.1, 0.0, 0.0], [20.0, 0.0]);
         let s = score_object_motion(1, Some(3), Some(&good), &tw, 200.0, 200.0).unwrap();
@@ -193,16 +193,16 @@ mod tests {
             let q = quat_from_axis_angle([0.0, 1.0, 0.0], w * t);
             let r = quat_to_mat(q);
             let c = [0.0, 0.0, 3.0];
-            let arm = geometry::mul_mv(&r, [0.5, 0.1, 0.0]);
+            let arm = rigid::mul_mv(&r, [0.5, 0.1, 0.0]);
             PoseSample {
                 t,
-                position: geometry::add(geometry::add(c, arm), [0.0, 0.05 * t, 0.0]),
+                position: rigid::add(rigid::add(c, arm), [0.0, 0.05 * t, 0.0]),
                 orientation: q,
             }
         });
         let (t0, t1) = (0.03, 0.035);
         let tw = object_twist(&ps, t0, t1, 0.01).unwrap();
-        assert!(geometry::norm(geometry::sub(tw.w_radps, [0.0, w, 0.0])) < 1e-9);
+        assert!(rigid::norm(rigid::sub(tw.w_radps, [0.0, w, 0.0])) < 1e-9);
         let s = score_object_motion(2, None, None, &tw, 100.0, 100.0).unwrap();
         let proj = |t: f64| {
             let (p, _) = interpolate_pose(&ps, t, 0.01).unwrap();

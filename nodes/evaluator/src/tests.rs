@@ -3,7 +3,7 @@
 use evseg_schemas::{CameraInfo, CameraMotion, Distortion, Egomotion, Events, Mask, ObjectPose, Track};
 
 use super::*;
-use crate::geometry::{mul_mtv, quat_from_axis_angle, quat_to_mat};
+use evseg_geometry::rigid::{mul_mtv, quat_from_axis_angle, quat_to_mat};
 
 const W: u16 = 8;
 const H: u16 = 6;

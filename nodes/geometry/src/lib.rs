@@ -9,7 +9,9 @@
 //! - [`lsq`]: small dense least squares (normal equations with Tikhonov regularization);
 //! - [`cache`]: prefetch hints for per-pixel table lookups in per-event loops;
 //! - [`assignment`]: optimal one-to-one assignment (Hungarian), for matching labels to objects
-//!   (evaluator) and segments to tracks (tracker).
+//!   (evaluator) and segments to tracks (tracker);
+//! - [`rigid`]: 3-vectors, rotation matrices, quaternions and the SO(3) / SE(3) logarithms on
+//!   plain arrays, for the simulator's kinematics and the evaluator's ground truth.
 //!
 //! Normalized coordinates: undistorted, focal length 1, camera frame x right, y down, z forward.
 //! Flows in normalized coordinates per second; rotation rates in rad/s; translations in the units
@@ -29,6 +31,7 @@ pub mod egomotion_node;
 pub mod lsq;
 pub mod motion;
 pub mod refine;
+pub mod rigid;
 pub mod rotation;
 pub mod samples;
 pub mod svm;

@@ -1011,8 +1011,8 @@ fn cast_keyframe_with(kf: &mut KeyFrame, scene: &Scene, rays: &Rays, block_z: &m
 fn object_speed(
     m: &scene::RelativeMotion,
     pose: &scene::BoxPose,
-    corners: &[math::V3; 8],
-    half: math::V3,
+    corners: &[math::Vec3; 8],
+    half: math::Vec3,
     r_max: f64,
 ) -> f64 {
     let zmin = corners.iter().map(|c| c[2]).fold(f64::INFINITY, f64::min);
@@ -1034,7 +1034,7 @@ mod tests {
     #[allow(clippy::needless_range_loop)]
     fn excursion(
         cam: &crate::camera::CameraConfig,
-        pts: &dyn Fn(f64) -> Vec<math::V3>,
+        pts: &dyn Fn(f64) -> Vec<math::Vec3>,
         ta: f64,
         tb: f64,
         out: &mut Vec<(f64, f64, f64, f64)>,
@@ -1043,7 +1043,7 @@ mod tests {
         let inside = |p: Option<(f64, f64)>| {
             p.is_some_and(|(x, y)| x >= -0.5 && y >= -0.5 && x <= w - 0.5 && y <= h - 0.5)
         };
-        let sub: Vec<Vec<math::V3>> = (0..=4).map(|s| pts(ta + (tb - ta) * s as f64 / 4.0)).collect();
+        let sub: Vec<Vec<math::Vec3>> = (0..=4).map(|s| pts(ta + (tb - ta) * s as f64 / 4.0)).collect();
         for j in 0..sub[0].len() {
             let p0 = cam.project(sub[0][j]);
             let p1 = cam.project(sub[4][j]);
@@ -1115,7 +1115,7 @@ mod tests {
                     }
                 }
                 let scene = &e.scene;
-                let bg = |t: f64| -> Vec<math::V3> {
+                let bg = |t: f64| -> Vec<math::Vec3> {
                     let c = scene.camera_state(t);
                     let r = math::transpose(&c.rotation);
                     world
@@ -1123,7 +1123,7 @@ mod tests {
                         .map(|x| math::mul_mv(&r, math::sub(*x, c.position)))
                         .collect()
                 };
-                let obj = |t: f64| -> Vec<math::V3> {
+                let obj = |t: f64| -> Vec<math::Vec3> {
                     let c = scene.camera_state(t);
                     let mut pts = Vec::new();
                     for b in scene.boxes.iter().filter(|b| b.id != 0) {

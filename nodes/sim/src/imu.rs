@@ -9,12 +9,12 @@ use evseg_schemas::ImuSample;
 use serde::{Deserialize, Serialize};
 
 use crate::SimError;
-use crate::math::{self, M3};
+use crate::math::{self, Mat3};
 use crate::rng::Rng;
 use crate::trajectory::RigidState;
 
 /// Rotation taking IMU-frame vectors to the camera frame (EVIMO2 convention), row-major.
-pub const IMU_TO_CAMERA: M3 = [[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]];
+pub const IMU_TO_CAMERA: Mat3 = [[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]];
 
 /// IMU noise and rate parameters.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

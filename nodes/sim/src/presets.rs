@@ -19,7 +19,7 @@ use crate::camera::CameraConfig;
 use crate::config::{RenderConfig, SceneConfig, TruthConfig};
 use crate::esim::EsimConfig;
 use crate::imu::ImuConfig;
-use crate::math::{self, M3, V3};
+use crate::math::{self, Mat3, Vec3};
 use crate::rng::Rng;
 use crate::scene::{BoxConfig, Lighting, ObjectConfig, PlaneConfig, SceneContent};
 use crate::texture::{Pattern, TextureConfig};
@@ -40,7 +40,7 @@ pub const PRESET_NAMES: &[&str] = &[
 
 /// Camera -> world rotation of a camera looking along world +y with world z up (camera x =
 /// world x, camera y = world -z).
-pub const CAMERA_LOOKING_FORWARD: M3 = [[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]];
+pub const CAMERA_LOOKING_FORWARD: Mat3 = [[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]];
 
 /// The configuration of preset `name` with `seed`.
 pub fn preset(name: &str, seed: u64) -> Result<SceneConfig, SimError> {
@@ -229,7 +229,7 @@ struct Builder {
     camera_cfg: CameraConfig,
 }
 
-fn plane(origin: V3, u: V3, v: V3, texture: TextureConfig) -> PlaneConfig {
+fn plane(origin: Vec3, u: Vec3, v: Vec3, texture: TextureConfig) -> PlaneConfig {
     PlaneConfig {
         origin,
         axis_u: u,
@@ -325,9 +325,9 @@ impl Builder {
     fn object(
         &mut self,
         id: u16,
-        half: V3,
-        center: V3,
-        swing: V3,
+        half: Vec3,
+        center: Vec3,
+        swing: Vec3,
         freq: f64,
         texture: TextureConfig,
     ) -> ObjectConfig {
@@ -394,7 +394,7 @@ impl Builder {
                 wall_texture(Pattern::Stripes { period_m: 0.6 }, 0.15, 0.5, 6),
             ),
         ];
-        let furniture = |center: V3, half: V3, yaw: f64, pattern: Pattern, seed: u64| BoxConfig {
+        let furniture = |center: Vec3, half: Vec3, yaw: f64, pattern: Pattern, seed: u64| BoxConfig {
             half_extents: half,
             trajectory: RigidTrajectory::fixed(center, math::rot_axis(2, yaw)),
             texture: TextureConfig {

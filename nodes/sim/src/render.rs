@@ -9,7 +9,7 @@
 //! steps instead of one jump.
 
 use crate::camera::CameraConfig;
-use crate::math::{self, V3};
+use crate::math::{self, Vec3};
 use crate::scene::{BoxPose, RelativeMotion, Scene};
 use crate::texture::LANES;
 use crate::trajectory::RigidState;
@@ -321,7 +321,7 @@ impl Outline {
     /// camera-frame origin `o_b` in box coordinates and half extents `half`, or `None` (see
     /// [`BoxGeom::outline`]); `planes` are the background planes (`a . X < 1` on the camera's
     /// side).
-    fn new(corners: &[V3; 8], o_b: V3, half: V3, planes: &[PlaneGeom]) -> Option<Self> {
+    fn new(corners: &[Vec3; 8], o_b: Vec3, half: Vec3, planes: &[PlaneGeom]) -> Option<Self> {
         if corners.iter().any(|c| c[2] <= 0.05) || (0..3).all(|k| o_b[k].abs() <= half[k]) {
             return None;
         }
@@ -457,7 +457,7 @@ pub struct FrameGeom {
     pub shade_by_key: Vec<f32>,
 }
 
-fn f3(v: V3) -> [f32; 3] {
+fn f3(v: Vec3) -> [f32; 3] {
     [v[0] as f32, v[1] as f32, v[2] as f32]
 }
 
@@ -1279,7 +1279,7 @@ impl FrameGeom {
 /// Pixel bounding box of a box's projection (edges sampled, so lens distortion is covered),
 /// with a 2 px margin; the whole image when the box reaches behind the camera; `None` when the
 /// box is entirely behind the camera or off-image.
-fn box_bbox(cam: &CameraConfig, pose: &BoxPose, half: V3) -> Option<[i32; 4]> {
+fn box_bbox(cam: &CameraConfig, pose: &BoxPose, half: Vec3) -> Option<[i32; 4]> {
     let corners = pose.corners(half);
     if corners.iter().all(|c| c[2] <= 0.0) {
         return None;

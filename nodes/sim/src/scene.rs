@@ -6,7 +6,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::SimError;
-use crate::math::{self, M3, V3};
+use crate::math::{self, Mat3, Vec3};
 use crate::texture::{Texture, TextureConfig};
 use crate::trajectory::{RigidState, RigidTrajectory};
 
@@ -15,12 +15,12 @@ use crate::trajectory::{RigidState, RigidTrajectory};
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct PlaneConfig {
     /// A point of the plane (texture origin), world, m.
-    pub origin: V3,
+    pub origin: Vec3,
     /// Texture u axis, world, unit.
-    pub axis_u: V3,
+    pub axis_u: Vec3,
     /// Texture v axis, world, unit, orthogonal to `axis_u`; `axis_u x axis_v` is the normal
     /// used for shading and should point into the room.
-    pub axis_v: V3,
+    pub axis_v: Vec3,
     /// Appearance.
     pub texture: TextureConfig,
 }
@@ -30,7 +30,7 @@ pub struct PlaneConfig {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct BoxConfig {
     /// Half sizes along the box's own x, y, z axes, m.
-    pub half_extents: V3,
+    pub half_extents: Vec3,
     /// Pose of the box centre and axes over time (world frame).
     pub trajectory: RigidTrajectory,
     /// Appearance (each face uses a different part of the texture).
@@ -51,14 +51,14 @@ pub struct ObjectConfig {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Lighting {
     /// Direction towards the light, world (normalized on use).
-    pub direction: V3,
+    pub direction: Vec3,
     /// Ambient share in (0, 1].
     pub ambient: f64,
 }
 
 impl Lighting {
     /// Natural log of the brightness factor of a surface with world normal `n` (unit).
-    pub fn ln_shade(&self, n: V3) -> f64 {
+    pub fn ln_shade(&self, n: Vec3) -> f64 {
         let l = math::normalize(self.direction);
         (self.ambient + (1.0 - self.ambient) * math::dot(n, l).max(0.0)).ln()
     }
@@ -133,7 +133,7 @@ pub struct SceneBox {
     /// Object id (0 = background).
     pub id: u16,
     /// Half sizes, m.
-    pub half: V3,
+    pub half: Vec3,
     /// Motion.
     pub trajectory: RigidTrajectory,
     /// Index into [`Scene::textures`].
@@ -232,9 +232,9 @@ const BOX_SPLIT: usize = 3;
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RelativeMotion {
     /// m/s, camera frame.
-    pub linear: V3,
+    pub linear: Vec3,
     /// rad/s, camera frame.
-    pub angular: V3,
+    pub angular: Vec3,
 }
 
 impl RelativeMotion {
@@ -260,12 +260,12 @@ impl RelativeMotion {
     }
 
     /// Velocity of the camera-frame point `p` relative to the camera, m/s.
-    pub fn velocity(&self, p: V3) -> V3 {
+    pub fn velocity(&self, p: Vec3) -> Vec3 {
         math::add(self.linear, math::cross(self.angular, p))
     }
 
     /// Normalized image flow (1/s) of the camera-frame point `p` (needs `p.z > 0`).
-    pub fn normalized_flow(&self, p: V3) -> (f64, f64) {
+    pub fn normalized_flow(&self, p: Vec3) -> (f64, f64) {
         let v = self.velocity(p);
         let (x, y) = (p[0] / p[2], p[1] / p[2]);
         ((v[0] - x * v[2]) / p[2], (v[1] - y * v[2]) / p[2])
@@ -274,7 +274,7 @@ impl RelativeMotion {
     /// Upper bound of the normalized image speed (1/s) of this body's points within `radius`
     /// (m) of the camera-frame point `center`, at depth `z >= z_min`, seen at image radius
     /// `sqrt(x^2 + y^2) <= r_max` (normalized).
-    pub fn speed_bound_ball(&self, center: V3, radius: f64, z_min: f64, r_max: f64) -> f64 {
+    pub fn speed_bound_ball(&self, center: Vec3, radius: f64, z_min: f64, r_max: f64) -> f64 {
         // |u| = |[[1, 0, -x], [0, 1, -y]] V| / Z <= sqrt(1 + r^2) |V| / Z, and
         // |V(P)| <= |V(center)| + |angular| |P - center|.
         let v = math::norm(self.velocity(center)) + math::norm(self.angular) * radius;
@@ -290,7 +290,7 @@ impl RelativeMotion {
     /// over the box is at a corner (not the largest `|V|` over the smallest `Z`, which may be
     /// at different corners). The largest image radius of the projection (the convex hull of
     /// the projected corners) is at a corner too.
-    pub fn speed_bound_box(&self, corners: &[V3; 8], r_max: f64) -> Option<f64> {
+    pub fn speed_bound_box(&self, corners: &[Vec3; 8], r_max: f64) -> Option<f64> {
         let z_min = corners.iter().map(|c| c[2]).fold(f64::INFINITY, f64::min);
         if z_min.is_nan() || z_min <= 0.1 {
             return None;
@@ -321,7 +321,7 @@ impl RelativeMotion {
     /// off the image centre or moves little along the optical axis (a box seen at `r = 0.5`
     /// and moving sideways: about `|V| / Z` instead of `1.12 |V| / Z`); callers take the
     /// smaller. `None` unless every corner is at depth > 0.1 m.
-    pub fn speed_bound_box_centred(&self, corners: &[V3; 8]) -> Option<f64> {
+    pub fn speed_bound_box_centred(&self, corners: &[Vec3; 8]) -> Option<f64> {
         let z_min = corners.iter().map(|c| c[2]).fold(f64::INFINITY, f64::min);
         if z_min.is_nan() || z_min <= 0.1 {
             return None;
@@ -330,7 +330,7 @@ impl RelativeMotion {
         const M: usize = N + 1;
         // The (N + 1)^3 grid of sub-box corners (corner bit k of `corners` is the end along
         // the box's axis k): velocity, depth and normalized image point of each.
-        let lerp = |a: V3, b: V3, f: f64| math::add(a, math::scale(math::sub(b, a), f));
+        let lerp = |a: Vec3, b: Vec3, f: f64| math::add(a, math::scale(math::sub(b, a), f));
         let mut grid = [([0.0f64; 3], 0.0f64, [0.0f64; 2]); M * M * M];
         for (g, item) in grid.iter_mut().enumerate() {
             let f = |d: usize| d as f64 / N as f64;
@@ -540,9 +540,9 @@ impl RelativeMotion {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct BoxPose {
     /// Box -> camera rotation.
-    pub r_cb: M3,
+    pub r_cb: Mat3,
     /// Box centre in the camera frame, m.
-    pub center: V3,
+    pub center: Vec3,
 }
 
 impl BoxPose {
@@ -556,7 +556,7 @@ impl BoxPose {
     }
 
     /// The 8 corners in the camera frame.
-    pub fn corners(&self, half: V3) -> [V3; 8] {
+    pub fn corners(&self, half: Vec3) -> [Vec3; 8] {
         let mut out = [[0.0; 3]; 8];
         for (k, c) in out.iter_mut().enumerate() {
             let s = [

@@ -3,7 +3,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::math::{self, M3, V3};
+use crate::math::{self, Mat3, Vec3};
 
 /// One term `amplitude * sin(2 pi freq_hz t + phase_rad)`.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -86,20 +86,20 @@ impl Signal {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RigidState {
     /// Body -> world rotation.
-    pub rotation: M3,
+    pub rotation: Mat3,
     /// Body origin in the world, m.
-    pub position: V3,
+    pub position: Vec3,
     /// Linear velocity of the origin, m/s, world frame.
-    pub velocity: V3,
+    pub velocity: Vec3,
     /// Linear acceleration of the origin, m/s², world frame.
-    pub acceleration: V3,
+    pub acceleration: Vec3,
     /// Angular velocity, rad/s, body frame.
-    pub omega_body: V3,
+    pub omega_body: Vec3,
 }
 
 impl RigidState {
     /// Angular velocity, rad/s, world frame.
-    pub fn omega_world(&self) -> V3 {
+    pub fn omega_world(&self) -> Vec3 {
         math::mul_mv(&self.rotation, self.omega_body)
     }
 }
@@ -114,7 +114,7 @@ pub struct RigidTrajectory {
     /// World position of the body origin, per world axis, m.
     pub position: [Signal; 3],
     /// Fixed rotation applied first (body -> world), row-major.
-    pub base_rotation: M3,
+    pub base_rotation: Mat3,
     /// Axis (0 = x, 1 = y, 2 = z) of each of the three chained rotations.
     pub axes: [usize; 3],
     /// Angle of each chained rotation, rad.
@@ -123,7 +123,7 @@ pub struct RigidTrajectory {
 
 impl RigidTrajectory {
     /// A body resting at `position` with rotation `base_rotation`.
-    pub fn fixed(position: V3, base_rotation: M3) -> Self {
+    pub fn fixed(position: Vec3, base_rotation: Mat3) -> Self {
         Self {
             position: position.map(Signal::constant),
             base_rotation,

@@ -1,34 +1,45 @@
-//! Small rigid-body helpers on plain arrays: 3-vectors, quaternions `[x, y, z, w]`, rotation
-//! matrices (row-major `[[f64; 3]; 3]`), slerp and the SO(3) / SE(3) logarithms.
+//! Rigid-body helpers on plain arrays, shared by the simulator and the evaluator: 3-vectors,
+//! rotation matrices (row-major `[[f64; 3]; 3]`), unit quaternions `[x, y, z, w]` (the schemas'
+//! order), slerp and the SO(3) / SE(3) logarithms. Frames are the caller's: a matrix `r_ab`
+//! maps coordinates in frame `b` to frame `a` (`mul_mv`), its transpose back (`mul_mtv`).
+//! Small enough to inline across crates (the simulator's bounds call them per render step).
 
 /// A 3-vector.
 pub type Vec3 = [f64; 3];
-/// A rotation matrix, row-major: `m[row][col]`.
+/// A 3x3 matrix, row-major: `m[row][col]`.
 pub type Mat3 = [[f64; 3]; 3];
-/// A quaternion `[x, y, z, w]` (the schema's order).
+/// A quaternion `[x, y, z, w]` (the schemas' order).
 pub type Quat = [f64; 4];
 
+/// The identity matrix.
+pub const IDENTITY: Mat3 = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+
 /// `a + b`.
+#[inline]
 pub fn add(a: Vec3, b: Vec3) -> Vec3 {
     [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
 }
 
 /// `a - b`.
+#[inline]
 pub fn sub(a: Vec3, b: Vec3) -> Vec3 {
     [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
 }
 
 /// `s * a`.
+#[inline]
 pub fn scale(a: Vec3, s: f64) -> Vec3 {
     [a[0] * s, a[1] * s, a[2] * s]
 }
 
 /// Dot product.
+#[inline]
 pub fn dot(a: Vec3, b: Vec3) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
 /// Cross product `a x b`.
+#[inline]
 pub fn cross(a: Vec3, b: Vec3) -> Vec3 {
     [
         a[1] * b[2] - a[2] * b[1],
@@ -38,28 +49,40 @@ pub fn cross(a: Vec3, b: Vec3) -> Vec3 {
 }
 
 /// Euclidean norm.
+#[inline]
 pub fn norm(a: Vec3) -> f64 {
     dot(a, a).sqrt()
 }
 
+/// `a / |a|` (returns `a` unchanged when it is zero).
+#[inline]
+pub fn normalize(a: Vec3) -> Vec3 {
+    let n = norm(a);
+    if n > 0.0 { scale(a, 1.0 / n) } else { a }
+}
+
 /// Linear interpolation `a + s (b - a)`.
+#[inline]
 pub fn lerp(a: Vec3, b: Vec3, s: f64) -> Vec3 {
     add(a, scale(sub(b, a), s))
 }
 
 /// Angle between two vectors, radians in `[0, pi]` (meaningless, 0, if either is zero: callers
 /// check norms first).
+#[inline]
 pub fn angle_between(a: Vec3, b: Vec3) -> f64 {
     // atan2 of |a x b| and a.b is accurate at small and large angles alike.
     norm(cross(a, b)).atan2(dot(a, b))
 }
 
 /// `m v`.
+#[inline]
 pub fn mul_mv(m: &Mat3, v: Vec3) -> Vec3 {
     [dot(m[0], v), dot(m[1], v), dot(m[2], v)]
 }
 
 /// `m^T v`.
+#[inline]
 pub fn mul_mtv(m: &Mat3, v: Vec3) -> Vec3 {
     [
         m[0][0] * v[0] + m[1][0] * v[1] + m[2][0] * v[2],
@@ -69,23 +92,41 @@ pub fn mul_mtv(m: &Mat3, v: Vec3) -> Vec3 {
 }
 
 /// `a b`.
+#[inline]
 pub fn mul_mm(a: &Mat3, b: &Mat3) -> Mat3 {
-    let mut m = [[0.0; 3]; 3];
-    for (r, row) in m.iter_mut().enumerate() {
-        for (c, x) in row.iter_mut().enumerate() {
-            *x = (0..3).map(|k| a[r][k] * b[k][c]).sum();
+    let mut r = [[0.0; 3]; 3];
+    for (i, row) in r.iter_mut().enumerate() {
+        for (j, cell) in row.iter_mut().enumerate() {
+            *cell = a[i][0] * b[0][j] + a[i][1] * b[1][j] + a[i][2] * b[2][j];
         }
     }
-    m
+    r
 }
 
 /// `m^T`.
+#[inline]
 pub fn transpose(m: &Mat3) -> Mat3 {
     [
         [m[0][0], m[1][0], m[2][0]],
         [m[0][1], m[1][1], m[2][1]],
         [m[0][2], m[1][2], m[2][2]],
     ]
+}
+
+/// Column `j` of `m`.
+#[inline]
+pub fn column(m: &Mat3, j: usize) -> Vec3 {
+    [m[0][j], m[1][j], m[2][j]]
+}
+
+/// Rotation by `angle` (rad) about the unit axis `axis` (0 = x, 1 = y, 2 = z), right-handed.
+pub fn rot_axis(axis: usize, angle: f64) -> Mat3 {
+    let (s, c) = angle.sin_cos();
+    match axis {
+        0 => [[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]],
+        1 => [[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]],
+        _ => [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]],
+    }
 }
 
 /// The unit quaternion of `q`, or `None` when its norm is zero or not finite.
@@ -114,6 +155,47 @@ pub fn quat_to_mat(q: Quat) -> Mat3 {
             1.0 - 2.0 * (x * x + y * y),
         ],
     ]
+}
+
+/// Unit quaternion `[x, y, z, w]` (w >= 0) of a rotation matrix.
+pub fn quat_from_mat(m: &Mat3) -> Quat {
+    let tr = m[0][0] + m[1][1] + m[2][2];
+    let q = if tr > 0.0 {
+        let s = (tr + 1.0).sqrt() * 2.0;
+        [
+            (m[2][1] - m[1][2]) / s,
+            (m[0][2] - m[2][0]) / s,
+            (m[1][0] - m[0][1]) / s,
+            0.25 * s,
+        ]
+    } else if m[0][0] > m[1][1] && m[0][0] > m[2][2] {
+        let s = (1.0 + m[0][0] - m[1][1] - m[2][2]).sqrt() * 2.0;
+        [
+            0.25 * s,
+            (m[0][1] + m[1][0]) / s,
+            (m[0][2] + m[2][0]) / s,
+            (m[2][1] - m[1][2]) / s,
+        ]
+    } else if m[1][1] > m[2][2] {
+        let s = (1.0 + m[1][1] - m[0][0] - m[2][2]).sqrt() * 2.0;
+        [
+            (m[0][1] + m[1][0]) / s,
+            0.25 * s,
+            (m[1][2] + m[2][1]) / s,
+            (m[0][2] - m[2][0]) / s,
+        ]
+    } else {
+        let s = (1.0 + m[2][2] - m[0][0] - m[1][1]).sqrt() * 2.0;
+        [
+            (m[0][2] + m[2][0]) / s,
+            (m[1][2] + m[2][1]) / s,
+            0.25 * s,
+            (m[1][0] - m[0][1]) / s,
+        ]
+    };
+    let n = (q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]).sqrt();
+    let sign = if q[3] < 0.0 { -1.0 } else { 1.0 };
+    [sign * q[0] / n, sign * q[1] / n, sign * q[2] / n, sign * q[3] / n]
 }
 
 /// Quaternion `[x, y, z, w]` of a rotation by `angle` radians about the unit `axis`.
@@ -265,5 +347,26 @@ mod tests {
         assert!((a.to_degrees() - 45.0).abs() < 1e-12);
         let b = angle_between([0.0, 0.0, 2.0], [0.0, 0.0, -1.0]);
         assert!((b - std::f64::consts::PI).abs() < 1e-12);
+    }
+
+    #[test]
+    fn quaternion_of_axis_rotation() {
+        let q = quat_from_mat(&rot_axis(2, 0.5));
+        assert!((q[2] - (0.25f64).sin()).abs() < 1e-12);
+        assert!((q[3] - (0.25f64).cos()).abs() < 1e-12);
+        let q = quat_from_mat(&rot_axis(0, 3.0));
+        assert!((q[0] - (1.5f64).sin()).abs() < 1e-12, "{q:?}");
+    }
+
+    #[test]
+    fn rotation_composition_is_orthonormal() {
+        let r = mul_mm(&rot_axis(0, 0.3), &rot_axis(1, -1.2));
+        let p = mul_mm(&r, &transpose(&r));
+        for (i, row) in p.iter().enumerate() {
+            for (j, v) in row.iter().enumerate() {
+                assert!((v - if i == j { 1.0 } else { 0.0 }).abs() < 1e-12);
+            }
+        }
+        assert!((cross([1.0, 0.0, 0.0], [0.0, 1.0, 0.0])[2] - 1.0).abs() < 1e-15);
     }
 }
