@@ -44,6 +44,7 @@ pub mod params;
 pub mod warp;
 
 use evseg_geometry::cache::prefetch_referent_ahead;
+use evseg_geometry::rigid::dot;
 use evseg_geometry::{
     EgomotionParams, FlowSample, RotationRate, TableCache, estimate_background_translation,
     estimate_translation, flow_direction, flow_samples,
@@ -450,10 +451,6 @@ fn planar_is_silent(reports: &[ClusterReport], planar_bg: &[usize], share: f64) 
     let all: usize = reports.iter().map(|r| r.events).sum();
     let background: usize = planar_bg.iter().sum();
     share > 0.0 && all.saturating_sub(background) as f64 <= share * all as f64
-}
-
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
 /// Sums `(|r|, |n_derot|)` over `members` (one cluster) under translation `t` (`None`: no
