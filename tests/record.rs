@@ -83,19 +83,7 @@ fn python() -> Option<String> {
 }
 
 fn python_json(py: &str, script: &str, args: &[&str]) -> serde_json::Value {
-    let out = Command::new(py)
-        .arg("-c")
-        .arg(script)
-        .args(args)
-        .output()
-        .expect("python runs");
-    assert!(
-        out.status.success(),
-        "python failed:\n{}\n{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    serde_json::from_slice(&out.stdout).expect("python printed JSON")
+    serde_json::from_slice(&evseg_tests::run_python(py, script, args)).expect("python printed JSON")
 }
 
 /// Lists channels and counts with the official reader, reading every message.

@@ -100,6 +100,24 @@ pub fn python_with(modules: &[&str], purpose: &str) -> Option<String> {
     None
 }
 
+/// Runs `py -c script args...` (a Python from [`python_with`]) and returns what it printed on
+/// standard output; panics with both of its streams when it fails.
+pub fn run_python(py: &str, script: &str, args: &[&str]) -> Vec<u8> {
+    let out = Command::new(py)
+        .arg("-c")
+        .arg(script)
+        .args(args)
+        .output()
+        .expect("python runs");
+    assert!(
+        out.status.success(),
+        "python failed:\n{}\n{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out.stdout
+}
+
 /// The official Rerun command-line tool, version 0.36 (`pip install rerun-sdk==0.36.*`):
 /// `$EVSEG_RERUN`, else `rerun` next to `$EVSEG_PYTHON`, in the workspace's `.venv`, in
 /// `/work/venv`, or on `PATH`. `None` (the check is skipped, with a message) when none runs,

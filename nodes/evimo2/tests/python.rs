@@ -4,7 +4,6 @@
 
 mod common;
 
-use std::process::Command;
 
 use evseg_evimo2::{MetaForm, ReadOptions, Sequence, WriteOptions, write_sequence_with};
 use evseg_schemas::Distortion;
@@ -16,19 +15,7 @@ fn python() -> Option<String> {
 }
 
 fn run(py: &str, script: &str, args: &[&str]) -> String {
-    let out = Command::new(py)
-        .arg("-c")
-        .arg(script)
-        .args(args)
-        .output()
-        .expect("python runs");
-    assert!(
-        out.status.success(),
-        "python failed:\n{}\n{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8(out.stdout).expect("utf-8 output")
+    String::from_utf8(evseg_tests::run_python(py, script, args)).expect("utf-8 output")
 }
 
 const READ_SCRIPT: &str = r#"
