@@ -4,7 +4,6 @@
 
 mod common;
 
-
 use evseg_evimo2::{MetaForm, ReadOptions, Sequence, WriteOptions, write_sequence_with};
 use evseg_schemas::Distortion;
 use serde_json::Value;
