@@ -62,6 +62,7 @@
 use anyhow::{Context, bail};
 use evseg_background_merger::{BackgroundMerger, BackgroundParams, SliceInput};
 use evseg_geometry::Camera;
+use evseg_geometry::rigid::{self, dot};
 use evseg_hierarchical_merger::{HierParams, HierarchicalMerger};
 use evseg_normal_flow::{PlaneFitEstimator, PlaneFitParams};
 use evseg_oversegmenter::{OversegParams, Oversegmenter};
@@ -328,10 +329,10 @@ fn dump(
 }
 
 fn angle_deg(a: [f64; 3], b: [f64; 3]) -> f64 {
-    let d = a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
-    let na = (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
-    let nb = (b[0] * b[0] + b[1] * b[1] + b[2] * b[2]).sqrt();
-    (d / (na * nb)).clamp(-1.0, 1.0).acos().to_degrees()
+    (rigid::dot(a, b) / (rigid::norm(a) * rigid::norm(b)))
+        .clamp(-1.0, 1.0)
+        .acos()
+        .to_degrees()
 }
 
 /// SPLIT_STATS: per slice, the object share, the planar foreground share and separation
@@ -904,7 +905,6 @@ fn main() -> anyhow::Result<()> {
                             per[usize::from(c.id[sm.index])].push(sm);
                         }
                     }
-                    let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
                     let bgc: Vec<bool> = per
                         .iter()
                         .map(|m| {
