@@ -89,6 +89,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let (mut speed, mut conf, mut inl, mut pts, mut pol): (Bins, Bins, Bins, Bins, Bins) =
             Default::default();
         let (mut offs, mut gap, mut grid, mut outl): (Bins, Bins, Bins, Bins) = Default::default();
+        let mut since_start = Bins::default();
         // Absolute length errors |p| - u . n0 (px/s), by the angle between n0 and u and by the
         // fit's direction standard deviation.
         let (mut abs_angle, mut abs_dsd, mut rel_dsd): (Bins, Bins, Bins) = Default::default();
@@ -161,6 +162,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 let ang = ang.min(90.0 - ang);
                 let k = bin_of(ang, &[5.0, 15.0, 25.0, 35.0]);
                 grid.add(k.0, k.1, rel);
+                let k = bin_of(ev.t[i] * 1e3, &[10.0, 20.0, 30.0, 60.0, 100.0, 200.0, 500.0]);
+                since_start.add(k.0, k.1, rel);
             }
         }
         all.sort_by(f64::total_cmp);
@@ -195,6 +198,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         offs.print("plane offset at own pixel, px of travel");
         gap.print("since previous same-pol event at pixel, px of travel");
         grid.print("n0 angle to pixel axes, deg");
+        since_start.print("event time since the stream's start, ms");
         abs_angle.print("ABSOLUTE error px/s by angle(n0, u) deg");
         abs_dsd.print("ABSOLUTE error px/s by direction sd deg");
         rel_dsd.print("relative error by direction sd deg");
