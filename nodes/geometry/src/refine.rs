@@ -58,6 +58,15 @@ pub struct DepthMemory {
     pub slices: u32,
 }
 
+impl DepthMemory {
+    /// Forgets every remembered depth and the slice count, keeping the region count: the next
+    /// refinement fits its depths afresh and the memory's weight ramps up again.
+    pub fn restart(&mut self) {
+        self.rho.fill(f64::NAN);
+        self.slices = 0;
+    }
+}
+
 /// [`refine_direction_robust`] with a prior on each region's inverse depth from `memory`
 /// (`Some((memory, weight))`): the previous depths, times one scale fitted per slice (the
 /// speed changes), pull each region's depth with `weight` times the mean information of the
@@ -113,18 +122,7 @@ pub fn refine_direction_with_memory(
         };
         // Each region's own inverse depth and information under `t`, then (with a memory) the
         // slice's scale of the previous depths and the blend.
-        let own: Vec<(f64, f64)> = rows
-            .iter()
-            .map(|region| {
-                let den = t.dot(&(region.xx * t));
-                let rho = if den > 0.0 {
-                    (t.dot(&region.nx) / den).max(0.0)
-                } else {
-                    0.0
-                };
-                (rho, den.max(0.0))
-            })
-            .collect();
+        let own: Vec<(f64, f64)> = rows.iter().map(|region| region.own_depth(&t)).collect();
         let blended: Vec<f64> = if prior_weight > 0.0 {
             let (mut num, mut den, mut info) = (0.0, 0.0, 0.0);
             for (&(rho, d), &k) in own.iter().zip(&ids) {
@@ -172,10 +170,8 @@ pub fn refine_direction_with_memory(
             m += rho * rho * xx;
             b += rho * nx;
         }
-        if huber_k.is_some() && !abs_res.is_empty() {
-            let mid = abs_res.len() / 2;
-            let (_, med, _) = abs_res.select_nth_unstable_by(mid, f64::total_cmp);
-            scale = Some((1.4826 * *med).max(f64::MIN_POSITIVE));
+        if huber_k.is_some() {
+            scale = robust_scale(&mut abs_res).or(scale);
         }
         match direction_step(&m, &b, &mut t) {
             Some(change) if change >= CONVERGED => {}
@@ -196,6 +192,65 @@ pub fn refine_direction_with_memory(
     Some(t.into())
 }
 
+/// The robust scale of absolute residuals: 1.4826 x their median (the standard deviation of
+/// Gaussian residuals), at least the smallest positive number; `None` when there are none.
+/// Reorders `abs_res`.
+fn robust_scale(abs_res: &mut [f64]) -> Option<f64> {
+    if abs_res.is_empty() {
+        return None;
+    }
+    let mid = abs_res.len() / 2;
+    let (_, med, _) = abs_res.select_nth_unstable_by(mid, f64::total_cmp);
+    Some((1.4826 * *med).max(f64::MIN_POSITIVE))
+}
+
+/// How well a unit direction explains one slice's regions on their own: see [`profile_cost`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ProfileCost {
+    /// The Huber cost of the residuals under the direction (normalized flow squared, 1/s^2,
+    /// times the samples' weights).
+    pub cost: f64,
+    /// The robust scale used, 1/s.
+    pub scale: f64,
+}
+
+/// How well the unit direction `t` explains one slice's `regions` on their own (no memory):
+/// each region with at least `min_region` samples at its own best inverse depth under `t`
+/// (clamped at 0), the Huber loss of its samples' residuals `n_derot - rho X . t` (normalized
+/// flow, 1/s) weighted by the samples' weights, summed. The Huber constant is `huber_k` robust
+/// scales; `scale` is that scale (1/s), or `None` to take it from these residuals (1.4826 x
+/// their median absolute value). Lower is better; only differences between directions scored
+/// on the same regions and scale (pass the first one's `scale` to the second) mean anything.
+pub fn profile_cost(
+    regions: &[Vec<(&FlowSample, f64)>],
+    t: [f64; 3],
+    min_region: usize,
+    huber_k: f64,
+    scale: Option<f64>,
+) -> ProfileCost {
+    let t = Vector3::from(t);
+    // (residual, weight) per sample.
+    let mut residuals: Vec<(f64, f64)> = Vec::new();
+    for region in regions.iter().filter(|r| r.len() >= min_region.max(1)) {
+        let rows = RegionRows::new(region);
+        let (rho, _) = rows.own_depth(&t);
+        residuals.extend(rows.rows.iter().map(|(x, n, w)| (n - rho * x.dot(&t), *w)));
+    }
+    let scale = scale.unwrap_or_else(|| {
+        let mut abs: Vec<f64> = residuals.iter().map(|(e, _)| e.abs()).collect();
+        robust_scale(&mut abs).unwrap_or(f64::MIN_POSITIVE)
+    });
+    let c = huber_k * scale;
+    let cost = residuals
+        .iter()
+        .map(|&(e, w)| {
+            let e = e.abs();
+            w * if e <= c { 0.5 * e * e } else { c * (e - 0.5 * c) }
+        })
+        .sum();
+    ProfileCost { cost, scale }
+}
+
 /// One region's samples for the Huber refinement: `(X, n_derot, prior weight)` rows and their
 /// prior-weighted moments `sum w X X^T`, `sum w n X`.
 struct RegionRows {
@@ -212,6 +267,18 @@ impl RegionRows {
             .collect();
         let (xx, nx) = moments(rows.iter().map(|&(x, n, w)| (x, n, w)));
         Self { rows, xx, nx }
+    }
+
+    /// The region's own inverse depth under unit direction `t` (least squares of its samples,
+    /// clamped at 0) and its information `t^T (sum w X X^T) t` (at least 0).
+    fn own_depth(&self, t: &Vector3<f64>) -> (f64, f64) {
+        let den = t.dot(&(self.xx * t));
+        let rho = if den > 0.0 {
+            (t.dot(&self.nx) / den).max(0.0)
+        } else {
+            0.0
+        };
+        (rho, den.max(0.0))
     }
 }
 
@@ -385,6 +452,42 @@ mod tests {
             (Vector3::from(a) - Vector3::from(b)).norm() < 1e-9,
             "{a:?} vs {b:?}"
         );
+    }
+
+    #[test]
+    fn the_profile_cost_is_least_at_the_true_direction() {
+        let t_true = [0.3, -0.2, 0.9];
+        let centres = (0..12u32).map(|r| {
+            (
+                f64::from(r % 4) * 0.3 - 0.45,
+                f64::from(r / 4) * 0.3 - 0.3,
+                0.2 + 0.15 * f64::from(r),
+            )
+        });
+        let points: Vec<(f64, f64)> = (0..60u32)
+            .map(|j| (f64::from(j % 8) * 0.01, f64::from(j / 8) * 0.01))
+            .collect();
+        // Every tenth sample flipped, so the robust scale is not 0.
+        let samples = region_samples(t_true, centres, &points, |k| k % 10 == 0);
+        let regions: Vec<Vec<(&FlowSample, f64)>> = samples
+            .iter()
+            .map(|m| m.iter().map(|s| (s, 1.0)).collect())
+            .collect();
+        let tn: [f64; 3] = Vector3::from(t_true).normalize().into();
+        let at_truth = profile_cost(&regions, tn, 10, 1.5, None);
+        assert!(at_truth.scale > 0.0 && at_truth.cost > 0.0, "{at_truth:?}");
+        let mut last = at_truth.cost;
+        // Turning away from the truth costs more, and more the further it turns.
+        for deg in [2.0f64, 5.0, 10.0, 20.0] {
+            let r = nalgebra::Rotation3::from_axis_angle(&Vector3::y_axis(), deg.to_radians());
+            let t: [f64; 3] = (r * Vector3::from(tn)).into();
+            let c = profile_cost(&regions, t, 10, 1.5, Some(at_truth.scale));
+            assert!(c.cost > last, "{deg} deg: {} after {last}", c.cost);
+            assert_eq!(c.scale, at_truth.scale);
+            last = c.cost;
+        }
+        // Regions below the size limit count for nothing.
+        assert_eq!(profile_cost(&regions, tn, 61, 1.5, Some(1.0)).cost, 0.0);
     }
 
     #[test]

@@ -152,6 +152,7 @@ fn apply(
             }
             "depth_memory" => hier.egomotion.depth_memory = f,
             "depth_memory_ramp" => hier.egomotion.depth_memory_ramp_slices = f as u32,
+            "depth_memory_restart_ratio" => hier.egomotion.depth_memory_restart_ratio = f,
             // The final egomotion's settings alone (the hierarchical merger's `egomotion`).
             "final_huber_k" => hier.egomotion.huber_k = f,
             "final_min_conf" => hier.egomotion.min_confidence = f as f32,

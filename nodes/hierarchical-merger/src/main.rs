@@ -116,6 +116,11 @@ fn main() -> ExitCode {
         "depth_memory_ramp_slices",
         d.egomotion.depth_memory_ramp_slices,
         "slices over which depth_memory's weight grows to its full value from the start (0 = at once)",
+    )
+    .param(
+        "depth_memory_restart_ratio",
+        d.egomotion.depth_memory_restart_ratio,
+        "while depth_memory ramps up: restart it when its direction fits the slice's samples worse than the slice's own direction by more than this fraction of the robust cost (0 = never)",
     );
     let description = describe_egomotion(description, &d.egomotion).build();
     run_stage(description, |cfg: &NodeConfig| {
@@ -135,6 +140,7 @@ fn main() -> ExitCode {
             egomotion: EgomotionParams {
                 depth_memory: cfg.param("depth_memory")?,
                 depth_memory_ramp_slices: cfg.param("depth_memory_ramp_slices")?,
+                depth_memory_restart_ratio: cfg.param("depth_memory_restart_ratio")?,
                 ..egomotion_from_config(cfg)?
             },
         };

@@ -127,6 +127,12 @@ impl HierParams {
             "must be finite and >= 0",
         )?;
         check(
+            "depth_memory_restart_ratio",
+            self.egomotion.depth_memory_restart_ratio,
+            self.egomotion.depth_memory_restart_ratio >= 0.0,
+            "must be finite and >= 0",
+        )?;
+        check(
             "refine_huber_k",
             self.egomotion.huber_k,
             self.egomotion.huber_k >= 0.0,
