@@ -423,9 +423,9 @@ mod tests {
             .collect()
     }
 
-    #[test]
-    fn regions_at_different_depths_give_the_direction_from_a_poor_start() {
-        let t_true = [0.3, -0.2, 0.9];
+    /// [`region_samples`] of twelve regions on a 4 x 3 grid, each at its own depth (inverse
+    /// depth 0.2 to 1.85), of 60 samples on an 8-wide grid 0.01 apart.
+    fn twelve_regions(t_true: [f64; 3], wrong: impl Fn(usize) -> bool) -> Vec<Vec<FlowSample>> {
         let centres = (0..12u32).map(|r| {
             (
                 f64::from(r % 4) * 0.3 - 0.45,
@@ -436,7 +436,13 @@ mod tests {
         let points: Vec<(f64, f64)> = (0..60u32)
             .map(|j| (f64::from(j % 8) * 0.01, f64::from(j / 8) * 0.01))
             .collect();
-        let samples = region_samples(t_true, centres, &points, |_| false);
+        region_samples(t_true, centres, &points, wrong)
+    }
+
+    #[test]
+    fn regions_at_different_depths_give_the_direction_from_a_poor_start() {
+        let t_true = [0.3, -0.2, 0.9];
+        let samples = twelve_regions(t_true, |_| false);
         let regions: Vec<Vec<(&FlowSample, f64)>> = samples
             .iter()
             .map(|m| m.iter().map(|s| (s, 1.0)).collect())
@@ -457,18 +463,8 @@ mod tests {
     #[test]
     fn the_profile_cost_is_least_at_the_true_direction() {
         let t_true = [0.3, -0.2, 0.9];
-        let centres = (0..12u32).map(|r| {
-            (
-                f64::from(r % 4) * 0.3 - 0.45,
-                f64::from(r / 4) * 0.3 - 0.3,
-                0.2 + 0.15 * f64::from(r),
-            )
-        });
-        let points: Vec<(f64, f64)> = (0..60u32)
-            .map(|j| (f64::from(j % 8) * 0.01, f64::from(j / 8) * 0.01))
-            .collect();
         // Every tenth sample flipped, so the robust scale is not 0.
-        let samples = region_samples(t_true, centres, &points, |k| k % 10 == 0);
+        let samples = twelve_regions(t_true, |k| k % 10 == 0);
         let regions: Vec<Vec<(&FlowSample, f64)>> = samples
             .iter()
             .map(|m| m.iter().map(|s| (s, 1.0)).collect())
