@@ -159,6 +159,7 @@ fn apply(
             "final_clear_px" => hier.egomotion.clear_px = f as u16,
             "final_min_cell_samples" => hier.egomotion.min_cell_samples = f as usize,
             "final_max_samples" => hier.egomotion.max_samples = f as usize,
+            "final_refine_iterations" => hier.egomotion.refine_iterations = f as usize,
             "grid_cols" => {
                 bg.egomotion.grid_cols = f as usize;
                 hier.egomotion.grid_cols = f as usize;
@@ -170,6 +171,7 @@ fn apply(
             "merge_threshold" => hier.merge_threshold = f,
             "fill_cell_px" => hier.fill_cell_px = f as u16,
             "fill_reach" => hier.fill_reach = f as u16,
+            "direction_prior_samples" => hier.direction_prior_samples = f,
             "background_penalty" => hier.background_penalty = f,
             "lambda_r" => hier.lambda_r = f,
             "lambda" => hier.lambda = f,

@@ -28,6 +28,7 @@
 pub mod fill;
 pub mod params;
 
+use evseg_geometry::rigid;
 use evseg_geometry::{
     DepthMemory, FlowSample, RotationRate, TableCache, TranslationFit,
     estimate_background_translation_with_memory, flow_samples,
@@ -184,6 +185,9 @@ pub struct HierarchicalMerger {
     table: TableCache,
     /// The final egomotion's cell depths of the previous slices (`egomotion.depth_memory`).
     depth_memory: DepthMemory,
+    /// The last published direction of translation (unit, camera frame of its slice) and its
+    /// slice's time (midpoint of its events, seconds), for `direction_prior_samples`.
+    last_direction: Option<(f64, [f64; 3])>,
 }
 
 impl HierarchicalMerger {
@@ -194,6 +198,7 @@ impl HierarchicalMerger {
             params,
             table: TableCache::default(),
             depth_memory: DepthMemory::default(),
+            last_direction: None,
         })
     }
 
@@ -418,6 +423,8 @@ impl HierarchicalMerger {
             |i| label[i] != 0,
             Some(&mut self.depth_memory),
         );
+        let estimate =
+            estimate.map(|direction| self.with_direction_prior(direction, events, rate, bg_samples.len()));
         let egomotion = match estimate {
             Some(direction) => Egomotion {
                 direction,
@@ -439,6 +446,59 @@ impl HierarchicalMerger {
         })
     }
 }
+
+impl HierarchicalMerger {
+    /// The slice's unit `direction` blended with the last published one, turned into this
+    /// slice's camera frame by the rotation `rate` over the time between the two slices, with
+    /// weights `n` and `direction_prior_samples` (`n` the slice's background samples with
+    /// flow); remembered for the next slice. The slice alone when the parameter is 0, when there
+    /// is no earlier direction within [`PRIOR_MAX_GAP_S`], or when the two cancel.
+    fn with_direction_prior(
+        &mut self,
+        direction: [f64; 3],
+        events: &Events,
+        rate: Option<RotationRate>,
+        n: usize,
+    ) -> [f64; 3] {
+        let c = self.params.direction_prior_samples;
+        let t = match (events.t.first(), events.t.last()) {
+            (Some(a), Some(b)) => 0.5 * (a + b),
+            _ => return direction,
+        };
+        let prior = self.last_direction.and_then(|(t_last, last)| {
+            let dt = t - t_last;
+            (c > 0.0 && dt > 0.0 && dt <= PRIOR_MAX_GAP_S).then(|| {
+                // A direction fixed in the world turns by -w dt in the camera's frame.
+                let w = rate.map_or([0.0; 3], |r| r.at(t_last + 0.5 * dt));
+                let angle = rigid::norm(w) * dt;
+                if angle > 0.0 {
+                    let turn = rigid::quat_to_mat(rigid::quat_from_axis_angle(rigid::normalize(w), -angle));
+                    rigid::mul_mv(&turn, last)
+                } else {
+                    last
+                }
+            })
+        });
+        let out = match prior {
+            Some(prior) => {
+                let k = n as f64 / (n as f64 + c);
+                let blend = rigid::add(rigid::scale(direction, k), rigid::scale(prior, 1.0 - k));
+                if rigid::norm(blend) > 1e-9 {
+                    rigid::normalize(blend)
+                } else {
+                    direction
+                }
+            }
+            None => direction,
+        };
+        self.last_direction = Some((t, out));
+        out
+    }
+}
+
+/// Longest time between two slices (seconds) over which the last direction is a prior for the
+/// next (`direction_prior_samples`): beyond it the heading may have turned anywhere.
+pub const PRIOR_MAX_GAP_S: f64 = 0.2;
 
 #[cfg(test)]
 mod tests;

@@ -108,6 +108,11 @@ fn main() -> ExitCode {
         "cells the fill looks out to where the 3x3 cells around an event without flow hold no labelled event",
     )
     .param(
+        "direction_prior_samples",
+        d.direction_prior_samples,
+        "background samples at which the slice's direction and the previous one (turned by the gyro) weigh equally in the published direction (0 = off)",
+    )
+    .param(
         "depth_memory",
         d.egomotion.depth_memory,
         "weight of the previous slices' cell depths as a prior in the final egomotion's depth refinement (0 = off)",
@@ -137,6 +142,7 @@ fn main() -> ExitCode {
             min_segment_events: cfg.param("min_segment_events")?,
             fill_cell_px: cfg.param("fill_cell_px")?,
             fill_reach: cfg.param("fill_reach")?,
+            direction_prior_samples: cfg.param("direction_prior_samples")?,
             egomotion: EgomotionParams {
                 depth_memory: cfg.param("depth_memory")?,
                 depth_memory_ramp_slices: cfg.param("depth_memory_ramp_slices")?,

@@ -64,6 +64,23 @@ pub struct HierParams {
     /// The final egomotion estimate (SVM, then depth refinement; see
     /// `evseg_geometry::egomotion`).
     pub egomotion: EgomotionParams,
+    /// Background flow samples at which a slice's direction of translation and the previous
+    /// slice's (turned by the gyro's rotation between the two) weigh equally in the direction
+    /// published: the slice's weight is `n / (n + direction_prior_samples)` for its `n`
+    /// background samples with flow, so a slice with thousands keeps nearly its own estimate
+    /// and one with a few hundred leans on the last (0 = off: every slice alone). Not in the
+    /// paper. Default 300, from 100 / 300 / 1000 offline on the per-slice estimates
+    /// (`method_on_sim` `DIRVEC`; the mean of fourteen median direction errors, deg, and the
+    /// RMSE Vx / Vy / Vz relative to off): bench seeds 5.43 -> 5.41 / 5.36 / 5.44, x 0.96 /
+    /// 0.99 / 0.98, x 0.93 / 1.00 / 0.95, x 0.90 / 1.04 / 0.88; seeds 301-307 / 401-407 6.11 ->
+    /// 6.10 / 6.01 / 6.06, Vz x 0.99 / 0.95 / 0.88; seeds 501-507 / 601-607 5.73 -> 5.73 / 5.71 /
+    /// 5.65, Vz x 0.99 / 0.97 / 0.95. A fixed blend (gain 0.25-0.7, session 31) was worse on
+    /// every setting: the heading turns about 5.6 deg per 30 ms slice, so only slices with
+    /// little evidence should lean on the last. Through the graph at 300 against 0: `evseg
+    /// bench` median direction error 5.43 -> 5.36 deg, RMSE 0.034 / 0.036 / 0.050 -> 0.032 /
+    /// 0.036 / 0.048 m/s (1000: 5.44 deg, 0.031 / 0.037 / 0.044); seeds 301-307 / 401-407 (3
+    /// s) 6.11 -> 6.01 deg, RMSE 0.037 / 0.038 / 0.074 -> 0.036 / 0.037 / 0.071.
+    pub direction_prior_samples: f64,
 }
 
 impl Default for HierParams {
@@ -85,6 +102,7 @@ impl Default for HierParams {
                 depth_memory: DEPTH_MEMORY,
                 ..EgomotionParams::default()
             },
+            direction_prior_samples: 300.0,
         }
     }
 }
@@ -162,6 +180,12 @@ impl HierParams {
             f64::from(self.min_confidence),
             true,
             "must be a number",
+        )?;
+        check(
+            "direction_prior_samples",
+            self.direction_prior_samples,
+            self.direction_prior_samples >= 0.0,
+            "must be finite and >= 0",
         )?;
         if self.fill_cell_px == 0 {
             return Err(ParamError::new("fill_cell_px", 0, "must be >= 1"));

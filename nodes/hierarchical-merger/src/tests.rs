@@ -199,3 +199,58 @@ fn similarity_matches_the_paper() {
     assert!(boxes_touch([0.0, 0.0, 10.0, 10.0], [11.0, 5.0, 20.0, 8.0], 2.0));
     assert!(!boxes_touch([0.0, 0.0, 10.0, 10.0], [13.0, 5.0, 20.0, 8.0], 2.0));
 }
+
+/// Events at times `t0` and `t1` (seconds): a slice whose midpoint is their mean.
+fn events_between(t0: f64, t1: f64) -> Events {
+    let mut ev = Events::default();
+    ev.push(t0, 1, 1, 1);
+    ev.push(t1, 2, 2, 0);
+    ev
+}
+
+fn angle(a: [f64; 3], b: [f64; 3]) -> f64 {
+    rigid::angle_between(a, b).to_degrees()
+}
+
+#[test]
+fn a_slice_with_few_background_samples_leans_on_the_last_direction_turned_by_the_gyro() {
+    let params = HierParams {
+        direction_prior_samples: 300.0,
+        ..HierParams::default()
+    };
+    let mut m = HierarchicalMerger::new(params).unwrap();
+    let x = [1.0, 0.0, 0.0];
+    let y = [0.0, 1.0, 0.0];
+    // The first slice has no prior: its own direction.
+    assert_eq!(m.with_direction_prior(x, &events_between(0.0, 0.03), None, 10), x);
+    // Equal weights (n = 300) and no rotation: halfway between the two.
+    let half = m.with_direction_prior(y, &events_between(0.03, 0.06), None, 300);
+    assert!((angle(half, x) - 45.0).abs() < 1e-9, "{half:?}");
+    // Many samples: nearly the slice's own.
+    let own = m.with_direction_prior(y, &events_between(0.06, 0.09), None, 1_000_000);
+    assert!(angle(own, y) < 0.02, "{own:?}");
+    // No samples: the last direction, turned by -w dt in the camera frame (0.03 s at 1 rad/s
+    // about z: 1.72 deg towards +x).
+    let rate = RotationRate::from([0.0, 0.0, 1.0]);
+    let held = m.with_direction_prior(x, &events_between(0.09, 0.12), Some(rate), 0);
+    let (s, c) = 0.03f64.sin_cos();
+    let turned = [c * own[0] + s * own[1], -s * own[0] + c * own[1], own[2]];
+    assert!(angle(held, turned) < 0.01, "{held:?} vs {turned:?}");
+    // A gap longer than PRIOR_MAX_GAP_S: the slice alone.
+    let late = PRIOR_MAX_GAP_S + 0.2;
+    assert_eq!(
+        m.with_direction_prior(x, &events_between(late, late + 0.03), None, 0),
+        x
+    );
+    // Off: every slice alone.
+    let mut off = HierarchicalMerger::new(HierParams {
+        direction_prior_samples: 0.0,
+        ..HierParams::default()
+    })
+    .unwrap();
+    off.with_direction_prior(x, &events_between(0.0, 0.03), None, 0);
+    assert_eq!(
+        off.with_direction_prior(y, &events_between(0.03, 0.06), None, 0),
+        y
+    );
+}
