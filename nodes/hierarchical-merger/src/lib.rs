@@ -28,10 +28,9 @@
 pub mod fill;
 pub mod params;
 
-use evseg_geometry::rigid;
 use evseg_geometry::{
     DepthMemory, FlowSample, RotationRate, TableCache, TranslationFit,
-    estimate_background_translation_with_memory, flow_samples,
+    estimate_background_translation_with_memory, flow_samples, rigid,
 };
 use evseg_schemas::align::AlignError;
 use evseg_schemas::{CameraInfo, CoarseSegmentation, Egomotion, Events, NormalFlow, Segment, Segmentation};
@@ -178,7 +177,8 @@ pub struct MergeStep {
     pub similarity: f64,
 }
 
-/// The hierarchical merger (stateless across slices except the undistortion table).
+/// The hierarchical merger. Its state across slices: the undistortion table, the final
+/// egomotion's depth memory and the last published direction.
 #[derive(Debug, Clone)]
 pub struct HierarchicalMerger {
     params: HierParams,
@@ -445,9 +445,7 @@ impl HierarchicalMerger {
             dropped_small,
         })
     }
-}
 
-impl HierarchicalMerger {
     /// The slice's unit `direction` blended with the last published one, turned into this
     /// slice's camera frame by the rotation `rate` over the time between the two slices, with
     /// weights `n` and `direction_prior_samples` (`n` the slice's background samples with
