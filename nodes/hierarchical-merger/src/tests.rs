@@ -1,5 +1,5 @@
 use super::*;
-use evseg_geometry::translational_flow;
+use evseg_geometry::{EgomotionParams, translational_flow};
 
 const F: f64 = 150.0;
 
@@ -253,4 +253,39 @@ fn a_slice_with_few_background_samples_leans_on_the_last_direction_turned_by_the
         off.with_direction_prior(y, &events_between(0.03, 0.06), None, 0),
         y
     );
+}
+
+#[test]
+fn out_of_range_settings_are_refused_naming_the_parameter() {
+    let bad = [
+        (
+            "direction_prior_samples",
+            HierParams {
+                direction_prior_samples: -1.0,
+                ..HierParams::default()
+            },
+        ),
+        (
+            "direction_prior_samples",
+            HierParams {
+                direction_prior_samples: f64::NAN,
+                ..HierParams::default()
+            },
+        ),
+        (
+            "depth_memory_restart_ratio",
+            HierParams {
+                egomotion: EgomotionParams {
+                    depth_memory_restart_ratio: -0.1,
+                    ..HierParams::default().egomotion
+                },
+                ..HierParams::default()
+            },
+        ),
+    ];
+    for (name, params) in bad {
+        let err = HierarchicalMerger::new(params).expect_err(name);
+        assert!(err.to_string().contains(name), "{err}");
+    }
+    assert!(HierarchicalMerger::new(HierParams::default()).is_ok());
 }
