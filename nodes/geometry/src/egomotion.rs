@@ -356,9 +356,15 @@ pub fn estimate_translation_with_memory(
         n => (f64::from(memory.slices) / f64::from(n)).min(1.0),
     };
     // While the memory settles, the slice's own estimate (no memory) is the check: a memory
-    // that pulls the direction to where the slice's samples fit clearly worse is restarted.
+    // that pulls the direction to where the slice's samples fit clearly worse is replaced by
+    // the fresh one that estimate filled with this slice's depths.
     let settling = memory.slices < p.depth_memory_ramp_slices && p.depth_memory_restart_ratio > 0.0;
-    let alone = if settling { refine(None) } else { None };
+    let mut fresh = DepthMemory::default();
+    let alone = if settling {
+        refine(Some((&mut fresh, 0.0)))
+    } else {
+        None
+    };
     let mut t = refine(Some((&mut *memory, weight * ramp)));
     if let (Some(alone), Some(held)) = (alone, t) {
         let k = if p.huber_k > 0.0 {
@@ -372,8 +378,8 @@ pub fn estimate_translation_with_memory(
         // round (a slice its own direction explains exactly has a cost near 0).
         let apart = rigid::angle_between(alone, held) > SAME_DIRECTION_RAD;
         if apart && with_memory.cost > (1.0 + p.depth_memory_restart_ratio) * own.cost {
-            memory.restart();
-            t = refine(Some((&mut *memory, 0.0)));
+            *memory = fresh;
+            t = Some(alone);
         }
     }
     memory.slices = memory.slices.saturating_add(1);

@@ -58,15 +58,6 @@ pub struct DepthMemory {
     pub slices: u32,
 }
 
-impl DepthMemory {
-    /// Forgets every remembered depth and the slice count, keeping the region count: the next
-    /// refinement fits its depths afresh and the memory's weight ramps up again.
-    pub fn restart(&mut self) {
-        self.rho.fill(f64::NAN);
-        self.slices = 0;
-    }
-}
-
 /// [`refine_direction_robust`] with a prior on each region's inverse depth from `memory`
 /// (`Some((memory, weight))`): the previous depths, times one scale fitted per slice (the
 /// speed changes), pull each region's depth with `weight` times the mean information of the
