@@ -6,7 +6,7 @@ use evseg_geometry::cache::{PREFETCH_AHEAD, prefetch};
 use evseg_schemas::{CameraInfo, Events, NormalFlow};
 
 use crate::fit::{AgeLimits, Neighbourhood, PlaneFit, RowRun, fit_plane};
-use crate::params::{ParamsError, PlaneFitParams};
+use crate::params::{ParamsError, PlaneFitParams, WideFitParams};
 
 /// Refits after outlier rejection of the scale check's larger window (at most; the fit's own
 /// `max_refits` if smaller): one re-selection of the inliers removes what a first fit over all
@@ -58,6 +58,11 @@ pub struct EstimatorStats {
     /// Fits left invalid because the plane of the larger check window disagreed
     /// ([`PlaneFitParams::check_radius`]).
     pub disagreed: u64,
+    /// Wide fits made ([`PlaneFitEstimator::with_wide_fit`]): valid estimates faster than
+    /// [`WideFitParams::min_speed_px_s`].
+    pub wide_fits: u64,
+    /// Wide fits that gave a valid (and agreed) estimate, which the wide flow then carries.
+    pub wide_valid: u64,
 }
 
 /// One event's estimate in pixel units.
@@ -98,6 +103,13 @@ pub struct PlaneFitEstimator {
     last_t: f64,
     stats: EstimatorStats,
     last_fit: Option<PlaneFit>,
+    /// The wide fit's settings, when on.
+    wide: Option<WideFitParams>,
+    /// Points of the wide window (when it is not the check window) and of its check window.
+    nb_wide: Neighbourhood,
+    nb_wide_check: Neighbourhood,
+    /// The wide estimate of the last event fitted ([`PixelEstimate::INVALID`] when none).
+    last_wide: PixelEstimate,
     /// Per event of the slice in progress: written to its surface (reused buffer).
     written: Vec<bool>,
 }
@@ -129,8 +141,27 @@ impl PlaneFitEstimator {
             last_t: f64::NEG_INFINITY,
             stats: EstimatorStats::default(),
             last_fit: None,
+            wide: None,
+            nb_wide: Neighbourhood::default(),
+            nb_wide_check: Neighbourhood::default(),
+            last_wide: PixelEstimate::INVALID,
             written: Vec::new(),
         })
+    }
+
+    /// Turns the wide fit on: every valid estimate faster than
+    /// [`WideFitParams::min_speed_px_s`] is fitted again on the wide window, and
+    /// [`process_wide_into`](Self::process_wide_into) gives that estimate as the event's wide
+    /// flow. The small window's flow is unchanged.
+    pub fn with_wide_fit(mut self, wide: WideFitParams) -> Result<Self, EstimatorError> {
+        wide.validate(&self.params)?;
+        self.wide = Some(wide);
+        Ok(self)
+    }
+
+    /// The wide fit's settings, when on.
+    pub fn wide_fit(&self) -> Option<&WideFitParams> {
+        self.wide.as_ref()
     }
 
     /// The settings in use.
@@ -190,20 +221,45 @@ impl PlaneFitEstimator {
         next: Option<&Events>,
         out: &mut NormalFlow,
     ) -> Result<(), EstimatorError> {
+        self.process_wide_into(events, next, out, None)
+    }
+
+    /// As [`process_with_next_into`](Self::process_with_next_into), also writing the wide flow
+    /// into `wide` when given (cleared first, aligned with `events`): each event's wide estimate
+    /// where the wide fit ([`with_wide_fit`](Self::with_wide_fit)) gave one, else its own
+    /// estimate (the same as in `out`; everywhere when the wide fit is off).
+    pub fn process_wide_into(
+        &mut self,
+        events: &Events,
+        next: Option<&Events>,
+        out: &mut NormalFlow,
+        mut wide: Option<&mut NormalFlow>,
+    ) -> Result<(), EstimatorError> {
         check_columns(events)?;
         if let Some(next) = next {
             check_columns(next)?;
         }
         let n = events.len();
-        out.nx.clear();
-        out.ny.clear();
-        out.confidence.clear();
-        out.nx.resize(n, 0.0);
-        out.ny.resize(n, 0.0);
-        out.confidence.resize(n, 0.0);
+        for f in std::iter::once(&mut *out).chain(wide.as_deref_mut()) {
+            f.nx.clear();
+            f.ny.clear();
+            f.confidence.clear();
+            f.nx.resize(n, 0.0);
+            f.ny.resize(n, 0.0);
+            f.confidence.resize(n, 0.0);
+        }
         let width = self.width;
         let jacobian = std::mem::take(&mut self.jacobian);
-        self.run(events, next, |i, est, _| {
+        // Writes estimate `est` of event `i` to `f`, in normalized units.
+        let write = |f: &mut NormalFlow, i: usize, est: &PixelEstimate| {
+            let idx = events.y[i] as usize * width + events.x[i] as usize;
+            let [j00, j01, j10, j11] = jacobian[idx];
+            let [fu, fv] = [est.flow_px[0] as f32, est.flow_px[1] as f32];
+            f.nx[i] = j00 * fu + j01 * fv;
+            f.ny[i] = j10 * fu + j11 * fv;
+            f.confidence[i] = est.confidence as f32;
+        };
+        self.run(events, next, |i, est, wide_est, _| {
             let ahead = i + PREFETCH_AHEAD;
             if let (Some(&x), Some(&y)) = (events.x.get(ahead), events.y.get(ahead))
                 && let Some(j) = jacobian.get(y as usize * width + x as usize)
@@ -211,12 +267,15 @@ impl PlaneFitEstimator {
                 prefetch(j);
             }
             if est.confidence > 0.0 {
-                let idx = events.y[i] as usize * width + events.x[i] as usize;
-                let [j00, j01, j10, j11] = jacobian[idx];
-                let [fu, fv] = [est.flow_px[0] as f32, est.flow_px[1] as f32];
-                out.nx[i] = j00 * fu + j01 * fv;
-                out.ny[i] = j10 * fu + j11 * fv;
-                out.confidence[i] = est.confidence as f32;
+                write(out, i, &est);
+                if let Some(w) = wide.as_deref_mut() {
+                    let chosen = if wide_est.confidence > 0.0 {
+                        &wide_est
+                    } else {
+                        &est
+                    };
+                    write(w, i, chosen);
+                }
             }
         });
         self.jacobian = jacobian;
@@ -227,7 +286,7 @@ impl PlaneFitEstimator {
     pub fn process_pixels(&mut self, events: &Events) -> Result<Vec<PixelEstimate>, EstimatorError> {
         check_columns(events)?;
         let mut out = vec![PixelEstimate::INVALID; events.len()];
-        self.run(events, None, |i, est, _| out[i] = est);
+        self.run(events, None, |i, est, _, _| out[i] = est);
         Ok(out)
     }
 
@@ -240,13 +299,13 @@ impl PlaneFitEstimator {
     ) -> Result<Vec<(PixelEstimate, Option<PlaneFit>)>, EstimatorError> {
         check_columns(events)?;
         let mut out = vec![(PixelEstimate::INVALID, None); events.len()];
-        self.run(events, None, |i, est, fit| out[i] = (est, fit));
+        self.run(events, None, |i, est, _, fit| out[i] = (est, fit));
         Ok(out)
     }
 
     /// Writes every event of the slice to the surfaces and fits it, handing `(index, estimate,
-    /// plane)`
-    /// to `sink`. Causal (each event fitted right after it is written) when `lookahead_s` is 0;
+    /// wide estimate, plane)` to `sink` (the wide estimate [`PixelEstimate::INVALID`] when there
+    /// is none). Causal (each event fitted right after it is written) when `lookahead_s` is 0;
     /// otherwise an event is fitted once the first event later than `t + lookahead_s` arrives
     /// (or at the end of the slice), with the neighbours written up to then. The events of
     /// `next` within `lookahead_s` of the slice's last event are written (not fitted) after the
@@ -255,14 +314,14 @@ impl PlaneFitEstimator {
         &mut self,
         events: &Events,
         next_slice: Option<&Events>,
-        mut sink: impl FnMut(usize, PixelEstimate, Option<PlaneFit>),
+        mut sink: impl FnMut(usize, PixelEstimate, PixelEstimate, Option<PlaneFit>),
     ) {
         let n = events.len();
         let la = self.params.lookahead_s;
         if la <= 0.0 {
             for i in 0..n {
                 let est = self.push_event(events.t[i], events.x[i], events.y[i], events.p[i]);
-                sink(i, est, self.last_fit);
+                sink(i, est, self.last_wide, self.last_fit);
             }
             return;
         }
@@ -306,13 +365,13 @@ impl PlaneFitEstimator {
         next: &mut usize,
         end: usize,
         until: f64,
-        sink: &mut impl FnMut(usize, PixelEstimate, Option<PlaneFit>),
+        sink: &mut impl FnMut(usize, PixelEstimate, PixelEstimate, Option<PlaneFit>),
     ) {
         let la = self.params.lookahead_s;
         while *next < end && (!written[*next] || events.t[*next] + la < until) {
             self.prefetch_window(events, *next + PREFETCH_AHEAD);
             let est = self.fit_written(written[*next], events, *next, la);
-            sink(*next, est, self.last_fit);
+            sink(*next, est, self.last_wide, self.last_fit);
             *next += 1;
         }
     }
@@ -341,7 +400,8 @@ impl PlaneFitEstimator {
         if xu >= self.width || yu >= self.height {
             return;
         }
-        let r = self.params.radius.max(self.params.check_radius);
+        let wide = self.wide.map_or(0, |w| w.radius.max(w.check_radius));
+        let r = self.params.radius.max(self.params.check_radius).max(wide);
         let (x0, x1) = (xu.saturating_sub(r), (xu + r).min(self.width - 1));
         let surface = &self.surface[usize::from(p != 0)];
         for yy in yu.saturating_sub(r)..=(yu + r).min(self.height - 1) {
@@ -353,6 +413,7 @@ impl PlaneFitEstimator {
 
     fn fit_written(&mut self, written: bool, events: &Events, i: usize, lookahead: f64) -> PixelEstimate {
         self.last_fit = None;
+        self.last_wide = PixelEstimate::INVALID;
         if !written {
             return PixelEstimate::INVALID;
         }
@@ -363,6 +424,7 @@ impl PlaneFitEstimator {
     /// and fits its plane (causally: `lookahead_s` applies to [`process`](Self::process) only).
     pub fn push_event(&mut self, t: f64, x: u16, y: u16, p: u8) -> PixelEstimate {
         self.last_fit = None;
+        self.last_wide = PixelEstimate::INVALID;
         if !self.write_event(t, x, y, p) {
             return PixelEstimate::INVALID;
         }
@@ -406,7 +468,8 @@ impl PlaneFitEstimator {
     /// Fits the plane of a written event to the neighbours on its surface whose age is within
     /// `[-lookahead, dt_max]` (and at least `dt_min` in magnitude); with a check window
     /// ([`PlaneFitParams::check_radius`]) a valid estimate is kept only when that window's plane
-    /// agrees with it.
+    /// agrees with it. With the wide fit on ([`with_wide_fit`](Self::with_wide_fit)) a fast
+    /// valid estimate also gets the wide window's, left in `last_wide`.
     fn fit_event(&mut self, t: f64, x: u16, y: u16, p: u8, lookahead: f64) -> PixelEstimate {
         let (xu, yu) = (x as usize, y as usize);
         let (width, height) = (self.width, self.height);
@@ -416,7 +479,7 @@ impl PlaneFitEstimator {
             y0: yu.saturating_sub(radius),
             y1: (yu + radius).min(height - 1),
         };
-        let r = self.params.radius;
+        let (r, rc) = (self.params.radius, self.params.check_radius);
         let at = Centre {
             t,
             x: xu,
@@ -424,91 +487,166 @@ impl PlaneFitEstimator {
             lookahead,
         };
         let surface = &self.surface[usize::from(p != 0)];
+        let params = &self.params;
         self.nb.clear();
-        gather(&mut self.nb, surface, width, &self.params, &at, window(r), None);
-        let (outlier, refits, min_points) = (
-            self.params.outlier_s,
-            self.params.max_refits,
-            self.params.min_points,
+        gather(&mut self.nb, surface, width, params, &at, window(r), None);
+        let check = (rc > r).then(|| window(rc));
+        let own = fit_checked(
+            &self.nb,
+            &mut self.nb_check,
+            surface,
+            width,
+            params,
+            &at,
+            window(r),
+            params.max_refits,
+            check,
         );
-        self.last_fit = fit_plane(&self.nb, outlier, refits, min_points);
-        let mut estimate = self.last_fit.and_then(|fit| self.judge(&fit));
-        let rc = self.params.check_radius;
-        let clearly_planar = |e: &PixelEstimate, f: Option<PlaneFit>| {
-            e.confidence >= self.params.check_skip_confidence
-                && f.is_some_and(|f| f.direction_sd_rad <= self.params.check_skip_direction_sd_rad)
+        self.last_fit = own.plane;
+        self.last_wide = PixelEstimate::INVALID;
+        if own.disagreed {
+            self.stats.disagreed += 1;
+        }
+        let Some(estimate) = own.estimate else {
+            return PixelEstimate::INVALID;
         };
-        if let Some(e) = estimate
-            && rc > r
-            && !clearly_planar(&e, self.last_fit)
+        self.stats.valid += 1;
+        if let Some(wide) = self.wide
+            && estimate.flow_px[0].hypot(estimate.flow_px[1]) > wide.min_speed_px_s
         {
-            // The larger window: the small one's points and the ring around them.
-            self.nb_check.copy_from(&self.nb);
-            gather(
-                &mut self.nb_check,
+            // The wide window's points: those of the check just done when it is the same
+            // window, else the small window's and the ring around them.
+            let points = if own.ring_filled && wide.radius == rc {
+                &self.nb_check
+            } else {
+                self.nb_wide.copy_from(&self.nb);
+                gather(
+                    &mut self.nb_wide,
+                    surface,
+                    width,
+                    params,
+                    &at,
+                    window(wide.radius),
+                    Some(window(r)),
+                );
+                &self.nb_wide
+            };
+            let check = (wide.check_radius > wide.radius).then(|| window(wide.check_radius));
+            let fitted = fit_checked(
+                points,
+                &mut self.nb_wide_check,
                 surface,
                 width,
-                &self.params,
+                params,
                 &at,
-                window(rc),
-                Some(window(r)),
+                window(wide.radius),
+                wide.max_refits,
+                check,
             );
-            let agreed = fit_plane(&self.nb_check, outlier, CHECK_REFITS.min(refits), min_points)
-                .and_then(|f| f.normal_flow_px())
-                .is_some_and(|c| self.agrees(e.flow_px, c));
-            if !agreed {
-                self.stats.disagreed += 1;
-                estimate = None;
+            self.stats.wide_fits += 1;
+            if let Some(w) = fitted.estimate {
+                self.stats.wide_valid += 1;
+                self.last_wide = w;
             }
         }
-        match estimate {
-            Some(e) => {
-                self.stats.valid += 1;
-                e
-            }
-            None => PixelEstimate::INVALID,
-        }
+        estimate
     }
+}
 
-    /// True when normal flows `a` and `b` (pixels/s) point within
-    /// [`PlaneFitParams::check_max_angle_rad`] of each other and their lengths differ by at most
-    /// [`PlaneFitParams::check_max_speed_diff`] of `b`'s.
-    fn agrees(&self, a: [f64; 2], b: [f64; 2]) -> bool {
-        let (sa, sb) = (
-            (a[0] * a[0] + a[1] * a[1]).sqrt(),
-            (b[0] * b[0] + b[1] * b[1]).sqrt(),
-        );
-        if !(sa > 0.0 && sb > 0.0) {
-            return false;
-        }
-        let cos = (a[0] * b[0] + a[1] * b[1]) / (sa * sb);
-        cos >= self.params.check_max_angle_rad.cos()
-            && (sa / sb - 1.0).abs() <= self.params.check_max_speed_diff
-    }
+/// One window's fit ([`fit_checked`]).
+struct Checked {
+    /// The plane fitted to the window's points (also when judged invalid).
+    plane: Option<PlaneFit>,
+    /// The estimate, when valid and (with a check) agreed.
+    estimate: Option<PixelEstimate>,
+    /// The check window's plane disagreed with a valid estimate.
+    disagreed: bool,
+    /// The check ran: `ring` holds the check window's points.
+    ring_filled: bool,
+}
 
-    /// Turns a fit into an estimate, or `None` when it is too fast, flat, or its confidence is at
-    /// or below `min_confidence` (and never 0). Confidence is the inlier share times
-    /// `1 - rms / outlier_s` (1 for a perfect plane through every point).
-    fn judge(&self, fit: &PlaneFit) -> Option<PixelEstimate> {
-        let flow = fit.normal_flow_px()?;
-        let speed = fit.speed_px_s();
-        if speed.is_nan() || speed > self.params.max_speed_px_s {
-            return None;
+/// Fits a plane to `points` (the window `inner`'s neighbours of the centre `at`, with at most
+/// `refits` refits) and judges it ([`judge`]); with a larger `check` window, a valid estimate that is not clearly planar
+/// ([`PlaneFitParams::check_skip_confidence`]) stands only when the plane of the check window
+/// (`points` and the ring around them, gathered into `ring`) agrees with it ([`agrees`]).
+#[allow(clippy::too_many_arguments)]
+fn fit_checked(
+    points: &Neighbourhood,
+    ring: &mut Neighbourhood,
+    surface: &[f64],
+    width: usize,
+    params: &PlaneFitParams,
+    at: &Centre,
+    inner: Window,
+    refits: usize,
+    check: Option<Window>,
+) -> Checked {
+    let (outlier, min_points) = (params.outlier_s, params.min_points);
+    let plane = fit_plane(points, outlier, refits, min_points);
+    let mut out = Checked {
+        plane,
+        estimate: plane.and_then(|fit| judge(params, &fit)),
+        disagreed: false,
+        ring_filled: false,
+    };
+    let clearly_planar = |e: &PixelEstimate| {
+        e.confidence >= params.check_skip_confidence
+            && plane.is_some_and(|f| f.direction_sd_rad <= params.check_skip_direction_sd_rad)
+    };
+    if let (Some(e), Some(check)) = (out.estimate, check)
+        && !clearly_planar(&e)
+    {
+        ring.copy_from(points);
+        gather(ring, surface, width, params, at, check, Some(inner));
+        out.ring_filled = true;
+        let agreed = fit_plane(ring, outlier, CHECK_REFITS.min(refits), min_points)
+            .and_then(|f| f.normal_flow_px())
+            .is_some_and(|c| agrees(params, e.flow_px, c));
+        if !agreed {
+            out.disagreed = true;
+            out.estimate = None;
         }
-        if fit.direction_sd_rad.is_nan() || fit.direction_sd_rad >= self.params.max_direction_sd_rad {
-            return None;
-        }
-        let inlier_share = fit.inliers as f64 / fit.points as f64;
-        let quality = (1.0 - fit.rms_s / self.params.outlier_s).clamp(0.0, 1.0);
-        let confidence = inlier_share * quality;
-        if confidence.is_nan() || confidence <= self.params.min_confidence.max(0.0) {
-            return None;
-        }
-        Some(PixelEstimate {
-            flow_px: flow,
-            confidence,
-        })
     }
+    out
+}
+
+/// True when normal flows `a` and `b` (pixels/s) point within
+/// [`PlaneFitParams::check_max_angle_rad`] of each other and their lengths differ by at most
+/// [`PlaneFitParams::check_max_speed_diff`] of `b`'s.
+fn agrees(params: &PlaneFitParams, a: [f64; 2], b: [f64; 2]) -> bool {
+    let (sa, sb) = (
+        (a[0] * a[0] + a[1] * a[1]).sqrt(),
+        (b[0] * b[0] + b[1] * b[1]).sqrt(),
+    );
+    if !(sa > 0.0 && sb > 0.0) {
+        return false;
+    }
+    let cos = (a[0] * b[0] + a[1] * b[1]) / (sa * sb);
+    cos >= params.check_max_angle_rad.cos() && (sa / sb - 1.0).abs() <= params.check_max_speed_diff
+}
+
+/// Turns a fit into an estimate, or `None` when it is too fast, flat, or its confidence is at
+/// or below `min_confidence` (and never 0). Confidence is the inlier share times
+/// `1 - rms / outlier_s` (1 for a perfect plane through every point).
+fn judge(params: &PlaneFitParams, fit: &PlaneFit) -> Option<PixelEstimate> {
+    let flow = fit.normal_flow_px()?;
+    let speed = fit.speed_px_s();
+    if speed.is_nan() || speed > params.max_speed_px_s {
+        return None;
+    }
+    if fit.direction_sd_rad.is_nan() || fit.direction_sd_rad >= params.max_direction_sd_rad {
+        return None;
+    }
+    let inlier_share = fit.inliers as f64 / fit.points as f64;
+    let quality = (1.0 - fit.rms_s / params.outlier_s).clamp(0.0, 1.0);
+    let confidence = inlier_share * quality;
+    if confidence.is_nan() || confidence <= params.min_confidence.max(0.0) {
+        return None;
+    }
+    Some(PixelEstimate {
+        flow_px: flow,
+        confidence,
+    })
 }
 
 /// An inclusive pixel window `[x0, x1] x [y0, y1]`.

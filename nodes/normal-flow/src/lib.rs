@@ -34,6 +34,6 @@ pub use estimator::{EstimatorError, EstimatorStats, PixelEstimate, PlaneFitEstim
 pub use fit::{Neighbourhood, PlaneFit, fit_plane};
 pub use learned::{LearnedError, LearnedEstimator, LearnedParams};
 pub use node_score::{NodeScore, RunScoreError, write_run_score};
-pub use params::{MAX_RADIUS, ParamsError, PlaneFitParams};
+pub use params::{MAX_RADIUS, ParamsError, PlaneFitParams, WideFitParams};
 pub use score::{Score, ScoreParams, Scorer};
 pub use weights::{LearnedWeights, WeightsError};

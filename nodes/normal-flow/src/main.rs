@@ -1,13 +1,15 @@
 //! `evseg-normal-flow`: per-event normal flow of each slice by local plane fits; with the
 //! optional `truth` input wired, also scores it (per slice in the log, for the run in
-//! `normal-flow-score-<node>.json` in the run folder).
+//! `normal-flow-score-<node>.json` in the run folder). With the `wide_flow` output read by
+//! some node of the graph, also sends the wide flow (a 7 x 7 refit of the fast estimates,
+//! [`evseg_normal_flow::WideFitParams`]) for the final egomotion.
 
 use std::path::PathBuf;
 use std::process::ExitCode;
 
 use evseg_normal_flow::consensus::{consensus_from_config, consensus_on_slice, describe_consensus};
 use evseg_normal_flow::{
-    ConsensusParams, NodeScore, PlaneFitEstimator, PlaneFitParams, Score, write_run_score,
+    ConsensusParams, NodeScore, PlaneFitEstimator, PlaneFitParams, Score, WideFitParams, write_run_score,
 };
 use evseg_runtime::describe::Describe;
 use evseg_runtime::{BoxError, Inputs, Mode, NodeConfig, Outputs, Stage, run_stage};
@@ -20,6 +22,10 @@ struct NormalFlowNode {
     params: PlaneFitParams,
     consensus: ConsensusParams,
     replaced: u64,
+    /// The wide fit's settings when some node reads `wide_flow` (else it is not computed).
+    wide: Option<WideFitParams>,
+    /// Wide-flow lengths the consensus replaced.
+    wide_replaced: u64,
     estimator: Option<PlaneFitEstimator>,
     score: NodeScore,
     slices: u64,
@@ -67,6 +73,15 @@ struct RunReport<'a> {
     out_of_order: u64,
     /// Fits the larger window's plane disagreed with (left invalid).
     disagreed: u64,
+    /// The wide flow's window and check half-widths and speed threshold (pixels, px/s; all 0
+    /// when `wide_flow` is not read), its fits and valid ones, and the lengths its consensus
+    /// replaced.
+    wide_radius: usize,
+    wide_check_radius: usize,
+    wide_min_speed_px_s: f64,
+    wide_fits: u64,
+    wide_valid: u64,
+    wide_consensus_replaced: u64,
     score: Score,
 }
 
@@ -87,20 +102,28 @@ impl NormalFlowNode {
             if self.estimator.is_some() {
                 tracing::warn!(seq, "camera changed: surfaces of active events restarted");
             }
-            self.estimator = Some(PlaneFitEstimator::new(&slice.camera, self.params)?);
+            let estimator = PlaneFitEstimator::new(&slice.camera, self.params)?;
+            self.estimator = Some(match self.wide {
+                Some(wide) => estimator.with_wide_fit(wide)?,
+                None => estimator,
+            });
         }
         let Some(estimator) = self.estimator.as_mut() else {
             return Ok(());
         };
         let before = estimator.stats();
         let mut flow = NormalFlow::default();
+        let mut wide = self.wide.map(|_| NormalFlow::default());
         // Named by its own sequence number: a held slice is fitted while the next one is the
         // runtime's current slice.
         estimator
-            .process_with_next_into(&slice.events, next, &mut flow)
+            .process_wide_into(&slice.events, next, &mut flow, wide.as_mut())
             .map_err(|e| format!("slice {seq}: {e}"))?;
         let after = estimator.stats();
         self.replaced += consensus_on_slice(&slice, &mut flow, &self.consensus).replaced as u64;
+        if let Some(wide) = wide.as_mut() {
+            self.wide_replaced += consensus_on_slice(&slice, wide, &self.consensus).replaced as u64;
+        }
         let ignored = (after.out_of_sensor - before.out_of_sensor) + (after.bad_time - before.bad_time);
         if ignored > 0 {
             tracing::warn!(
@@ -110,6 +133,9 @@ impl NormalFlowNode {
             );
         }
         out.send("flow", seq, t_start, t_end, &flow)?;
+        if let Some(wide) = &wide {
+            out.send("wide_flow", seq, t_start, t_end, wide)?;
+        }
         self.slices += 1;
         if let Some(truth) = truth {
             self.score
@@ -179,6 +205,12 @@ impl Stage for NormalFlowNode {
             bad_time: stats.bad_time,
             out_of_order: stats.out_of_order,
             disagreed: stats.disagreed,
+            wide_radius: self.wide.map_or(0, |w| w.radius),
+            wide_check_radius: self.wide.map_or(0, |w| w.check_radius),
+            wide_min_speed_px_s: self.wide.map_or(0.0, |w| w.min_speed_px_s),
+            wide_fits: stats.wide_fits,
+            wide_valid: stats.wide_valid,
+            wide_consensus_replaced: self.wide_replaced,
             score,
         };
         write_run_score(&self.run_dir, &self.node, &report, &report.score)?;
@@ -188,6 +220,7 @@ impl Stage for NormalFlowNode {
 
 fn main() -> ExitCode {
     let d = PlaneFitParams::default();
+    let dw = WideFitParams::default();
     let dc = ConsensusParams::default();
     let description = Describe::new(
         "evseg-normal-flow",
@@ -204,6 +237,10 @@ fn main() -> ExitCode {
     .output::<NormalFlow>(
         "flow",
         "normal flow per event, normalized units/s, aligned with the slice",
+    )
+    .output::<NormalFlow>(
+        "wide_flow",
+        "as flow, with the estimates faster than wide_min_speed_px_s refitted on the wide window (for the final egomotion); computed and sent only when a node of the graph reads it",
     )
     .param(
         "radius",
@@ -284,6 +321,26 @@ fn main() -> ExitCode {
         "check_skip_direction_sd_deg",
         d.check_skip_direction_sd_rad.to_degrees(),
         "fits this certain of their direction, degrees (and within check_skip_confidence) skip the check",
+    )
+    .param(
+        "wide_radius",
+        dw.radius as u64,
+        "wide_flow: half-width of the wide window, pixels (radius+1..=4)",
+    )
+    .param(
+        "wide_check_radius",
+        dw.check_radius as u64,
+        "wide_flow: half-width of the wide fit's scale check, pixels (0 = no check; else wide_radius+1..=4)",
+    )
+    .param(
+        "wide_min_speed_px_s",
+        dw.min_speed_px_s,
+        "wide_flow: estimates faster than this are refitted on the wide window, pixels/s",
+    )
+    .param(
+        "wide_max_refits",
+        dw.max_refits as u64,
+        "wide_flow: refits of the wide fit after outlier rejection, at most",
     );
     let description = describe_consensus(description, &dc).build();
     run_stage(description, |cfg: &NodeConfig| {
@@ -308,6 +365,18 @@ fn main() -> ExitCode {
             check_skip_direction_sd_rad: cfg.param::<f64>("check_skip_direction_sd_deg")?.to_radians(),
         };
         params.validate()?;
+        let wide = WideFitParams {
+            radius: cfg.param::<usize>("wide_radius")?,
+            check_radius: cfg.param::<usize>("wide_check_radius")?,
+            min_speed_px_s: cfg.param::<f64>("wide_min_speed_px_s")?,
+            max_refits: cfg.param::<usize>("wide_max_refits")?,
+        };
+        wide.validate(&params)?;
+        // The wide fit costs time; it runs only for a graph that reads its output.
+        let wide_read = cfg
+            .outputs
+            .iter()
+            .any(|o| o.port == "wide_flow" && !o.consumers.is_empty());
         // In lock-step mode a held slice is sent only when the next one arrives, and the
         // slicer sends the next one only while fewer than `window` slices wait for their
         // consumers, some of which wait for this node's flow: a window of 1 would stall.
@@ -328,6 +397,8 @@ fn main() -> ExitCode {
             params,
             consensus,
             replaced: 0,
+            wide: wide_read.then_some(wide),
+            wide_replaced: 0,
             estimator: None,
             score: NodeScore::default(),
             slices: 0,

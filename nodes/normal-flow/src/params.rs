@@ -153,6 +153,81 @@ impl Default for PlaneFitParams {
     }
 }
 
+/// Settings of the wide fit ([`PlaneFitEstimator::with_wide_fit`](
+/// crate::PlaneFitEstimator::with_wide_fit)): a second plane fit on a larger window for the
+/// events whose own fit is fast, which gives a second flow (the wide flow) for consumers that
+/// need lengths more than coverage at motion boundaries (the final egomotion). Distances pixels,
+/// speeds pixels per second.
+///
+/// Why: a fast edge crosses the 5 x 5 window in a few milliseconds, so few distinct timestamps
+/// carry the plane's slope and the length is noisy; a 7 x 7 window has twice the points across
+/// the same edge. Where the flow is slow, the larger window reaches into the older edges of the
+/// texture (`dt_max_s`) and the small window is better. The wide window blurs motion
+/// boundaries, which costs the segmentation (every stage fed the mixed flow: IoU 0.8565 ->
+/// 0.8555) more than it gains; the final egomotion, fitted on the background away from objects,
+/// gains (hierarchical merger's `method_on_sim`, mean of fourteen sequences' median direction
+/// errors: bench seeds 5.41 -> 4.78 deg, seeds 301-407 6.06 -> 5.59, 501-607 5.76 -> 5.53;
+/// docs/scoreboard-history.md, session 43).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WideFitParams {
+    /// Half-width of the wide window, pixels. Default 3 (7 x 7), the study's window (also
+    /// the small fit's scale-check window, whose points the wide fit then reuses). More than [`PlaneFitParams::radius`], at most [`MAX_RADIUS`].
+    pub radius: usize,
+    /// Half-width of the wide fit's scale check (as [`PlaneFitParams::check_radius`], with the
+    /// same angle and speed tolerances); 0 = no check, else more than `radius`, at most
+    /// [`MAX_RADIUS`]. Default 0: the small fit was already checked, and a 9 x 9 check of the
+    /// wide fit was both slower and worse (`method_on_sim`, mean of fourteen median direction
+    /// errors, 9 x 9 check / none: bench seeds 4.85 / 4.73 deg, seeds 301-407 5.54 / 5.51,
+    /// 501-607 5.54 / 5.39; IoU unchanged).
+    pub check_radius: usize,
+    /// Events whose own (small-window) estimate is faster than this, pixels per second, get the
+    /// wide fit; the others keep their own estimate in the wide flow. Default 200 px/s (the
+    /// study's mean of median direction errors on the bench seeds at 150 / 200 / 300 / 600 px/s
+    /// and everywhere: 4.79 / 4.78 / 5.14 / 5.35 / 5.18 deg).
+    pub min_speed_px_s: f64,
+    /// Refits of the wide fit after outlier rejection, at most (as
+    /// [`PlaneFitParams::max_refits`]).
+    pub max_refits: usize,
+}
+
+impl Default for WideFitParams {
+    fn default() -> Self {
+        Self {
+            radius: 3,
+            check_radius: 0,
+            min_speed_px_s: 200.0,
+            max_refits: 3,
+        }
+    }
+}
+
+impl WideFitParams {
+    /// Checks every field against the small window's settings `own`; the error names the first
+    /// bad one.
+    pub fn validate(&self, own: &PlaneFitParams) -> Result<(), ParamsError> {
+        if self.radius <= own.radius || self.radius > MAX_RADIUS {
+            return Err(ParamsError::WideRadius {
+                wide: self.radius,
+                radius: own.radius,
+            });
+        }
+        if self.check_radius != 0 && (self.check_radius <= self.radius || self.check_radius > MAX_RADIUS) {
+            return Err(ParamsError::WideCheckRadius {
+                check: self.check_radius,
+                wide: self.radius,
+            });
+        }
+        if !(self.min_speed_px_s.is_finite() && self.min_speed_px_s >= 0.0) {
+            return Err(ParamsError::Range {
+                name: "wide_min_speed",
+                rule: ">= 0",
+                value: self.min_speed_px_s,
+            });
+        }
+        Ok(())
+    }
+}
+
 /// Invalid settings.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum ParamsError {
@@ -168,6 +243,24 @@ pub enum ParamsError {
         check: usize,
         /// The fit's radius.
         radius: usize,
+    },
+    /// A wide window that is not larger than the fit's window, or above [`MAX_RADIUS`].
+    #[error("wide_radius must be in {radius}+1..={MAX_RADIUS} pixels (radius is {radius}), got {wide}")]
+    WideRadius {
+        /// The value given.
+        wide: usize,
+        /// The fit's radius.
+        radius: usize,
+    },
+    /// A wide check window that is not larger than the wide window, or above [`MAX_RADIUS`].
+    #[error(
+        "wide_check_radius must be 0 (no check) or in {wide}+1..={MAX_RADIUS} pixels (wide_radius is {wide}), got {check}"
+    )]
+    WideCheckRadius {
+        /// The value given.
+        check: usize,
+        /// The wide window's radius.
+        wide: usize,
     },
     /// `min_points` below 3 (a plane needs 3 points) or above the window size.
     #[error("min_points must be between 3 and {window} (the window's pixels), got {got}")]
