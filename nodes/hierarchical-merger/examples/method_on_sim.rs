@@ -30,6 +30,10 @@
 //! planar segmenter's previous-foreground mask (whether the mask keeps the object out of the fit).
 //! XLA=0: the plane fit's look-ahead stops at the slice's end (the node's
 //! `lookahead_across_slices: false`).
+//! WIDE=0: the final egomotion takes the same flow as the segmentation, not the flow node's
+//! wide flow that graph.yaml wires to it; WIDE_RADIUS / WIDE_CHECK_RADIUS / WIDE_MIN_SPEED (px/s) / WIDE_REFITS
+//! set the wide fit (`evseg_normal_flow::WideFitParams`); WIDE_ALL=1 feeds the wide flow to
+//! every stage (a study: the segmentation loses).
 //! TQ_MS: event times floored to multiples of this many ms (frame-stamped simulators).
 //! SLICE_MS: the slice length (default 30 ms, as graph.yaml). SIM_SET: the simulator's sensor,
 //! IMU and texture settings (see `sim_override`).
@@ -64,7 +68,7 @@ use evseg_background_merger::{BackgroundMerger, BackgroundParams, SliceInput};
 use evseg_geometry::Camera;
 use evseg_geometry::rigid::{self, dot};
 use evseg_hierarchical_merger::{HierParams, HierarchicalMerger};
-use evseg_normal_flow::{PlaneFitEstimator, PlaneFitParams};
+use evseg_normal_flow::{PlaneFitEstimator, PlaneFitParams, WideFitParams};
 use evseg_oversegmenter::{OversegParams, Oversegmenter};
 use evseg_planar_segmenter::{PlanarParams, PlanarSegmenter};
 use evseg_schemas::{NormalFlow, Slice, Truth};
@@ -453,7 +457,18 @@ fn main() -> anyhow::Result<()> {
             }
         }
         let flow_conf: f64 = env_or("FLOW_MIN_CONF", 0.0)?;
-        let mut est = PlaneFitEstimator::new(
+        let wide_default = WideFitParams::default();
+        let wide_params = (env_or("WIDE", 1u8)? != 0)
+            .then(|| -> anyhow::Result<WideFitParams> {
+                Ok(WideFitParams {
+                    radius: env_or("WIDE_RADIUS", wide_default.radius)?,
+                    check_radius: env_or("WIDE_CHECK_RADIUS", wide_default.check_radius)?,
+                    min_speed_px_s: env_or("WIDE_MIN_SPEED", wide_default.min_speed_px_s)?,
+                    max_refits: env_or("WIDE_REFITS", wide_default.max_refits)?,
+                })
+            })
+            .transpose()?;
+        let est = PlaneFitEstimator::new(
             &camera,
             PlaneFitParams {
                 min_confidence: flow_conf,
@@ -484,6 +499,10 @@ fn main() -> anyhow::Result<()> {
                 ..PlaneFitParams::default()
             },
         )?;
+        let mut est = match wide_params {
+            Some(w) => est.with_wide_fit(w)?,
+            None => est,
+        };
         // The simulator's optical flow of event `i`, normalized units/s.
         let true_flow = |s: &Slice, truth: &Truth, i: usize| {
             cam.pixel_flow_to_normalized(
@@ -496,16 +515,18 @@ fn main() -> anyhow::Result<()> {
         // The look-ahead reaches into the next slice as the node's default does
         // (`lookahead_across_slices`); XLA=0 fits each slice on its own.
         let across = env_or("XLA", u8::from(est.params().lookahead_across_slices))? != 0;
-        let flows: Vec<NormalFlow> = slices
+        // Each slice's flow and, with the wide fit on, its wide flow (the flow oracles have none).
+        let flows: Vec<(NormalFlow, Option<NormalFlow>)> = slices
             .iter()
             .enumerate()
             .map(|(k, (s, truth, _))| {
                 let fit_slice =
-                    |est: &mut PlaneFitEstimator| -> Result<NormalFlow, evseg_normal_flow::EstimatorError> {
+                    |est: &mut PlaneFitEstimator| -> Result<_, evseg_normal_flow::EstimatorError> {
                         let next = slices.get(k + 1).filter(|_| across).map(|(n, _, _)| &n.events);
                         let mut f = NormalFlow::default();
-                        est.process_with_next_into(&s.events, next, &mut f)?;
-                        Ok(f)
+                        let mut wide = est.wide_fit().map(|_| NormalFlow::default());
+                        est.process_wide_into(&s.events, next, &mut f, wide.as_mut())?;
+                        Ok((f, wide))
                     };
                 if ideal {
                     let mut f = NormalFlow::default();
@@ -515,9 +536,9 @@ fn main() -> anyhow::Result<()> {
                         f.ny.push(v[1] as f32);
                         f.confidence.push(1.0);
                     }
-                    Ok(f)
+                    Ok((f, None))
                 } else if truemag {
-                    let mut f = fit_slice(&mut est)?;
+                    let (mut f, _) = fit_slice(&mut est)?;
                     for i in 0..s.events.len() {
                         let (nx, ny) = (f64::from(f.nx[i]), f64::from(f.ny[i]));
                         let len = (nx * nx + ny * ny).sqrt();
@@ -551,14 +572,17 @@ fn main() -> anyhow::Result<()> {
                             }
                         }
                     }
-                    Ok(f)
+                    Ok((f, None))
                 } else if let Some(cp) = cons {
-                    let mut f = fit_slice(&mut est)?;
-                    let st =
-                        evseg_normal_flow::consensus(&s.events, &mut f, s.camera.width, s.camera.height, &cp);
+                    let (mut f, mut wide) = fit_slice(&mut est)?;
+                    let (w, h) = (s.camera.width, s.camera.height);
+                    let st = evseg_normal_flow::consensus(&s.events, &mut f, w, h, &cp);
                     cstat.0 += st.valid;
                     cstat.1 += st.replaced;
-                    Ok(f)
+                    if let Some(wide) = wide.as_mut() {
+                        evseg_normal_flow::consensus(&s.events, wide, w, h, &cp);
+                    }
+                    Ok((f, wide))
                 } else {
                     fit_slice(&mut est)
                 }
@@ -567,6 +591,14 @@ fn main() -> anyhow::Result<()> {
         if cons.is_some() {
             println!("consensus: replaced {} of {} valid", cstat.1, cstat.0);
         }
+        // WIDE_ALL: the wide flow for every stage, not only the final egomotion.
+        let (flows, wide_flows): (Vec<NormalFlow>, Vec<Option<NormalFlow>>) = flows
+            .into_iter()
+            .map(|(f, wide)| match wide {
+                Some(w) if std::env::var_os("WIDE_ALL").is_some() => (w, None),
+                other => (f, other),
+            })
+            .unzip();
         if std::env::var_os("CELLS").is_some() {
             print_cell_extent(&slices, &flows, camera.width, camera.height);
         }
@@ -743,7 +775,14 @@ fn main() -> anyhow::Result<()> {
                 })?;
                 stage_s[1] += clock.elapsed().as_secs_f64();
                 let clock = std::time::Instant::now();
-                let h = hier.merge(&s.camera, &s.events, f, rate, &m.coarse)?;
+                let h = hier.merge_with_egomotion_flow(
+                    &s.camera,
+                    &s.events,
+                    f,
+                    wide_flows[dump_k].as_ref(),
+                    rate,
+                    &m.coarse,
+                )?;
                 stage_s[2] += clock.elapsed().as_secs_f64();
                 let mut oracle_label;
                 let mut label = &h.segmentation.label;

@@ -217,6 +217,22 @@ impl HierarchicalMerger {
         rate: Option<RotationRate>,
         coarse: &CoarseSegmentation,
     ) -> Result<HierResult, HierError> {
+        self.merge_with_egomotion_flow(camera, events, flow, None, rate, coarse)
+    }
+
+    /// As [`merge`](Self::merge), with the final egomotion (step 5) fitted on
+    /// `egomotion_flow` (aligned with `events`, normalized units/s) instead of `flow` when
+    /// given: the normal-flow node's wide flow, whose fast lengths come from a larger window
+    /// (`evseg_normal_flow::WideFitParams`). The segmentation always uses `flow`.
+    pub fn merge_with_egomotion_flow(
+        &mut self,
+        camera: &CameraInfo,
+        events: &Events,
+        flow: &NormalFlow,
+        egomotion_flow: Option<&NormalFlow>,
+        rate: Option<RotationRate>,
+        coarse: &CoarseSegmentation,
+    ) -> Result<HierResult, HierError> {
         let p = self.params;
         let n = events.len();
         if let Some(r) = rate
@@ -414,6 +430,17 @@ impl HierarchicalMerger {
         }
 
         // 5. Final egomotion on the final background.
+        let egomotion_samples = match egomotion_flow {
+            Some(f) => Some(flow_samples(
+                self.table.get(camera),
+                events,
+                f,
+                w.as_ref(),
+                p.min_confidence,
+            )?),
+            None => None,
+        };
+        let samples = egomotion_samples.as_ref().unwrap_or(&samples);
         let bg_samples: Vec<&FlowSample> = samples.iter().filter(|s| label[s.index] == 0).collect();
         let estimate = estimate_background_translation_with_memory(
             &bg_samples,

@@ -22,10 +22,16 @@ impl Stage for Node {
         let slice: Slice = input.get("slices")?;
         let flow: NormalFlow = input.get("flow")?;
         let coarse: CoarseSegmentation = input.get("coarse")?;
+        let egomotion_flow: Option<NormalFlow> = input.get_opt("egomotion_flow")?;
         let rate = RotationRate::of_slice(&slice, input.span(), self.rate_slope);
-        let r = self
-            .merger
-            .merge(&slice.camera, &slice.events, &flow, rate, &coarse)?;
+        let r = self.merger.merge_with_egomotion_flow(
+            &slice.camera,
+            &slice.events,
+            &flow,
+            egomotion_flow.as_ref(),
+            rate,
+            &coarse,
+        )?;
         tracing::debug!(
             slice = input.seq(),
             initial = r.initial_segments,
@@ -50,6 +56,10 @@ fn main() -> ExitCode {
     .input::<Slice>("slices", "event slices (omega: IMU rotation rate, camera frame)")
     .input::<NormalFlow>("flow", "per-event normal flow")
     .input::<CoarseSegmentation>("coarse", "the background merger's groups")
+    .optional_input::<NormalFlow>(
+        "egomotion_flow",
+        "per-event normal flow for the final egomotion only (the normal-flow node's wide_flow); without it the final egomotion uses flow",
+    )
     .output::<Segmentation>(
         "segments",
         "label per event (0 = background), segments with translation (depth 1), egomotion",

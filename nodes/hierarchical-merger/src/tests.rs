@@ -289,3 +289,38 @@ fn out_of_range_settings_are_refused_naming_the_parameter() {
     }
     assert!(HierarchicalMerger::new(HierParams::default()).is_ok());
 }
+
+#[test]
+fn the_final_egomotion_takes_the_egomotion_flow_and_the_segmentation_does_not() {
+    // One background with an object: `flow` moves the background by BG, `egomotion_flow` by
+    // another translation (the same events and object flow).
+    let other = [-0.1, 0.3, 0.2];
+    let object = [-0.5, 0.0, 0.0];
+    let blocks =
+        |bg: [f64; 3]| -> Vec<Block> { vec![(0, 200, 0, 150, 0, bg), (90, 130, 60, 100, 1, object)] };
+    let (ev, flow, coarse) = build(&blocks(BG), 2);
+    let (ev2, ego_flow, _) = build(&blocks(other), 2);
+    assert_eq!(ev, ev2);
+    let rate = Some([0.0; 3].into());
+    let mut plain = HierarchicalMerger::new(HierParams::default()).unwrap();
+    let own = plain.merge(&camera(), &ev, &flow, rate, &coarse).unwrap();
+    let mut m = HierarchicalMerger::new(HierParams::default()).unwrap();
+    let r = m
+        .merge_with_egomotion_flow(&camera(), &ev, &flow, Some(&ego_flow), rate, &coarse)
+        .unwrap();
+    assert_eq!(r.segmentation.label, own.segmentation.label);
+    assert!(r.segmentation.label.iter().any(|&l| l != 0), "no object found");
+    let (d_own, d) = (
+        own.segmentation.egomotion.direction,
+        r.segmentation.egomotion.direction,
+    );
+    assert!(angle(d_own, BG) < 2.0, "flow's direction {d_own:?}");
+    assert!(angle(d, other) < 2.0, "egomotion flow's direction {d:?}");
+    // An egomotion flow of another length is refused.
+    let mut short = ego_flow.clone();
+    short.confidence.pop();
+    assert!(matches!(
+        m.merge_with_egomotion_flow(&camera(), &ev, &flow, Some(&short), rate, &coarse),
+        Err(HierError::Align(_))
+    ));
+}
