@@ -5,7 +5,7 @@ use evseg_geometry::Camera;
 use evseg_geometry::cache::{PREFETCH_AHEAD, prefetch};
 use evseg_schemas::{CameraInfo, Events, NormalFlow};
 
-use crate::fit::{AgeLimits, Neighbourhood, PlaneFit, RowRun, fit_plane};
+use crate::fit::{AgeLimits, Neighbourhood, PlaneFit, PlaneRefit, RowRun, fit_plane};
 use crate::params::{ParamsError, PlaneFitParams, WideFitParams};
 
 /// Refits after outlier rejection of the scale check's larger window (at most; the fit's own
@@ -108,6 +108,9 @@ pub struct PlaneFitEstimator {
     /// Points of the wide window (when it is not the check window) and of its check window.
     nb_wide: Neighbourhood,
     nb_wide_check: Neighbourhood,
+    /// The scale check's fit in progress (continued by the wide fit) and the wide fit's check's.
+    check_fit: PlaneRefit,
+    wide_check_fit: PlaneRefit,
     /// The wide estimate of the last event fitted ([`PixelEstimate::INVALID`] when none).
     last_wide: PixelEstimate,
     /// Per event of the slice in progress: written to its surface (reused buffer).
@@ -144,6 +147,8 @@ impl PlaneFitEstimator {
             wide: None,
             nb_wide: Neighbourhood::default(),
             nb_wide_check: Neighbourhood::default(),
+            check_fit: PlaneRefit::default(),
+            wide_check_fit: PlaneRefit::default(),
             last_wide: PixelEstimate::INVALID,
             written: Vec::new(),
         })
@@ -488,19 +493,25 @@ impl PlaneFitEstimator {
         };
         let surface = &self.surface[usize::from(p != 0)];
         let params = &self.params;
+        let (outlier, min_points) = (params.outlier_s, params.min_points);
         self.nb.clear();
         gather(&mut self.nb, surface, width, params, &at, window(r), None);
+        let plane = fit_plane(&self.nb, outlier, params.max_refits, min_points);
         let check = (rc > r).then(|| window(rc));
-        let own = fit_checked(
+        let own = check_fit(
+            plane,
             &self.nb,
-            &mut self.nb_check,
+            Ring {
+                points: &mut self.nb_check,
+                fit: &mut self.check_fit,
+                window: check,
+            },
             surface,
             width,
             params,
             &at,
             window(r),
             params.max_refits,
-            check,
         );
         self.last_fit = own.plane;
         self.last_wide = PixelEstimate::INVALID;
@@ -515,33 +526,50 @@ impl PlaneFitEstimator {
             && estimate.flow_px[0].hypot(estimate.flow_px[1]) > wide.min_speed_px_s
         {
             // The wide window's points: those of the check just done when it is the same
-            // window, else the small window's and the ring around them.
-            let points = if own.ring_filled && wide.radius == rc {
-                &self.nb_check
-            } else {
-                self.nb_wide.copy_from(&self.nb);
-                gather(
-                    &mut self.nb_wide,
-                    surface,
-                    width,
-                    params,
-                    &at,
-                    window(wide.radius),
-                    Some(window(r)),
-                );
-                &self.nb_wide
+            // window, else the small window's and the ring around them. Its plane: the check's
+            // fit continued when it can be (the same points, fewer refits so far), which is the
+            // plane a fresh fit with the wide fit's refits would give.
+            let same_window = own.ring_filled && wide.radius == rc;
+            let (points, plane) = match own.ring_refits {
+                Some(done) if same_window && done <= wide.max_refits => {
+                    let ok =
+                        self.check_fit
+                            .refit(&self.nb_check, outlier, wide.max_refits - done, min_points);
+                    (&self.nb_check, ok.then(|| self.check_fit.plane(&self.nb_check)))
+                }
+                _ if same_window => (
+                    &self.nb_check,
+                    fit_plane(&self.nb_check, outlier, wide.max_refits, min_points),
+                ),
+                _ => {
+                    self.nb_wide.copy_from(&self.nb);
+                    gather(
+                        &mut self.nb_wide,
+                        surface,
+                        width,
+                        params,
+                        &at,
+                        window(wide.radius),
+                        Some(window(r)),
+                    );
+                    let plane = fit_plane(&self.nb_wide, outlier, wide.max_refits, min_points);
+                    (&self.nb_wide, plane)
+                }
             };
-            let check = (wide.check_radius > wide.radius).then(|| window(wide.check_radius));
-            let fitted = fit_checked(
+            let fitted = check_fit(
+                plane,
                 points,
-                &mut self.nb_wide_check,
+                Ring {
+                    points: &mut self.nb_wide_check,
+                    fit: &mut self.wide_check_fit,
+                    window: (wide.check_radius > wide.radius).then(|| window(wide.check_radius)),
+                },
                 surface,
                 width,
                 params,
                 &at,
                 window(wide.radius),
                 wide.max_refits,
-                check,
             );
             self.stats.wide_fits += 1;
             if let Some(w) = fitted.estimate {
@@ -553,7 +581,15 @@ impl PlaneFitEstimator {
     }
 }
 
-/// One window's fit ([`fit_checked`]).
+/// The scale check's larger window ([`check_fit`]): its `window` (`None` = no check), and the
+/// buffers its points and its fit in progress go to.
+struct Ring<'a> {
+    points: &'a mut Neighbourhood,
+    fit: &'a mut PlaneRefit,
+    window: Option<Window>,
+}
+
+/// One window's fit judged and checked ([`check_fit`]).
 struct Checked {
     /// The plane fitted to the window's points (also when judged invalid).
     plane: Option<PlaneFit>,
@@ -561,45 +597,54 @@ struct Checked {
     estimate: Option<PixelEstimate>,
     /// The check window's plane disagreed with a valid estimate.
     disagreed: bool,
-    /// The check ran: `ring` holds the check window's points.
+    /// The check ran: the ring's `points` hold the check window's points.
     ring_filled: bool,
+    /// Refits the check window's fit made, when it ran and gave a plane: the ring's `fit`
+    /// holds it in progress, for a fit of the same points with more refits to continue.
+    ring_refits: Option<usize>,
 }
 
-/// Fits a plane to `points` (the window `inner`'s neighbours of the centre `at`, with at most
-/// `refits` refits) and judges it ([`judge`]); with a larger `check` window, a valid estimate that is not clearly planar
-/// ([`PlaneFitParams::check_skip_confidence`]) stands only when the plane of the check window
-/// (`points` and the ring around them, gathered into `ring`) agrees with it ([`agrees`]).
+/// Judges `plane`, the fit of `points` (the window `inner`'s neighbours of the centre `at`,
+/// with at most `refits` refits), ([`judge`]); with a larger check window (`ring`), a valid
+/// estimate that is not clearly planar ([`PlaneFitParams::check_skip_confidence`]) stands only
+/// when the plane of the check window (`points` and the ring around them) agrees with it
+/// ([`agrees`]).
 #[allow(clippy::too_many_arguments)]
-fn fit_checked(
+fn check_fit(
+    plane: Option<PlaneFit>,
     points: &Neighbourhood,
-    ring: &mut Neighbourhood,
+    ring: Ring<'_>,
     surface: &[f64],
     width: usize,
     params: &PlaneFitParams,
     at: &Centre,
     inner: Window,
     refits: usize,
-    check: Option<Window>,
 ) -> Checked {
     let (outlier, min_points) = (params.outlier_s, params.min_points);
-    let plane = fit_plane(points, outlier, refits, min_points);
     let mut out = Checked {
         plane,
         estimate: plane.and_then(|fit| judge(params, &fit)),
         disagreed: false,
         ring_filled: false,
+        ring_refits: None,
     };
     let clearly_planar = |e: &PixelEstimate| {
         e.confidence >= params.check_skip_confidence
             && plane.is_some_and(|f| f.direction_sd_rad <= params.check_skip_direction_sd_rad)
     };
-    if let (Some(e), Some(check)) = (out.estimate, check)
+    if let (Some(e), Some(check)) = (out.estimate, ring.window)
         && !clearly_planar(&e)
     {
-        ring.copy_from(points);
-        gather(ring, surface, width, params, at, check, Some(inner));
+        ring.points.copy_from(points);
+        gather(ring.points, surface, width, params, at, check, Some(inner));
         out.ring_filled = true;
-        let agreed = fit_plane(ring, outlier, CHECK_REFITS.min(refits), min_points)
+        let check_refits = CHECK_REFITS.min(refits);
+        let fitted = ring.fit.start(ring.points, min_points)
+            && ring.fit.refit(ring.points, outlier, check_refits, min_points);
+        let check_plane = fitted.then(|| ring.fit.plane(ring.points));
+        out.ring_refits = fitted.then_some(check_refits);
+        let agreed = check_plane
             .and_then(|f| f.normal_flow_px())
             .is_some_and(|c| agrees(params, e.flow_px, c));
         if !agreed {

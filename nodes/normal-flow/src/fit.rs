@@ -235,7 +235,7 @@ impl PlaneFit {
 }
 
 /// Sums of the normal equations of the plane fit.
-#[derive(Default, Clone, Copy)]
+#[derive(Debug, Default, Clone, Copy)]
 struct Sums {
     n: f64,
     sx: f64,
@@ -318,89 +318,179 @@ pub fn fit_plane(
     max_refits: usize,
     min_points: usize,
 ) -> Option<PlaneFit> {
-    let n = nb.len;
-    let min_points = min_points.max(3);
-    if n < min_points {
+    let mut fit = PlaneRefit::default();
+    if !(fit.start(nb, min_points) && fit.refit(nb, outlier_s, max_refits, min_points)) {
         return None;
     }
-    let (dx, dy, dt) = (&nb.dx[..n], &nb.dy[..n], &nb.dt[..n]);
-    // The offset sums are exact integers; the time sums were added in the points' order, as
-    // `Sums::add` would.
-    let [s_n, s_x, s_y, s_xx, s_xy, s_yy] = nb.offset_sums.map(f64::from);
-    let [st, sxt, syt] = nb.time_sums;
-    let mut sums = Sums {
-        n: s_n,
-        sx: s_x,
-        sy: s_y,
-        sxx: s_xx,
-        sxy: s_xy,
-        syy: s_yy,
-        st,
-        sxt,
-        syt,
-    };
-    // Bit `i` set: point `i` is kept (an inlier of the current plane).
-    let mut used: u128 = if n == 128 { u128::MAX } else { (1u128 << n) - 1 };
-    // Time residuals of the points against `sol`.
-    let mut res = [0.0; MAX_POINTS];
-    let res = &mut res[..n];
-    let residuals = |sol: &[f64; 3], res: &mut [f64]| {
-        for i in 0..n {
-            res[i] = sol[0] * dx[i] + sol[1] * dy[i] + sol[2] - dt[i];
+    Some(fit.plane(nb))
+}
+
+/// A [`fit_plane`] in progress, which can be continued: [`start`](Self::start), then
+/// [`refit`](Self::refit) `a` times, [`plane`](Self::plane), `refit` `b` more times and `plane`
+/// give the plane of `fit_plane` with `a` refits and then exactly the one with `a + b` (the
+/// scale check's fit continued into the wide fit, which shares its points). Every call takes
+/// the same [`Neighbourhood`], unchanged. Reusable: `start` begins afresh.
+#[derive(Debug, Clone)]
+pub struct PlaneRefit {
+    sums: Sums,
+    /// Bit `i` set: point `i` is kept (an inlier of the current plane).
+    used: u128,
+    kept: usize,
+    /// The current solution `(gx, gy, c)`.
+    sol: [f64; 3],
+    /// Time residuals of the points against `sol` when `fresh`.
+    res: [f64; MAX_POINTS],
+    fresh: bool,
+    /// The kept set stopped changing: more refits change nothing.
+    stable: bool,
+}
+
+impl Default for PlaneRefit {
+    fn default() -> Self {
+        Self {
+            sums: Sums::default(),
+            used: 0,
+            kept: 0,
+            sol: [0.0; 3],
+            res: [0.0; MAX_POINTS],
+            fresh: false,
+            stable: false,
         }
-    };
-    let mut kept = n;
-    let mut sol = sums.solve()?;
-    // True when `res` holds the residuals of `sol`.
-    let mut fresh = false;
-    for _ in 0..max_refits {
-        residuals(&sol, res);
-        // The inliers as bits, without a branch per point; then only the points that changed
-        // side are visited, in ascending order, as a point-by-point pass would add them.
-        let mut inliers: u128 = 0;
+    }
+}
+
+impl PlaneRefit {
+    /// Fits the plane to every point of `nb`; false when there are fewer than `min_points`
+    /// (at least 3) or they do not span a plane.
+    #[inline]
+    pub fn start(&mut self, nb: &Neighbourhood, min_points: usize) -> bool {
+        let n = nb.len;
+        if n < min_points.max(3) {
+            return false;
+        }
+        // The offset sums are exact integers; the time sums were added in the points' order, as
+        // `Sums::add` would.
+        let [s_n, s_x, s_y, s_xx, s_xy, s_yy] = nb.offset_sums.map(f64::from);
+        let [st, sxt, syt] = nb.time_sums;
+        self.sums = Sums {
+            n: s_n,
+            sx: s_x,
+            sy: s_y,
+            sxx: s_xx,
+            sxy: s_xy,
+            syy: s_yy,
+            st,
+            sxt,
+            syt,
+        };
+        self.used = if n == 128 { u128::MAX } else { (1u128 << n) - 1 };
+        self.kept = n;
+        self.fresh = false;
+        self.stable = false;
+        match self.sums.solve() {
+            Some(sol) => {
+                self.sol = sol;
+                true
+            }
+            None => false,
+        }
+    }
+
+    /// Up to `max_refits` more refits (fewer once the kept set stops changing); false when fewer
+    /// than `min_points` points stay or they do not span a plane (the fit is then void).
+    #[inline]
+    pub fn refit(
+        &mut self,
+        nb: &Neighbourhood,
+        outlier_s: f64,
+        max_refits: usize,
+        min_points: usize,
+    ) -> bool {
+        let n = nb.len;
+        let min_points = min_points.max(3);
+        let (dx, dy, dt) = (&nb.dx[..n], &nb.dy[..n], &nb.dt[..n]);
+        let res = &mut self.res[..n];
+        for _ in 0..max_refits {
+            if self.stable {
+                break;
+            }
+            if !self.fresh {
+                residuals(&self.sol, dx, dy, dt, res);
+            }
+            // The inliers as bits, without a branch per point; then only the points that
+            // changed side are visited, in ascending order, as a point-by-point pass would add
+            // them.
+            let mut inliers: u128 = 0;
+            for (c, chunk) in res.chunks(64).enumerate() {
+                let mut bits: u64 = 0;
+                for (i, r) in chunk.iter().enumerate() {
+                    bits |= u64::from(r.abs() <= outlier_s) << i;
+                }
+                inliers |= u128::from(bits) << (64 * c);
+            }
+            let mut changed = inliers ^ self.used;
+            if changed == 0 {
+                // `res` still holds the residuals of `sol`.
+                self.fresh = true;
+                self.stable = true;
+                break;
+            }
+            self.used = inliers;
+            while changed != 0 {
+                let i = changed.trailing_zeros() as usize;
+                changed &= changed - 1;
+                let inlier = (inliers >> i) & 1 == 1;
+                let sign = if inlier { 1.0 } else { -1.0 };
+                self.sums.add(dx[i], dy[i], dt[i], sign);
+                if inlier {
+                    self.kept += 1;
+                } else {
+                    self.kept -= 1;
+                }
+            }
+            if self.kept < min_points {
+                return false;
+            }
+            match self.sums.solve() {
+                Some(sol) => {
+                    self.sol = sol;
+                    self.fresh = false;
+                }
+                None => return false,
+            }
+        }
+        true
+    }
+
+    /// The plane as it stands (after a successful [`start`](Self::start) and
+    /// [`refit`](Self::refit)).
+    #[inline]
+    pub fn plane(&mut self, nb: &Neighbourhood) -> PlaneFit {
+        let n = nb.len;
+        let res = &mut self.res[..n];
+        if !self.fresh {
+            residuals(&self.sol, &nb.dx[..n], &nb.dy[..n], &nb.dt[..n], res);
+            self.fresh = true;
+        }
+        let mut ss = 0.0;
         for (c, chunk) in res.chunks(64).enumerate() {
-            let mut bits: u64 = 0;
+            let bits = (self.used >> (64 * c)) as u64;
             for (i, r) in chunk.iter().enumerate() {
-                bits |= u64::from(r.abs() <= outlier_s) << i;
-            }
-            inliers |= u128::from(bits) << (64 * c);
-        }
-        let mut changed = inliers ^ used;
-        if changed == 0 {
-            fresh = true;
-            break;
-        }
-        used = inliers;
-        while changed != 0 {
-            let i = changed.trailing_zeros() as usize;
-            changed &= changed - 1;
-            let inlier = (inliers >> i) & 1 == 1;
-            let sign = if inlier { 1.0 } else { -1.0 };
-            sums.add(dx[i], dy[i], dt[i], sign);
-            if inlier {
-                kept += 1;
-            } else {
-                kept -= 1;
+                // Adding +0 for a rejected point leaves the sum as it is (it starts at +0).
+                let kept_r = if (bits >> i) & 1 == 1 { *r } else { 0.0 };
+                ss += kept_r * kept_r;
             }
         }
-        if kept < min_points {
-            return None;
-        }
-        sol = sums.solve()?;
+        plane_fit(self.sol, &self.sums, self.kept, n, ss)
     }
-    if !fresh {
-        residuals(&sol, res);
+}
+
+/// Time residuals `gx dx + gy dy + c - dt` of the points against `sol`, into `res`.
+#[inline]
+fn residuals(sol: &[f64; 3], dx: &[f64], dy: &[f64], dt: &[f64], res: &mut [f64]) {
+    for i in 0..res.len() {
+        res[i] = sol[0] * dx[i] + sol[1] * dy[i] + sol[2] - dt[i];
     }
-    let mut ss = 0.0;
-    for (c, chunk) in res.chunks(64).enumerate() {
-        let bits = (used >> (64 * c)) as u64;
-        for (i, r) in chunk.iter().enumerate() {
-            // Adding +0 for a rejected point leaves the sum as it is (it starts at +0).
-            let kept_r = if (bits >> i) & 1 == 1 { *r } else { 0.0 };
-            ss += kept_r * kept_r;
-        }
-    }
-    Some(plane_fit(sol, &sums, kept, n, ss))
 }
 
 /// The fit's result from its final solution `sol` = `(gx, gy, c)`, the normal equations `sums`
@@ -588,22 +678,35 @@ mod tests {
                     assert!(nb.push(dx, dy, t));
                 }
             }
+            let bits = |f: Option<PlaneFit>| {
+                f.map(|f| {
+                    (
+                        [f.gx, f.gy, f.c, f.rms_s, f.direction_sd_rad].map(f64::to_bits),
+                        f.inliers,
+                        f.points,
+                    )
+                })
+            };
             for refits in [0, 1, 3] {
                 let (a, b) = (
                     fit_plane(&nb, 0.002, refits, 5),
                     fit_plane_reference(&nb, 0.002, refits, 5),
                 );
-                let bits = |f: Option<PlaneFit>| {
-                    f.map(|f| {
-                        (
-                            [f.gx, f.gy, f.c, f.rms_s, f.direction_sd_rad].map(f64::to_bits),
-                            f.inliers,
-                            f.points,
-                        )
-                    })
-                };
                 assert_eq!(bits(a), bits(b), "case {case}, {refits} refits");
                 fits += usize::from(a.is_some());
+            }
+            // A fit continued (the scale check's 1 refit, then the wide fit's 3) is the fresh
+            // fit with as many refits in all, also after its plane was read in between.
+            for (first, more) in [(0, 1), (1, 2), (1, 0), (0, 3)] {
+                let mut go = PlaneRefit::default();
+                let mut continued = go.start(&nb, 5) && go.refit(&nb, 0.002, first, 5);
+                if continued {
+                    let midway = go.plane(&nb);
+                    assert_eq!(bits(Some(midway)), bits(fit_plane(&nb, 0.002, first, 5)));
+                    continued = go.refit(&nb, 0.002, more, 5);
+                }
+                let fresh = fit_plane(&nb, 0.002, first + more, 5);
+                assert_eq!(bits(continued.then(|| go.plane(&nb))), bits(fresh), "case {case}");
             }
         }
         assert!(fits > 5_000, "only {fits} fits succeeded");

@@ -31,7 +31,7 @@ pub mod weights;
 
 pub use consensus::{ConsensusParams, ConsensusStats, consensus};
 pub use estimator::{EstimatorError, EstimatorStats, PixelEstimate, PlaneFitEstimator, jacobian_table};
-pub use fit::{Neighbourhood, PlaneFit, fit_plane};
+pub use fit::{Neighbourhood, PlaneFit, PlaneRefit, fit_plane};
 pub use learned::{LearnedError, LearnedEstimator, LearnedParams};
 pub use node_score::{NodeScore, RunScoreError, write_run_score};
 pub use params::{MAX_RADIUS, ParamsError, PlaneFitParams, WideFitParams};
