@@ -591,6 +591,13 @@ fn main() -> anyhow::Result<()> {
         if cons.is_some() {
             println!("consensus: replaced {} of {} valid", cstat.1, cstat.0);
         }
+        let st = est.stats();
+        if est.wide_fit().is_some() {
+            println!(
+                "wide fit: {} of {} valid estimates ({} events) refitted, {} valid; scale check rejected {}",
+                st.wide_fits, st.valid, st.events, st.wide_valid, st.disagreed
+            );
+        }
         // WIDE_ALL: the wide flow for every stage, not only the final egomotion.
         let (flows, wide_flows): (Vec<NormalFlow>, Vec<Option<NormalFlow>>) = flows
             .into_iter()
