@@ -230,6 +230,17 @@ pub struct NormalFlow {
     pub confidence: Vec<f32>,
 }
 
+impl NormalFlow {
+    /// Makes the flow `n` events long with no estimate anywhere (flow 0, confidence 0), reusing
+    /// its buffers: the start of an estimator's output for a slice of `n` events.
+    pub fn reset_invalid(&mut self, n: usize) {
+        for column in [&mut self.nx, &mut self.ny, &mut self.confidence] {
+            column.clear();
+            column.resize(n, 0.0);
+        }
+    }
+}
+
 impl Message for NormalFlow {
     const SCHEMA: &'static str = "evseg.NormalFlow";
     const VERSION: u16 = 1;

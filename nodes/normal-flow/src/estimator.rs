@@ -245,13 +245,9 @@ impl PlaneFitEstimator {
             check_columns(next)?;
         }
         let n = events.len();
-        for f in std::iter::once(&mut *out).chain(wide.as_deref_mut()) {
-            f.nx.clear();
-            f.ny.clear();
-            f.confidence.clear();
-            f.nx.resize(n, 0.0);
-            f.ny.resize(n, 0.0);
-            f.confidence.resize(n, 0.0);
+        out.reset_invalid(n);
+        if let Some(w) = wide.as_deref_mut() {
+            w.reset_invalid(n);
         }
         let width = self.width;
         let jacobian = std::mem::take(&mut self.jacobian);

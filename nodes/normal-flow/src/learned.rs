@@ -732,12 +732,7 @@ impl LearnedEstimator {
         check_columns(events)?;
         let n = events.len();
         let (_, flow, conf) = self.estimate_sorted(events, t0, t1);
-        out.nx.clear();
-        out.ny.clear();
-        out.confidence.clear();
-        out.nx.resize(n, 0.0);
-        out.ny.resize(n, 0.0);
-        out.confidence.resize(n, 0.0);
+        out.reset_invalid(n);
         for (p, &e) in self.groups.ev_idx.iter().enumerate() {
             if conf[p] > 0.0 {
                 let e = e as usize;
