@@ -373,10 +373,7 @@ fn main() -> ExitCode {
         };
         wide.validate(&params)?;
         // The wide fit costs time; it runs only for a graph that reads its output.
-        let wide_read = cfg
-            .outputs
-            .iter()
-            .any(|o| o.port == "wide_flow" && !o.consumers.is_empty());
+        let wide_read = cfg.output_is_read("wide_flow");
         // In lock-step mode a held slice is sent only when the next one arrives, and the
         // slicer sends the next one only while fewer than `window` slices wait for their
         // consumers, some of which wait for this node's flow: a window of 1 would stall.

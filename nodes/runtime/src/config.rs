@@ -177,6 +177,14 @@ impl NodeConfig {
         })
     }
 
+    /// True when some node of the graph consumes output `port` (a recorder included): a node
+    /// may skip computing an output nobody reads.
+    pub fn output_is_read(&self, port: &str) -> bool {
+        self.outputs
+            .iter()
+            .any(|o| o.port == port && !o.consumers.is_empty())
+    }
+
     /// Parameter `name` as `T`, or `None` when it is absent or null.
     pub fn param_opt<T: serde::de::DeserializeOwned>(&self, name: &str) -> Result<Option<T>, RuntimeError> {
         match self.params.get(name) {
@@ -189,6 +197,27 @@ impl NodeConfig {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn an_output_is_read_only_when_it_has_a_consumer() {
+        let mut cfg = NodeConfig::with_params("flow", serde_json::Map::new());
+        let output = |port: &str, consumers: Vec<ConsumerRef>| OutputBinding {
+            port: port.into(),
+            key: format!("i/flow/{port}"),
+            schema: "evseg.NormalFlow".into(),
+            consumers,
+        };
+        let reader = ConsumerRef {
+            node: "hierarchical".into(),
+            port: "egomotion_flow".into(),
+            feedback: false,
+            ack_key: "i/hierarchical/ack".into(),
+        };
+        cfg.outputs = vec![output("flow", vec![]), output("wide_flow", vec![reader])];
+        assert!(cfg.output_is_read("wide_flow"));
+        assert!(!cfg.output_is_read("flow"), "an output without consumers");
+        assert!(!cfg.output_is_read("nope"), "an output the node does not have");
+    }
 
     #[test]
     fn malformed_or_missing_config_files_are_named_in_the_error() {
