@@ -97,20 +97,15 @@ pub struct PlaneFitEstimator {
     surface: [Vec<f64>; 2],
     /// Pixel flow to normalized flow per pixel, see [`jacobian_table`].
     jacobian: Vec<[f32; 4]>,
-    nb: Neighbourhood,
-    /// Points of the check window ([`PlaneFitParams::check_radius`]).
-    nb_check: Neighbourhood,
+    /// The small window's fit's buffers.
+    own: FitBuffers,
     last_t: f64,
     stats: EstimatorStats,
     last_fit: Option<PlaneFit>,
     /// The wide fit's settings, when on.
     wide: Option<WideFitParams>,
-    /// Points of the wide window (when it is not the check window) and of its check window.
-    nb_wide: Neighbourhood,
-    nb_wide_check: Neighbourhood,
-    /// The scale check's fit in progress (continued by the wide fit) and the wide fit's check's.
-    check_fit: PlaneRefit,
-    wide_check_fit: PlaneRefit,
+    /// The wide fit's buffers.
+    wide_buffers: FitBuffers,
     /// The wide estimate of the last event fitted ([`PixelEstimate::INVALID`] when none).
     last_wide: PixelEstimate,
     /// Per event of the slice in progress: written to its surface (reused buffer).
@@ -139,16 +134,12 @@ impl PlaneFitEstimator {
                 vec![f64::NEG_INFINITY; width * height],
             ],
             jacobian,
-            nb: Neighbourhood::default(),
-            nb_check: Neighbourhood::default(),
+            own: FitBuffers::default(),
             last_t: f64::NEG_INFINITY,
             stats: EstimatorStats::default(),
             last_fit: None,
             wide: None,
-            nb_wide: Neighbourhood::default(),
-            nb_wide_check: Neighbourhood::default(),
-            check_fit: PlaneRefit::default(),
-            wide_check_fit: PlaneRefit::default(),
+            wide_buffers: FitBuffers::default(),
             last_wide: PixelEstimate::INVALID,
             written: Vec::new(),
         })
@@ -472,43 +463,19 @@ impl PlaneFitEstimator {
     /// agrees with it. With the wide fit on ([`with_wide_fit`](Self::with_wide_fit)) a fast
     /// valid estimate also gets the wide window's, left in `last_wide`.
     fn fit_event(&mut self, t: f64, x: u16, y: u16, p: u8, lookahead: f64) -> PixelEstimate {
-        let (xu, yu) = (x as usize, y as usize);
-        let (width, height) = (self.width, self.height);
-        let window = |radius: usize| Window {
-            x0: xu.saturating_sub(radius),
-            x1: (xu + radius).min(width - 1),
-            y0: yu.saturating_sub(radius),
-            y1: (yu + radius).min(height - 1),
-        };
-        let (r, rc) = (self.params.radius, self.params.check_radius);
-        let at = Centre {
-            t,
-            x: xu,
-            y: yu,
-            lookahead,
-        };
-        let surface = &self.surface[usize::from(p != 0)];
-        let params = &self.params;
-        let (outlier, min_points) = (params.outlier_s, params.min_points);
-        self.nb.clear();
-        gather(&mut self.nb, surface, width, params, &at, window(r), None);
-        let plane = fit_plane(&self.nb, outlier, params.max_refits, min_points);
-        let check = (rc > r).then(|| window(rc));
-        let own = check_fit(
-            plane,
-            &self.nb,
-            Ring {
-                points: &mut self.nb_check,
-                fit: &mut self.check_fit,
-                window: check,
+        let site = Site {
+            surface: &self.surface[usize::from(p != 0)],
+            width: self.width,
+            height: self.height,
+            params: &self.params,
+            at: Centre {
+                t,
+                x: x as usize,
+                y: y as usize,
+                lookahead,
             },
-            surface,
-            width,
-            params,
-            &at,
-            window(r),
-            params.max_refits,
-        );
+        };
+        let own = fit_own(&site, &mut self.own);
         self.last_fit = own.plane;
         self.last_wide = PixelEstimate::INVALID;
         if own.disagreed {
@@ -518,65 +485,126 @@ impl PlaneFitEstimator {
             return PixelEstimate::INVALID;
         };
         self.stats.valid += 1;
-        if let Some(wide) = self.wide
+        if let Some(wide) = &self.wide
             // Squared, not `hypot`: libm's costs 1 % of the node's time.
             && estimate.flow_px[0] * estimate.flow_px[0] + estimate.flow_px[1] * estimate.flow_px[1]
                 > wide.min_speed_px_s * wide.min_speed_px_s
         {
-            // The wide window's points: those of the check just done when it is the same
-            // window, else the small window's and the ring around them. Its plane: the check's
-            // fit continued when it can be (the same points, fewer refits so far), which is the
-            // plane a fresh fit with the wide fit's refits would give.
-            let same_window = own.ring_filled && wide.radius == rc;
-            let (points, plane) = match own.ring_refits {
-                Some(done) if same_window && done <= wide.max_refits => {
-                    let ok =
-                        self.check_fit
-                            .refit(&self.nb_check, outlier, wide.max_refits - done, min_points);
-                    (&self.nb_check, ok.then(|| self.check_fit.plane(&self.nb_check)))
-                }
-                _ if same_window => (
-                    &self.nb_check,
-                    fit_plane(&self.nb_check, outlier, wide.max_refits, min_points),
-                ),
-                _ => {
-                    self.nb_wide.copy_from(&self.nb);
-                    gather(
-                        &mut self.nb_wide,
-                        surface,
-                        width,
-                        params,
-                        &at,
-                        window(wide.radius),
-                        Some(window(r)),
-                    );
-                    let plane = fit_plane(&self.nb_wide, outlier, wide.max_refits, min_points);
-                    (&self.nb_wide, plane)
-                }
-            };
-            let fitted = check_fit(
-                plane,
-                points,
-                Ring {
-                    points: &mut self.nb_wide_check,
-                    fit: &mut self.wide_check_fit,
-                    window: (wide.check_radius > wide.radius).then(|| window(wide.check_radius)),
-                },
-                surface,
-                width,
-                params,
-                &at,
-                window(wide.radius),
-                wide.max_refits,
-            );
             self.stats.wide_fits += 1;
-            if let Some(w) = fitted.estimate {
+            if let Some(w) = fit_wide(&site, wide, &own, &mut self.own, &mut self.wide_buffers) {
                 self.stats.wide_valid += 1;
                 self.last_wide = w;
             }
         }
         estimate
     }
+}
+
+/// One event's fitting context: the surface of its polarity (latest timestamp per pixel,
+/// seconds, row-major, `width` x `height` pixels), the settings and the event.
+struct Site<'a> {
+    surface: &'a [f64],
+    width: usize,
+    height: usize,
+    params: &'a PlaneFitParams,
+    at: Centre,
+}
+
+impl Site<'_> {
+    /// The square window of half-width `radius` pixels around the event, clipped to the sensor.
+    #[inline]
+    fn window(&self, radius: usize) -> Window {
+        Window {
+            x0: self.at.x.saturating_sub(radius),
+            x1: (self.at.x + radius).min(self.width - 1),
+            y0: self.at.y.saturating_sub(radius),
+            y1: (self.at.y + radius).min(self.height - 1),
+        }
+    }
+}
+
+/// One window's fit buffers, so that no event allocates: the window's points, and its scale
+/// check's points and fit in progress (the small window's check fit is what the wide fit
+/// continues when its window is the check's; the wide window's points stay unused then).
+#[derive(Debug, Clone, Default)]
+struct FitBuffers {
+    points: Neighbourhood,
+    check: Neighbourhood,
+    check_fit: PlaneRefit,
+}
+
+/// The small window's fit of the event at `site` ([`PlaneFitParams::radius`]), judged and
+/// checked on the larger window ([`PlaneFitParams::check_radius`]).
+fn fit_own(site: &Site<'_>, bufs: &mut FitBuffers) -> Checked {
+    let params = site.params;
+    let (r, rc) = (params.radius, params.check_radius);
+    bufs.points.clear();
+    gather(&mut bufs.points, site, site.window(r), None);
+    let plane = fit_plane(
+        &bufs.points,
+        params.outlier_s,
+        params.max_refits,
+        params.min_points,
+    );
+    let ring = Ring {
+        points: &mut bufs.check,
+        fit: &mut bufs.check_fit,
+        window: (rc > r).then(|| site.window(rc)),
+    };
+    check_fit(plane, &bufs.points, ring, site, site.window(r), params.max_refits)
+}
+
+/// The wide fit ([`PlaneFitEstimator::with_wide_fit`]) of the event at `site`, whose small
+/// window's fit `own` (with buffers `own_bufs`) gave a fast valid estimate: its estimate when
+/// valid (and, with a wide check, agreed).
+fn fit_wide(
+    site: &Site<'_>,
+    wide: &WideFitParams,
+    own: &Checked,
+    own_bufs: &mut FitBuffers,
+    bufs: &mut FitBuffers,
+) -> Option<PixelEstimate> {
+    let params = site.params;
+    let (outlier, min_points) = (params.outlier_s, params.min_points);
+    // The wide window's points: those of the check just done when it is the same window, else
+    // the small window's and the ring around them. Its plane: the check's fit continued when it
+    // can be (the same points, fewer refits so far), which is the plane a fresh fit with the
+    // wide fit's refits would give.
+    let same_window = own.ring_filled && wide.radius == params.check_radius;
+    let (points, plane) = match own.ring_refits {
+        Some(done) if same_window && done <= wide.max_refits => {
+            let check = &own_bufs.check;
+            let ok = own_bufs
+                .check_fit
+                .refit(check, outlier, wide.max_refits - done, min_points);
+            (check, ok.then(|| own_bufs.check_fit.plane(check)))
+        }
+        _ if same_window => {
+            let check = &own_bufs.check;
+            (check, fit_plane(check, outlier, wide.max_refits, min_points))
+        }
+        _ => {
+            bufs.points.copy_from(&own_bufs.points);
+            let inner = site.window(params.radius);
+            gather(&mut bufs.points, site, site.window(wide.radius), Some(inner));
+            let plane = fit_plane(&bufs.points, outlier, wide.max_refits, min_points);
+            (&bufs.points, plane)
+        }
+    };
+    let ring = Ring {
+        points: &mut bufs.check,
+        fit: &mut bufs.check_fit,
+        window: (wide.check_radius > wide.radius).then(|| site.window(wide.check_radius)),
+    };
+    check_fit(
+        plane,
+        points,
+        ring,
+        site,
+        site.window(wide.radius),
+        wide.max_refits,
+    )
+    .estimate
 }
 
 /// The scale check's larger window ([`check_fit`]): its `window` (`None` = no check), and the
@@ -602,23 +630,20 @@ struct Checked {
     ring_refits: Option<usize>,
 }
 
-/// Judges `plane`, the fit of `points` (the window `inner`'s neighbours of the centre `at`,
+/// Judges `plane`, the fit of `points` (the window `inner`'s neighbours of the event at `site`,
 /// with at most `refits` refits), ([`judge`]); with a larger check window (`ring`), a valid
 /// estimate that is not clearly planar ([`PlaneFitParams::check_skip_confidence`]) stands only
 /// when the plane of the check window (`points` and the ring around them) agrees with it
 /// ([`agrees`]).
-#[allow(clippy::too_many_arguments)]
 fn check_fit(
     plane: Option<PlaneFit>,
     points: &Neighbourhood,
     ring: Ring<'_>,
-    surface: &[f64],
-    width: usize,
-    params: &PlaneFitParams,
-    at: &Centre,
+    site: &Site<'_>,
     inner: Window,
     refits: usize,
 ) -> Checked {
+    let params = site.params;
     let (outlier, min_points) = (params.outlier_s, params.min_points);
     let mut out = Checked {
         plane,
@@ -635,7 +660,7 @@ fn check_fit(
         && !clearly_planar(&e)
     {
         ring.points.copy_from(points);
-        gather(ring.points, surface, width, params, at, check, Some(inner));
+        gather(ring.points, site, check, Some(inner));
         out.ring_filled = true;
         let check_refits = CHECK_REFITS.min(refits);
         let fitted = ring.fit.start(ring.points, min_points)
@@ -710,19 +735,12 @@ struct Centre {
     lookahead: f64,
 }
 
-/// Adds to `nb` the pixels of `window` on `surface` (row-major, `width` wide) whose age relative
-/// to the centre event is within `[-lookahead, dt_max]` and at least `dt_min` in magnitude (the
-/// centre's own pixel always, at time 0), leaving out the pixels of `skip` (already added), in
-/// row-major order.
-fn gather(
-    nb: &mut Neighbourhood,
-    surface: &[f64],
-    width: usize,
-    params: &PlaneFitParams,
-    at: &Centre,
-    window: Window,
-    skip: Option<Window>,
-) {
+/// Adds to `nb` the pixels of `window` on the site's surface whose age relative to the site's
+/// event is within `[-lookahead, dt_max]` and at least `dt_min` in magnitude (the event's own
+/// pixel always, at time 0), leaving out the pixels of `skip` (already added), in row-major
+/// order.
+fn gather(nb: &mut Neighbourhood, site: &Site<'_>, window: Window, skip: Option<Window>) {
+    let (surface, width, params, at) = (site.surface, site.width, site.params, &site.at);
     let ages = AgeLimits {
         t: at.t,
         dt_min: params.dt_min_s,
