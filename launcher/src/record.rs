@@ -91,6 +91,7 @@ pub fn add_recorder(
             from_node: node.clone(),
             from_output: output.clone(),
             feedback: false,
+            optional: false,
             span: Default::default(),
         });
     }

@@ -8,7 +8,9 @@
 //! keep their keys and credits. Outputs the recorder of this run (`--record`) alone consumes are
 //! replayed too when the recording has them. Before anything starts, the recording is read and
 //! checked: a missing channel or one of another schema is an error naming the file and the
-//! channel; a cut-off recording is replayed as far as it was recovered, with a warning.
+//! channel, except a missing channel that only optional input ports read (a recording made
+//! before those ports were wired): those ports are left unwired, with a note; a cut-off
+//! recording is replayed as far as it was recovered, with a warning.
 
 use std::collections::BTreeSet;
 use std::path::PathBuf;
@@ -17,6 +19,7 @@ use anyhow::{Context, bail};
 use evseg_graph::{Consumer, Graph, NodeSpec, OutputSpec, RestartPolicy};
 use evseg_recorder::read::Recording;
 use evseg_replay::check::{Wanted, check_channels, check_recording};
+use evseg_replay::error::ReplayError;
 use evseg_schemas::keys;
 
 use crate::record::RECORDER_BINARY;
@@ -79,6 +82,64 @@ pub struct ReplayPlan {
     file: PathBuf,
     replaced: BTreeSet<String>,
     recording: Recording,
+    /// Topics (`node/output`) missing from the recording whose live consumers all take them on
+    /// optional ports: not replayed, and those ports left unwired.
+    unwired: BTreeSet<String>,
+}
+
+/// The outputs of the `replaced` nodes that nodes staying live read, split into those some
+/// live node reads on a required port and those read only on optional ports.
+fn replayed_outputs(graph: &Graph, replaced: &BTreeSet<String>) -> (Vec<Wanted>, Vec<Wanted>) {
+    let (mut required, mut optional) = (Vec::new(), Vec::new());
+    for n in graph.nodes.iter().filter(|n| replaced.contains(&n.id)) {
+        for o in &n.outputs {
+            let live: Vec<&Consumer> = o
+                .consumers
+                .iter()
+                .filter(|c| !replaced.contains(&c.node))
+                .collect();
+            if live.is_empty() {
+                continue;
+            }
+            let w = Wanted {
+                topic: topic(&n.id, &o.name),
+                schema: o.schema.clone(),
+                needed_by: live
+                    .iter()
+                    .map(|c| format!("{}.{}", c.node, c.port))
+                    .collect::<Vec<_>>()
+                    .join(", "),
+            };
+            let only_optional = live.iter().all(|c| {
+                graph
+                    .node(&c.node)
+                    .and_then(|node| node.input(&c.port))
+                    .is_some_and(|i| i.optional)
+            });
+            if only_optional {
+                optional.push(w);
+            } else {
+                required.push(w);
+            }
+        }
+    }
+    (required, optional)
+}
+
+/// The topics of `optional` (outputs read only on optional ports) that `recording` does not
+/// have. One it has with another schema is still an error.
+fn missing_optional(recording: &Recording, optional: &[Wanted]) -> Result<BTreeSet<String>, ReplayError> {
+    let mut missing = BTreeSet::new();
+    for w in optional {
+        match check_channels(recording, std::slice::from_ref(w)) {
+            Ok(()) => {}
+            Err(ReplayError::MissingChannel { .. }) => {
+                missing.insert(w.topic.clone());
+            }
+            Err(e) => return Err(e),
+        }
+    }
+    Ok(missing)
 }
 
 impl ReplayPlan {
@@ -97,27 +158,19 @@ impl ReplayPlan {
                 spec.from
             );
         }
-        let mut wanted = Vec::new();
-        for n in graph.nodes.iter().filter(|n| replaced.contains(&n.id)) {
-            for o in &n.outputs {
-                let live: Vec<String> = o
-                    .consumers
-                    .iter()
-                    .filter(|c| !replaced.contains(&c.node))
-                    .map(|c| format!("{}.{}", c.node, c.port))
-                    .collect();
-                if !live.is_empty() {
-                    wanted.push(Wanted {
-                        topic: topic(&n.id, &o.name),
-                        schema: o.schema.clone(),
-                        needed_by: live.join(", "),
-                    });
-                }
-            }
-        }
+        let (wanted, optional) = replayed_outputs(graph, &replaced);
         let file = std::path::absolute(&spec.recording)
             .with_context(|| format!("recording {}", spec.recording.display()))?;
         let recording = check_recording(&file, &wanted).map_err(|e| anyhow::anyhow!("{e}"))?;
+        let unwired = missing_optional(&recording, &optional).map_err(|e| anyhow::anyhow!("{e}"))?;
+        for w in optional.iter().filter(|w| unwired.contains(&w.topic)) {
+            eprintln!(
+                "note: {} has no `{}`; the optional input {} is left unwired",
+                file.display(),
+                w.topic,
+                w.needed_by
+            );
+        }
         if recording.truncated.is_some() {
             eprintln!(
                 "warning: {}; replaying what was recovered",
@@ -133,6 +186,7 @@ impl ReplayPlan {
         };
         let list: Vec<String> = wanted
             .iter()
+            .chain(optional.iter().filter(|w| !unwired.contains(&w.topic)))
             .map(|w| format!("{} ({} messages)", w.topic, count(&w.topic)))
             .collect();
         tracing::info!(from = %spec.from, outputs = ?list, "replay");
@@ -141,6 +195,7 @@ impl ReplayPlan {
             file,
             replaced,
             recording,
+            unwired,
         })
     }
 
@@ -170,6 +225,9 @@ impl ReplayPlan {
                     continue;
                 }
                 let t = topic(&n.id, &o.name);
+                if self.unwired.contains(&t) {
+                    continue;
+                }
                 let only_recorder = live.iter().all(|c| is_recorder(graph, &c.node));
                 if only_recorder {
                     let w = Wanted {
@@ -207,6 +265,9 @@ impl ReplayPlan {
             .filter(|&mib| mib != shm.pool_mib);
         g.nodes.retain(|n| !self.replaced.contains(&n.id));
         for n in &mut g.nodes {
+            // Optional inputs whose channel the recording lacks.
+            n.inputs
+                .retain(|i| !self.unwired.contains(&topic(&i.from_node, &i.from_output)));
             // Feedback into a replaced node: nobody reads it now.
             for o in &mut n.outputs {
                 o.consumers.retain(|c| !self.replaced.contains(&c.node));
@@ -384,11 +445,15 @@ mod tests {
             from: "slicer".into(),
             speed: Some(2.0),
         };
+        let replaced = upstream(g, &spec.from).unwrap();
+        let (_, optional) = replayed_outputs(g, &replaced);
+        let unwired = missing_optional(&recording, &optional).unwrap();
         ReplayPlan {
-            replaced: upstream(g, &spec.from).unwrap(),
+            replaced,
             file: "/r.mcap".into(),
             spec,
             recording,
+            unwired,
         }
     }
 
@@ -443,6 +508,68 @@ mod tests {
         assert_eq!(names, ["slicer/slices", "slicer/truth"]);
         // The graph's pools: the replay keeps none of its own.
         assert_eq!(out.nodes[0].pool_mib, None);
+    }
+
+    #[test]
+    fn a_channel_only_optional_ports_read_may_be_missing_and_leaves_them_unwired() {
+        // `seg` also reads the slicer's `hint`, on an optional port.
+        let with_hint = |optional: bool| {
+            let mut g = graph();
+            for n in &mut g.nodes {
+                match n.id.as_str() {
+                    "slicer" => n.outputs.push(OutputSpec {
+                        name: "hint".into(),
+                        schema: "s".into(),
+                        consumers: vec![Consumer {
+                            node: "seg".into(),
+                            port: "hint".into(),
+                            feedback: false,
+                        }],
+                    }),
+                    "seg" => n.inputs.push(evseg_graph::InputSpec {
+                        port: "hint".into(),
+                        schema: "s".into(),
+                        from_node: "slicer".into(),
+                        from_output: "hint".into(),
+                        feedback: false,
+                        optional,
+                        span: Default::default(),
+                    }),
+                    _ => {}
+                }
+            }
+            g
+        };
+        let g = with_hint(true);
+        let names =
+            |g: &Graph| -> Vec<String> { g.nodes[0].outputs.iter().map(|o| o.name.clone()).collect() };
+        // A recording made before the port was wired: not replayed, and the port left unwired.
+        let p = plan(&g, &["slicer/slices", "slicer/truth"]);
+        let out = p.apply(&g, "local").unwrap();
+        assert_eq!(names(&out), ["slicer/slices", "slicer/truth"]);
+        assert!(out.node("seg").unwrap().input("hint").is_none());
+        assert!(out.node("seg").unwrap().input("slices").is_some());
+        // A recording with it: replayed and wired.
+        let p = plan(&g, &["slicer/slices", "slicer/truth", "slicer/hint"]);
+        let out = p.apply(&g, "local").unwrap();
+        assert_eq!(names(&out), ["slicer/slices", "slicer/truth", "slicer/hint"]);
+        assert!(out.node("seg").unwrap().input("hint").is_some());
+        // Present with another schema: still an error.
+        let replaced = upstream(&g, "slicer").unwrap();
+        let (required, optional) = replayed_outputs(&g, &replaced);
+        assert_eq!(optional.len(), 1);
+        let mut rec = p.recording.clone();
+        for c in rec.channels.values_mut() {
+            c.schema = "other".into();
+        }
+        assert!(matches!(
+            missing_optional(&rec, &optional),
+            Err(ReplayError::WrongSchema { .. })
+        ));
+        // Read on a required port, the channel is required (a missing one is an error).
+        let (required_too, optional) = replayed_outputs(&with_hint(false), &replaced);
+        assert!(optional.is_empty());
+        assert_eq!(required_too.len(), required.len() + 1);
     }
 
     #[test]

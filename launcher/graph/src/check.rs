@@ -445,6 +445,7 @@ fn wire_one(
             from_node: producer_id.to_string(),
             from_output: output.to_string(),
             feedback: input.feedback,
+            optional: taken.optional,
             span: input.port.at,
         },
     ))

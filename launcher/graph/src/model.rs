@@ -168,6 +168,11 @@ pub struct InputSpec {
     /// True for a feedback edge: the node gets the producer's message of the previous slice
     /// (none for the first slice), and the edge does not count for cycles or ordering.
     pub feedback: bool,
+    /// True when the node's description calls the port optional: the node also runs with it
+    /// unwired (a replay whose recording lacks its channel leaves it so). Left out of the
+    /// canonical form when false, so graphs without optional inputs hash as before.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub optional: bool,
     /// Where the input is wired in graph.yaml (not part of the canonical form).
     #[serde(skip)]
     pub span: Span,
