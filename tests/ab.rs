@@ -1,11 +1,13 @@
 //! `evseg ab`: two variants of a graph on the same recording. A variant identical to A gives
 //! zero differences (lock-step replay feeds both the same frames); a parameter change of B shows
-//! in its column; a swap to a binary with other ports is refused before anything runs.
+//! in its column; a swap to a binary with other ports is refused before anything runs; a swap
+//! to a binary without some of the old one's parameters or optional outputs is fitted with
+//! notes.
 
 use std::path::Path;
 use std::time::Duration;
 
-use evseg_tests::{Launcher, free_port, read_json, sim_graph, write};
+use evseg_tests::{Launcher, free_port, read_json, sim_graph, workspace_root, write};
 
 fn graph(port: u16) -> String {
     sim_graph("ab", port, "")
@@ -102,4 +104,52 @@ fn ab_compares_two_variants_on_one_recording() {
     assert!(!r.status.success());
     assert!(r.stderr.contains("graph-b.yaml:"), "{}", r.stderr);
     assert!(!work.join("input").exists(), "nothing may run");
+}
+
+#[test]
+fn swapping_the_learned_flow_into_the_default_graph_is_fitted_with_notes() {
+    // The default graph's flow node sets a plane-fit parameter and feeds the hierarchical
+    // merger's optional `egomotion_flow` from the plane fit's `wide_flow`, which the learned
+    // estimator has not. Variant B is fitted and passes the check: the run stops only at the
+    // recording, which does not exist (so no node starts).
+    let dir = tempfile::tempdir().unwrap();
+    let graph = workspace_root().join("graph.yaml");
+    let work = dir.path().join("w");
+    let r = evseg(
+        dir.path(),
+        &[
+            "ab",
+            graph.to_str().unwrap(),
+            "--recording",
+            "missing.mcap",
+            "--swap",
+            "flow=evseg-normal-flow-learned",
+            "--work",
+            work.to_str().unwrap(),
+        ],
+    );
+    assert!(!r.status.success());
+    assert!(
+        r.stderr
+            .contains("parameter `max_direction_sd_deg` of node `flow` removed"),
+        "{}",
+        r.stderr
+    );
+    assert!(
+        r.stderr
+            .contains("optional input `egomotion_flow` of node `hierarchical` left unwired"),
+        "{}",
+        r.stderr
+    );
+    assert!(r.stderr.contains("missing.mcap"), "{}", r.stderr);
+    assert!(
+        !r.stderr.contains("graph-b.yaml:"),
+        "B must pass the check:\n{}",
+        r.stderr
+    );
+    let b = std::fs::read_to_string(work.join("graph-b.yaml")).unwrap();
+    assert!(
+        b.contains("run: evseg-normal-flow-learned") && !b.contains("wide_flow"),
+        "{b}"
+    );
 }

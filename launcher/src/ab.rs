@@ -2,8 +2,12 @@
 //! by side with the differences.
 //!
 //! Variant A is the graph as written; variant B is the graph with `--swap node=binary` (the node
-//! runs another implementation; the edited graph is checked like any graph file, so the new
-//! binary must have compatible ports and parameters) and `--set-b node.param=value` applied.
+//! runs another implementation) and `--set-b node.param=value` applied. The swap fits the
+//! graph to the new binary where that is safe, with a note for each change
+//! (`evseg_graph::swap_adapted`): the old binary's parameters the new one does not have are
+//! removed, and optional inputs that read an output the new one does not publish are left
+//! unwired. The edited graph is then checked like any graph file, so a required port the new
+//! binary lacks, or a port of another type, is refused with variant B's file, line and column.
 //! Each recording is replayed from `--from` into both variants (`evseg replay`) at the same
 //! time, as two graph instances (`ab-a` and `ab-b`, so no key is shared) on one Zenoh network:
 //! variant B's router connects to variant A's. Lock-step replay makes the inputs of both
@@ -107,11 +111,18 @@ fn read_report(dir: &Path) -> anyhow::Result<Value> {
 fn graph_b(o: &AbOptions) -> anyhow::Result<PathBuf> {
     let file = o.graph.display().to_string();
     let mut text = std::fs::read_to_string(&o.graph).with_context(|| format!("cannot read {file}"))?;
+    let dir = o.graph.parent().map(Path::to_path_buf).unwrap_or_default();
+    let resolver = crate::resolve::BinaryResolver::new(&dir);
+    let describe = |b: &str| resolver.describe(b).map(|(_, d)| d);
     for s in &o.swap {
         let (node, binary) = s
             .split_once('=')
             .with_context(|| format!("--swap `{s}`: expected node=binary"))?;
-        text = evseg_graph::swap_binary(&file, &text, node, binary)?;
+        let adapted = evseg_graph::swap_adapted(&file, &text, node, binary, &describe)?;
+        for note in &adapted.notes {
+            eprintln!("note: variant B, {note}");
+        }
+        text = adapted.text;
     }
     std::fs::create_dir_all(&o.work).with_context(|| format!("cannot create {}", o.work.display()))?;
     let path = o.work.join("graph-b.yaml");

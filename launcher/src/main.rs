@@ -120,7 +120,9 @@ enum Command {
         /// Replay point (this node and its upstream are replayed in both variants).
         #[arg(long, default_value = "slicer")]
         from: String,
-        /// Variant B: run this node with another binary, `node=binary` (repeatable).
+        /// Variant B: run this node with another binary, `node=binary` (repeatable). Parameters
+        /// the new binary lacks are removed, and optional inputs fed by outputs it does not
+        /// publish are left unwired, each with a note.
         #[arg(long)]
         swap: Vec<String>,
         /// Both variants: parameter override `node.param=value` (repeatable).

@@ -29,7 +29,7 @@ pub use model::{
     Consumer, Graph, InputSpec, Machine, Mode, NodeKeys, NodeSpec, OutputSpec, PortKey, RecordSpec, Restart,
     RestartPolicy, SharedMemory,
 };
-pub use swap::swap_binary;
+pub use swap::{AdaptedSwap, swap_adapted, swap_binary};
 
 use diagnostic::Problems;
 
