@@ -4,6 +4,7 @@
 
 use evseg_schemas::messages::{CameraInfo, Events};
 
+use crate::block_reader::BlockReader;
 use crate::{Chunk, DecodeError, DecodeStats, EventDecoder, Format};
 
 /// Most events one record of any format can produce (an EVT 3.0 VECT_12 word); a
@@ -45,6 +46,92 @@ pub(crate) trait FormatDecoder: Send {
     /// True when the file carries an IMU stream.
     fn has_imu(&self) -> bool {
         false
+    }
+}
+
+/// The record decoding of a format read in whole records from a [`BlockReader`] (EVT 2.0,
+/// EVT 3.0, Event Stream): [`RecordDecoder`] runs the read loop, this the format.
+pub(crate) trait RecordState: Send {
+    /// The format.
+    const FORMAT: Format;
+    /// Bytes a record needs (the decoder refills below this).
+    const RECORD_BYTES: usize;
+    /// Decodes the whole records of `bytes` (starting at file offset `start`) into `out` until
+    /// `out.events.len() >= target`: the bytes consumed and why it stopped.
+    fn decode(&mut self, bytes: &[u8], start: u64, out: &mut Chunk, target: usize) -> (usize, Stop);
+    /// File offset of the fault at record `index` of the block that started at `start`.
+    fn fault_offset(&self, start: u64, index: usize) -> u64;
+    /// At the end of the file with `left` bytes (fewer than a record) undecoded, the next at
+    /// file offset `offset`: `None` for a clean end, else where and what is truncated.
+    fn truncated_at_end(&self, left: usize, offset: u64) -> Option<(u64, String)>;
+    /// Sensor size (width, height), pixels.
+    fn geometry(&self) -> (u16, u16);
+    /// Absolute time of the first event, µs, once known.
+    fn time_origin_us(&self) -> Option<i64>;
+    /// Counters.
+    fn stats(&self) -> DecodeStats;
+    /// Prepares `out` before a fill up to `target` events (default: nothing).
+    fn prepare(&self, _out: &mut Chunk, _target: usize) {}
+}
+
+/// A [`RecordState`] and the reader of its file: the [`FormatDecoder`] of the record formats.
+pub(crate) struct RecordDecoder<S> {
+    /// The file, positioned at the next undecoded byte.
+    pub reader: BlockReader,
+    /// The format's state.
+    pub state: S,
+}
+
+impl<S: RecordState> FormatDecoder for RecordDecoder<S> {
+    fn fill(&mut self, out: &mut Chunk, target: usize) -> Result<bool, DecodeError> {
+        self.state.prepare(out, target);
+        loop {
+            let bytes = self.reader.available();
+            if bytes.len() < S::RECORD_BYTES {
+                if self.reader.refill()? {
+                    continue;
+                }
+                let left = self.reader.available().len();
+                return match self.state.truncated_at_end(left, self.reader.offset()) {
+                    None => Ok(false),
+                    Some((offset, what)) => Err(DecodeError::Truncated {
+                        path: self.reader.path().to_path_buf(),
+                        offset,
+                        what,
+                    }),
+                };
+            }
+            let start = self.reader.offset();
+            let (consumed, stop) = self.state.decode(bytes, start, out, target);
+            self.reader.consume(consumed);
+            match stop {
+                Stop::Full => return Ok(true),
+                Stop::Block => {}
+                Stop::Fault(index, what) => {
+                    return Err(DecodeError::Corrupt {
+                        path: self.reader.path().to_path_buf(),
+                        offset: self.state.fault_offset(start, index),
+                        what,
+                    });
+                }
+            }
+        }
+    }
+
+    fn geometry(&self) -> (u16, u16) {
+        self.state.geometry()
+    }
+
+    fn time_origin_us(&self) -> Option<i64> {
+        self.state.time_origin_us()
+    }
+
+    fn format(&self) -> Format {
+        S::FORMAT
+    }
+
+    fn stats(&self) -> DecodeStats {
+        self.state.stats()
     }
 }
 

@@ -17,14 +17,14 @@
 use std::path::Path;
 
 use crate::block_reader::BlockReader;
-use crate::decoder::{FormatDecoder, Stop, TimeBase};
+use crate::decoder::{RecordDecoder, RecordState, Stop, TimeBase};
 use crate::{Chunk, DecodeError, DecodeStats, Format, OpenOptions, OutOfRange};
 
 /// The first bytes of every Event Stream file.
 pub(crate) const MAGIC: &[u8] = b"Event Stream";
 
 /// Decoder state besides the file reader.
-struct State {
+pub(crate) struct State {
     width: u16,
     height: u16,
     atis: bool,
@@ -44,10 +44,7 @@ struct State {
 }
 
 /// Streaming Event Stream decoder.
-pub(crate) struct EsDecoder {
-    reader: BlockReader,
-    state: State,
-}
+pub(crate) type EsDecoder = RecordDecoder<State>;
 
 impl EsDecoder {
     /// Opens `path`, reads its header and positions the decoder at the first event byte.
@@ -119,7 +116,7 @@ impl EsDecoder {
             });
         }
         reader.consume(20);
-        Ok(EsDecoder {
+        Ok(RecordDecoder {
             reader,
             state: State {
                 width,
@@ -142,7 +139,7 @@ impl EsDecoder {
 
 impl State {
     /// Decodes `bytes` (starting at file offset `start`) until `target` events.
-    fn decode(&mut self, bytes: &[u8], start: u64, out: &mut Chunk, target: usize) -> (usize, Stop) {
+    fn decode_bytes(&mut self, bytes: &[u8], start: u64, out: &mut Chunk, target: usize) -> (usize, Stop) {
         for (k, &b) in bytes.iter().enumerate() {
             match self.phase {
                 0 => {
@@ -212,53 +209,32 @@ impl State {
     }
 }
 
-impl FormatDecoder for EsDecoder {
-    fn fill(&mut self, out: &mut Chunk, target: usize) -> Result<bool, DecodeError> {
-        loop {
-            let bytes = self.reader.available();
-            if bytes.is_empty() {
-                if self.reader.refill()? {
-                    continue;
-                }
-                if self.state.phase != 0 {
-                    return Err(DecodeError::Truncated {
-                        path: self.reader.path().to_path_buf(),
-                        offset: self.state.event_offset,
-                        what: "the file ends inside an event".into(),
-                    });
-                }
-                return Ok(false);
-            }
-            let start = self.reader.offset();
-            let (consumed, stop) = self.state.decode(bytes, start, out, target);
-            self.reader.consume(consumed);
-            match stop {
-                Stop::Full => return Ok(true),
-                Stop::Block => {}
-                Stop::Fault(_, what) => {
-                    return Err(DecodeError::Corrupt {
-                        path: self.reader.path().to_path_buf(),
-                        offset: self.state.event_offset,
-                        what,
-                    });
-                }
-            }
-        }
+impl RecordState for State {
+    const FORMAT: Format = Format::EventStream;
+    const RECORD_BYTES: usize = 1;
+
+    fn decode(&mut self, bytes: &[u8], start: u64, out: &mut Chunk, target: usize) -> (usize, Stop) {
+        self.decode_bytes(bytes, start, out, target)
+    }
+
+    /// A fault is the current event's: its first byte.
+    fn fault_offset(&self, _start: u64, _index: usize) -> u64 {
+        self.event_offset
+    }
+
+    fn truncated_at_end(&self, _left: usize, _offset: u64) -> Option<(u64, String)> {
+        (self.phase != 0).then(|| (self.event_offset, "the file ends inside an event".to_string()))
     }
 
     fn geometry(&self) -> (u16, u16) {
-        (self.state.width, self.state.height)
+        (self.width, self.height)
     }
 
     fn time_origin_us(&self) -> Option<i64> {
-        self.state.clock.origin
-    }
-
-    fn format(&self) -> Format {
-        Format::EventStream
+        self.clock.origin
     }
 
     fn stats(&self) -> DecodeStats {
-        self.state.stats
+        self.stats
     }
 }

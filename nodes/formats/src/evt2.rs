@@ -10,7 +10,7 @@
 use std::path::Path;
 
 use crate::block_reader::BlockReader;
-use crate::decoder::{FormatDecoder, Stop, TimeBase};
+use crate::decoder::{RecordDecoder, RecordState, Stop, TimeBase};
 use crate::prophesee::{EvtVersion, open_raw};
 use crate::{Chunk, DecodeError, DecodeStats, Format, OpenOptions, OutOfRange};
 
@@ -18,7 +18,7 @@ use crate::{Chunk, DecodeError, DecodeStats, Format, OpenOptions, OutOfRange};
 const TIME_LOOP_US: i64 = 1 << 34;
 
 /// Decoder state besides the file reader.
-struct State {
+pub(crate) struct State {
     width: u16,
     height: u16,
     policy: OutOfRange,
@@ -33,10 +33,7 @@ struct State {
 }
 
 /// Streaming EVT 2.0 decoder.
-pub(crate) struct Evt2Decoder {
-    reader: BlockReader,
-    state: State,
-}
+pub(crate) type Evt2Decoder = RecordDecoder<State>;
 
 impl Evt2Decoder {
     /// Opens `path`, reads its header and positions the decoder at the first data word.
@@ -47,7 +44,7 @@ impl Evt2Decoder {
             options,
             Some(options.evt2_default_geometry),
         )?;
-        Ok(Evt2Decoder {
+        Ok(RecordDecoder {
             reader: BlockReader::open(path, header.length, options.read_block_bytes)?,
             state: State {
                 width,
@@ -81,7 +78,7 @@ impl State {
     }
 
     /// Decodes the whole words of `bytes` until `target` events; returns the bytes consumed.
-    fn decode(&mut self, bytes: &[u8], out: &mut Chunk, target: usize) -> (usize, Stop) {
+    fn decode_words(&mut self, bytes: &[u8], out: &mut Chunk, target: usize) -> (usize, Stop) {
         let words = bytes.len() / 4;
         for k in 0..words {
             let w = u32::from_le_bytes([bytes[4 * k], bytes[4 * k + 1], bytes[4 * k + 2], bytes[4 * k + 3]]);
@@ -134,54 +131,31 @@ impl State {
     }
 }
 
-impl FormatDecoder for Evt2Decoder {
-    fn fill(&mut self, out: &mut Chunk, target: usize) -> Result<bool, DecodeError> {
-        loop {
-            let bytes = self.reader.available();
-            if bytes.len() < 4 {
-                if self.reader.refill()? {
-                    continue;
-                }
-                let left = self.reader.available().len();
-                if left == 0 {
-                    return Ok(false);
-                }
-                return Err(DecodeError::Truncated {
-                    path: self.reader.path().to_path_buf(),
-                    offset: self.reader.offset(),
-                    what: format!("{left} bytes left, an EVT 2.0 word has 4"),
-                });
-            }
-            let (consumed, stop) = self.state.decode(bytes, out, target);
-            let start = self.reader.offset();
-            self.reader.consume(consumed);
-            match stop {
-                Stop::Full => return Ok(true),
-                Stop::Block => {}
-                Stop::Fault(word, what) => {
-                    return Err(DecodeError::Corrupt {
-                        path: self.reader.path().to_path_buf(),
-                        offset: start + 4 * word as u64,
-                        what,
-                    });
-                }
-            }
-        }
+impl RecordState for State {
+    const FORMAT: Format = Format::Evt2;
+    const RECORD_BYTES: usize = 4;
+
+    fn decode(&mut self, bytes: &[u8], _start: u64, out: &mut Chunk, target: usize) -> (usize, Stop) {
+        self.decode_words(bytes, out, target)
+    }
+
+    fn fault_offset(&self, start: u64, index: usize) -> u64 {
+        start + 4 * index as u64
+    }
+
+    fn truncated_at_end(&self, left: usize, offset: u64) -> Option<(u64, String)> {
+        (left > 0).then(|| (offset, format!("{left} bytes left, an EVT 2.0 word has 4")))
     }
 
     fn geometry(&self) -> (u16, u16) {
-        (self.state.width, self.state.height)
+        (self.width, self.height)
     }
 
     fn time_origin_us(&self) -> Option<i64> {
-        self.state.clock.origin
-    }
-
-    fn format(&self) -> Format {
-        Format::Evt2
+        self.clock.origin
     }
 
     fn stats(&self) -> DecodeStats {
-        self.state.stats
+        self.stats
     }
 }

@@ -15,7 +15,7 @@
 use std::path::Path;
 
 use crate::block_reader::BlockReader;
-use crate::decoder::{FormatDecoder, MAX_EVENTS_PER_RECORD, Stop, TimeBase};
+use crate::decoder::{MAX_EVENTS_PER_RECORD, RecordDecoder, RecordState, Stop, TimeBase};
 use crate::prophesee::{EvtVersion, open_raw};
 use crate::{Chunk, DecodeError, DecodeStats, Format, OpenOptions, OutOfRange};
 
@@ -25,7 +25,7 @@ const LOOP_THRESHOLD_HIGH: u32 = 1 << 11;
 const TIME_LOOP_US: i64 = 1 << 24;
 
 /// Decoder state besides the file reader.
-struct State {
+pub(crate) struct State {
     width: u16,
     height: u16,
     policy: OutOfRange,
@@ -48,16 +48,13 @@ struct State {
 }
 
 /// Streaming EVT 3.0 decoder.
-pub(crate) struct Evt3Decoder {
-    reader: BlockReader,
-    state: State,
-}
+pub(crate) type Evt3Decoder = RecordDecoder<State>;
 
 impl Evt3Decoder {
     /// Opens `path`, reads its header and positions the decoder at the first data word.
     pub fn open(path: &Path, options: &OpenOptions) -> Result<Self, DecodeError> {
         let (header, (width, height)) = open_raw(path, EvtVersion::Evt3, options, None)?;
-        Ok(Evt3Decoder {
+        Ok(RecordDecoder {
             reader: BlockReader::open(path, header.length, options.read_block_bytes)?,
             state: State {
                 width,
@@ -145,7 +142,7 @@ impl State {
 
     /// Decodes the whole 16-bit words of `bytes` into `out` until `target` events. Returns the
     /// number of bytes consumed and why it stopped.
-    fn decode(&mut self, bytes: &[u8], out: &mut Chunk, target: usize) -> (usize, Stop) {
+    fn decode_words(&mut self, bytes: &[u8], out: &mut Chunk, target: usize) -> (usize, Stop) {
         let words = bytes.len() / 2;
         let mut i = 0;
         if !self.time_base_set {
@@ -237,60 +234,42 @@ impl State {
     }
 }
 
-impl FormatDecoder for Evt3Decoder {
-    fn fill(&mut self, out: &mut Chunk, target: usize) -> Result<bool, DecodeError> {
-        // Reserve for the chunk asked for, capped: `target` may be "everything" (usize::MAX).
+impl RecordState for State {
+    const FORMAT: Format = Format::Evt3;
+    const RECORD_BYTES: usize = 2;
+
+    fn decode(&mut self, bytes: &[u8], _start: u64, out: &mut Chunk, target: usize) -> (usize, Stop) {
+        self.decode_words(bytes, out, target)
+    }
+
+    fn fault_offset(&self, start: u64, index: usize) -> u64 {
+        start + 2 * index as u64
+    }
+
+    fn truncated_at_end(&self, left: usize, offset: u64) -> Option<(u64, String)> {
+        (left > 0).then(|| (offset, "1 byte left, an EVT 3.0 word has 2".to_string()))
+    }
+
+    fn geometry(&self) -> (u16, u16) {
+        (self.width, self.height)
+    }
+
+    fn time_origin_us(&self) -> Option<i64> {
+        self.clock.origin
+    }
+
+    fn stats(&self) -> DecodeStats {
+        self.stats
+    }
+
+    /// Reserves room for the chunk asked for, capped: `target` may be "everything"
+    /// (`usize::MAX`).
+    fn prepare(&self, out: &mut Chunk, target: usize) {
         let room = target.saturating_sub(out.events.len()).min(1 << 20) + MAX_EVENTS_PER_RECORD;
         let e = &mut out.events;
         e.t.reserve(room);
         e.x.reserve(room);
         e.y.reserve(room);
         e.p.reserve(room);
-        loop {
-            let bytes = self.reader.available();
-            if bytes.len() < 2 {
-                if self.reader.refill()? {
-                    continue;
-                }
-                if self.reader.available().is_empty() {
-                    return Ok(false);
-                }
-                return Err(DecodeError::Truncated {
-                    path: self.reader.path().to_path_buf(),
-                    offset: self.reader.offset(),
-                    what: "1 byte left, an EVT 3.0 word has 2".into(),
-                });
-            }
-            let (consumed, stop) = self.state.decode(bytes, out, target);
-            let start = self.reader.offset();
-            self.reader.consume(consumed);
-            match stop {
-                Stop::Full => return Ok(true),
-                Stop::Block => {}
-                Stop::Fault(word, what) => {
-                    return Err(DecodeError::Corrupt {
-                        path: self.reader.path().to_path_buf(),
-                        offset: start + 2 * word as u64,
-                        what,
-                    });
-                }
-            }
-        }
-    }
-
-    fn geometry(&self) -> (u16, u16) {
-        (self.state.width, self.state.height)
-    }
-
-    fn time_origin_us(&self) -> Option<i64> {
-        self.state.clock.origin
-    }
-
-    fn format(&self) -> Format {
-        Format::Evt3
-    }
-
-    fn stats(&self) -> DecodeStats {
-        self.state.stats
     }
 }
