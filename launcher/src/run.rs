@@ -550,6 +550,77 @@ fn run_metadata(graph: &Graph, file: &Path, machine: &str) -> serde_json::Map<St
     m
 }
 
+/// The warnings and errors one node logged during a run (`logs/<node>.log`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct LoggedProblems {
+    /// The node (its log file's name).
+    pub node: String,
+    /// Lines at level WARN from evseg's own code.
+    pub warnings: usize,
+    /// Lines at level ERROR from evseg's own code.
+    pub errors: usize,
+    /// The first of those lines' messages (target and text, without the time stamp).
+    pub first: String,
+    /// WARN and ERROR lines of the libraries (Zenoh's transport notices, say).
+    pub library: usize,
+}
+
+/// What the nodes of the run in `dir` logged at WARN or ERROR, per node with any, sorted by
+/// node: evseg's own lines counted and the first quoted, the libraries' only counted. Lines
+/// are read as `tracing` writes them (`<time> <LEVEL> <target>: <message>`); others are passed
+/// over.
+pub fn logged_problems(dir: &Path) -> Vec<LoggedProblems> {
+    let mut logs: Vec<PathBuf> = std::fs::read_dir(dir.join("logs"))
+        .into_iter()
+        .flatten()
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| p.extension().is_some_and(|e| e == "log"))
+        .collect();
+    logs.sort();
+    let mut out = Vec::new();
+    for path in logs {
+        let Ok(text) = std::fs::read_to_string(&path) else {
+            continue;
+        };
+        let node = path
+            .file_stem()
+            .map_or_else(String::new, |s| s.to_string_lossy().into_owned());
+        let mut p = LoggedProblems {
+            node,
+            warnings: 0,
+            errors: 0,
+            first: String::new(),
+            library: 0,
+        };
+        for line in text.lines() {
+            // Past the time stamp: the level, then `target: message`.
+            let rest = line.trim_start_matches(|c: char| !c.is_whitespace()).trim_start();
+            let Some((level, message)) = rest.split_once(' ') else {
+                continue;
+            };
+            let (warn, error) = (level == "WARN", level == "ERROR");
+            if !(warn || error) {
+                continue;
+            }
+            let message = message.trim_start();
+            if !message.starts_with("evseg") {
+                p.library += 1;
+                continue;
+            }
+            p.warnings += usize::from(warn);
+            p.errors += usize::from(error);
+            if p.first.is_empty() {
+                p.first = message.to_string();
+            }
+        }
+        if p.warnings + p.errors + p.library > 0 {
+            out.push(p);
+        }
+    }
+    out
+}
+
 /// Markdown reports the nodes wrote into the run folder (`*/report.md`, one level down).
 pub fn reports(dir: &Path) -> Vec<PathBuf> {
     let mut found: Vec<PathBuf> = std::fs::read_dir(dir)
@@ -640,6 +711,46 @@ pub fn summary(outcome: &RunOutcome, order: &[String]) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn logged_problems_count_evseg_warnings_and_errors_per_node_and_quote_the_first() {
+        let dir = tempfile::tempdir().unwrap();
+        let logs = dir.path().join("logs");
+        std::fs::create_dir_all(&logs).unwrap();
+        std::fs::write(
+            logs.join("source.log"),
+            "2026-12-07T09:37:21.033727Z  INFO evseg_source::evimo2: IMU check: inconclusive\n\
+             2026-12-07T09:37:21.033772Z  WARN evseg_source::evimo2: /x: the folder has no IMU samples\n\
+             2026-12-07T09:37:22.000000Z ERROR evseg_source: a bad packet\n\
+             2026-12-07T09:37:23.283490Z  WARN zenoh::api::admin: Unable to find transport\n\
+             not a tracing line\n",
+        )
+        .unwrap();
+        std::fs::write(
+            logs.join("flow.log"),
+            "2026-12-07T09:37:21Z  INFO evseg_normal_flow: fine\n",
+        )
+        .unwrap();
+        std::fs::write(
+            logs.join("slicer.log"),
+            "2026-12-07T09:37:21Z  WARN evseg_slicer: slices=3\n",
+        )
+        .unwrap();
+        let found = logged_problems(dir.path());
+        assert_eq!(found.len(), 2, "{found:?}");
+        assert_eq!(
+            found[1],
+            LoggedProblems {
+                node: "source".into(),
+                warnings: 1,
+                errors: 1,
+                first: "evseg_source::evimo2: /x: the folder has no IMU samples".into(),
+                library: 1,
+            }
+        );
+        assert_eq!((found[0].node.as_str(), found[0].warnings), ("slicer", 1));
+        assert!(logged_problems(&dir.path().join("none")).is_empty());
+    }
 
     #[test]
     fn flow_comparison_has_a_row_per_score_file_and_names_an_unreadable_one() {
