@@ -194,6 +194,9 @@ fn run_and_score(
         listen: vec![crate::run::free_loopback_endpoint()?],
         ..RunOptions::default()
     })?;
+    for line in crate::run::problem_lines(&outcome.dir) {
+        eprintln!("  {name}: {line}");
+    }
     let report_path = outcome.dir.join("report").join("report.json");
     let text = std::fs::read_to_string(&report_path)
         .with_context(|| format!("the evaluator wrote no {}", report_path.display()))?;

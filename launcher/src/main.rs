@@ -576,26 +576,15 @@ fn print_outcome(outcome: &run::RunOutcome) {
     for why in &outcome.restarts {
         println!("restarted during the run: {why}");
     }
-    let problems = run::logged_problems(&outcome.dir);
-    if problems.iter().any(|p| p.warnings + p.errors > 0) {
+    let problems = run::problem_lines(&outcome.dir);
+    if !problems.is_empty() {
         println!(
-            "the nodes logged warnings or errors (the whole lines in {}):",
+            "logged at WARN or ERROR (the whole lines in {}):",
             outcome.dir.join("logs").display()
         );
-        for p in problems.iter().filter(|p| p.warnings + p.errors > 0) {
-            let mut first = p.first.clone();
-            if first.chars().count() > 300 {
-                first = first.chars().take(300).collect::<String>() + " ...";
-            }
-            println!(
-                "  {}: {} warnings, {} errors; first: {first}",
-                p.node, p.warnings, p.errors
-            );
+        for line in problems {
+            println!("  {line}");
         }
-    }
-    let library: usize = problems.iter().map(|p| p.library).sum();
-    if library > 0 {
-        println!("({library} warnings of the libraries (Zenoh) in the logs)");
     }
     println!(
         "run finished in {:.2} s; folder {}",

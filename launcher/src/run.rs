@@ -621,6 +621,32 @@ pub fn logged_problems(dir: &Path) -> Vec<LoggedProblems> {
     out
 }
 
+/// [`logged_problems`] of the run in `dir` as lines for a person: one per node with evseg
+/// warnings or errors (the counts and the first message, cut at 300 characters), then one
+/// counting the libraries' warnings; empty when there are none.
+pub fn problem_lines(dir: &Path) -> Vec<String> {
+    let problems = logged_problems(dir);
+    let mut lines: Vec<String> = problems
+        .iter()
+        .filter(|p| p.warnings + p.errors > 0)
+        .map(|p| {
+            let mut first: String = p.first.chars().take(300).collect();
+            if p.first.chars().count() > 300 {
+                first.push_str(" ...");
+            }
+            format!(
+                "{}: {} warnings, {} errors; first: {first}",
+                p.node, p.warnings, p.errors
+            )
+        })
+        .collect();
+    let library: usize = problems.iter().map(|p| p.library).sum();
+    if library > 0 {
+        lines.push(format!("{library} warnings of the libraries (Zenoh) in the logs"));
+    }
+    lines
+}
+
 /// Markdown reports the nodes wrote into the run folder (`*/report.md`, one level down).
 pub fn reports(dir: &Path) -> Vec<PathBuf> {
     let mut found: Vec<PathBuf> = std::fs::read_dir(dir)
