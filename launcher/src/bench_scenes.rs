@@ -194,7 +194,7 @@ fn run_and_score(
         listen: vec![crate::run::free_loopback_endpoint()?],
         ..RunOptions::default()
     })?;
-    for line in crate::run::problem_lines(&outcome.dir) {
+    for line in crate::run::problem_lines(&outcome.dir, false) {
         eprintln!("  {name}: {line}");
     }
     let report_path = outcome.dir.join("report").join("report.json");

@@ -576,7 +576,7 @@ fn print_outcome(outcome: &run::RunOutcome) {
     for why in &outcome.restarts {
         println!("restarted during the run: {why}");
     }
-    let problems = run::problem_lines(&outcome.dir);
+    let problems = run::problem_lines(&outcome.dir, true);
     if !problems.is_empty() {
         println!(
             "logged at WARN or ERROR (the whole lines in {}):",

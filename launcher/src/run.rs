@@ -622,9 +622,10 @@ pub fn logged_problems(dir: &Path) -> Vec<LoggedProblems> {
 }
 
 /// [`logged_problems`] of the run in `dir` as lines for a person: one per node with evseg
-/// warnings or errors (the counts and the first message, cut at 300 characters), then one
-/// counting the libraries' warnings; empty when there are none.
-pub fn problem_lines(dir: &Path) -> Vec<String> {
+/// warnings or errors (the counts and the first message, cut at 300 characters), then, with
+/// `library`, one counting the libraries' warnings; empty when there are none.
+pub fn problem_lines(dir: &Path, library: bool) -> Vec<String> {
+    let count = |n: usize, what: &str| format!("{n} {what}{}", if n == 1 { "" } else { "s" });
     let problems = logged_problems(dir);
     let mut lines: Vec<String> = problems
         .iter()
@@ -635,14 +636,19 @@ pub fn problem_lines(dir: &Path) -> Vec<String> {
                 first.push_str(" ...");
             }
             format!(
-                "{}: {} warnings, {} errors; first: {first}",
-                p.node, p.warnings, p.errors
+                "{}: {}, {}; first: {first}",
+                p.node,
+                count(p.warnings, "warning"),
+                count(p.errors, "error")
             )
         })
         .collect();
-    let library: usize = problems.iter().map(|p| p.library).sum();
-    if library > 0 {
-        lines.push(format!("{library} warnings of the libraries (Zenoh) in the logs"));
+    let from_libraries: usize = problems.iter().map(|p| p.library).sum();
+    if library && from_libraries > 0 {
+        lines.push(format!(
+            "{} of the libraries (Zenoh) in the logs",
+            count(from_libraries, "warning")
+        ));
     }
     lines
 }
