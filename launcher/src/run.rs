@@ -580,9 +580,11 @@ pub fn logged_problems(dir: &Path) -> Vec<LoggedProblems> {
     logs.sort();
     let mut out = Vec::new();
     for path in logs {
-        let Ok(text) = std::fs::read_to_string(&path) else {
+        // A log cut inside a character (a node killed mid-write) is still read.
+        let Ok(bytes) = std::fs::read(&path) else {
             continue;
         };
+        let text = String::from_utf8_lossy(&bytes);
         let node = path
             .file_stem()
             .map_or_else(String::new, |s| s.to_string_lossy().into_owned());
