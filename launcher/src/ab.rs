@@ -107,12 +107,11 @@ fn read_report(dir: &Path) -> anyhow::Result<Value> {
     serde_json::from_str(&text).with_context(|| format!("{}", path.display()))
 }
 
-/// Writes variant B's graph file into `work` and returns its path.
-fn graph_b(o: &AbOptions) -> anyhow::Result<PathBuf> {
+/// Writes variant B's graph file into `work` and returns its path; `resolver` describes the
+/// binaries.
+fn graph_b(o: &AbOptions, resolver: &crate::resolve::BinaryResolver) -> anyhow::Result<PathBuf> {
     let file = o.graph.display().to_string();
     let mut text = std::fs::read_to_string(&o.graph).with_context(|| format!("cannot read {file}"))?;
-    let dir = o.graph.parent().map(Path::to_path_buf).unwrap_or_default();
-    let resolver = crate::resolve::BinaryResolver::new(&dir);
     let describe = |b: &str| resolver.describe(b).map(|(_, d)| d);
     for s in &o.swap {
         let (node, binary) = s
@@ -134,11 +133,13 @@ fn graph_b(o: &AbOptions) -> anyhow::Result<PathBuf> {
 /// over sequences).
 pub fn ab(o: &AbOptions) -> anyhow::Result<Vec<AbFigure>> {
     anyhow::ensure!(!o.recordings.is_empty(), "give at least one recording");
-    let b_graph = graph_b(o)?;
+    // One resolver for the swap and the check, so that each binary is described once.
+    let dir = o.graph.parent().map(Path::to_path_buf).unwrap_or_default();
+    let resolver = crate::resolve::BinaryResolver::new(&dir);
+    let b_graph = graph_b(o, &resolver)?;
     // Variant B's graph is checked before anything runs (a swapped binary with other ports or
     // parameters is reported with variant B's file, line and column).
-    let dir = o.graph.parent().map(Path::to_path_buf).unwrap_or_default();
-    crate::run::load_graph(&b_graph, &crate::resolve::BinaryResolver::new(&dir))?;
+    crate::run::load_graph(&b_graph, &resolver)?;
     let mut rows = Vec::new();
     for rec in &o.recordings {
         let seq = rec

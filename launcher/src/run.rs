@@ -760,11 +760,10 @@ mod tests {
              not a tracing line\n",
         )
         .unwrap();
-        std::fs::write(
-            logs.join("flow.log"),
-            "2026-12-07T09:37:21Z  INFO evseg_normal_flow: fine\n",
-        )
-        .unwrap();
+        // A log cut inside a character is still read.
+        let mut flow = b"2026-12-07T09:37:21Z  INFO evseg_normal_flow: fine\n".to_vec();
+        flow.extend_from_slice(&[0xE2, 0x82]);
+        std::fs::write(logs.join("flow.log"), flow).unwrap();
         std::fs::write(
             logs.join("slicer.log"),
             "2026-12-07T09:37:21Z  WARN evseg_slicer: slices=3\n",

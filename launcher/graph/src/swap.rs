@@ -36,10 +36,7 @@ pub fn swap_binary(file_name: &str, text: &str, node: &str, binary: &str) -> Res
             out.push_str(line);
             continue;
         }
-        let start: usize = line
-            .char_indices()
-            .nth(span.column - 1)
-            .map_or(line.len(), |(b, _)| b);
+        let start = byte_at(line, span.column).unwrap_or(line.len());
         let rest = &line[start..];
         let len = if rest.starts_with(&old) {
             old.len()
@@ -270,6 +267,15 @@ mod tests {
         let s = swap_binary("g.yaml", G, "b", "my-slicer").unwrap();
         assert!(s.contains("{ id: b, run: my-slicer, inputs"), "{s}");
         assert_eq!(s.lines().count(), G.lines().count());
+    }
+
+    #[test]
+    fn malformed_yaml_is_an_error_naming_the_file_and_line() {
+        let bad = "name: g\nnodes:\n  - id: f\n    run: fit\n    params: { a: 1\n";
+        let e = swap_adapted("g.yaml", bad, "f", "learned", &describe)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("g.yaml:"), "{e}");
     }
 
     #[test]
