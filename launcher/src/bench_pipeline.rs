@@ -13,6 +13,7 @@ use anyhow::Context;
 use serde_json::Value;
 
 use crate::run::{RunOptions, run};
+use crate::spread::median_and_range;
 
 /// One stage's busy time.
 #[derive(Debug, Clone, serde::Serialize)]
@@ -204,26 +205,12 @@ pub fn summary(rows: &[PipelineRow]) -> Option<String> {
     if rows.len() < 2 {
         return None;
     }
-    let median = |mut v: Vec<f64>| {
-        v.sort_by(f64::total_cmp);
-        let n = v.len();
-        if n % 2 == 1 {
-            v[n / 2]
-        } else {
-            0.5 * (v[n / 2 - 1] + v[n / 2])
-        }
-    };
     let rates: Vec<f64> = rows.iter().map(|r| r.events_per_s / 1e6).collect();
-    let (lo, hi) = rates
-        .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &r| {
-            (lo.min(r), hi.max(r))
-        });
+    let (median_rate, lo, hi) = median_and_range(&rates)?;
     let start_ups: Vec<f64> = rows.iter().filter_map(|r| r.start_up_s).collect();
-    let start_up = if start_ups.is_empty() {
-        String::new()
-    } else {
-        format!("; median start-up {:.2} s", median(start_ups))
+    let start_up = match median_and_range(&start_ups) {
+        Some((m, _, _)) => format!("; median start-up {m:.2} s"),
+        None => String::new(),
     };
     let restarted = rows.iter().filter(|r| !r.restarts.is_empty()).count();
     let restarted = if restarted == 0 {
@@ -234,7 +221,7 @@ pub fn summary(rows: &[PipelineRow]) -> Option<String> {
     Some(format!(
         "{} runs: median **{:.2} M events/s** end to end (lowest {lo:.2}, highest {hi:.2}){start_up}{restarted}",
         rows.len(),
-        median(rates)
+        median_rate
     ))
 }
 

@@ -3,6 +3,7 @@
 mod ab;
 mod bench_pipeline;
 mod bench_scenes;
+mod bench_sim;
 mod bench_transport;
 mod export;
 mod info;
@@ -12,6 +13,7 @@ mod resolve;
 mod run;
 mod rundir;
 mod shm_limit;
+mod spread;
 mod supervise;
 mod view;
 mod watchdog;
@@ -274,6 +276,28 @@ enum BenchWhat {
         #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..))]
         runs: u32,
     },
+    /// The built-in simulator's speed: sensor seconds per CPU second of its one thread for each
+    /// preset (real time is 1.00), with the events per second of sensor time; runs interleaved.
+    Sim {
+        /// Presets (comma separated; default: every preset).
+        #[arg(long, value_delimiter = ',', value_parser = clap::builder::PossibleValuesParser::new(evseg_source::synthetic::PRESET_NAMES))]
+        scenes: Vec<String>,
+        /// Seconds of sensor time per run.
+        #[arg(long, default_value_t = 3.0)]
+        seconds: f64,
+        /// Seed.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Runs of every preset (the median, lowest and highest are given).
+        #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u32).range(1..))]
+        runs: u32,
+        /// A simulator setting, NAME=VALUE, for every preset (as `evseg sim --set`).
+        #[arg(long = "set", value_name = "NAME=VALUE", value_parser = parse_sim_setting)]
+        settings: Vec<(String, f64)>,
+        /// Working folder (bench.md, bench.json).
+        #[arg(long, default_value = "runs/bench-sim")]
+        work: PathBuf,
+    },
     /// Events per second through source -> slicer -> sink: three processes over Zenoh against
     /// the same stages in one process.
     Transport {
@@ -453,6 +477,42 @@ fn main() -> ExitCode {
             },
             runs,
         ),
+        Command::Bench {
+            what:
+                Some(BenchWhat::Sim {
+                    scenes,
+                    seconds,
+                    seed,
+                    runs,
+                    settings,
+                    work,
+                }),
+            ..
+        } => {
+            let scenes = if scenes.is_empty() {
+                evseg_source::synthetic::PRESET_NAMES
+                    .iter()
+                    .map(|s| s.to_string())
+                    .collect()
+            } else {
+                scenes
+            };
+            let options = bench_sim::SimBenchOptions {
+                scenes,
+                seconds,
+                seed,
+                runs,
+                settings,
+                work,
+            };
+            bench_sim::bench(&options).and_then(|b| {
+                publish_table(
+                    &options.work,
+                    &bench_sim::markdown(&b),
+                    &serde_json::to_value(&b)?,
+                )
+            })
+        }
         Command::Bench {
             what: Some(BenchWhat::Transport { slices, work, json }),
             ..
@@ -646,6 +706,42 @@ mod tests {
                 .map(|e| e.to_string())
                 .unwrap_or_default();
             assert!(err.contains(says), "{bad}: {err}");
+        }
+    }
+
+    #[test]
+    fn bench_sim_takes_a_list_of_presets_and_refuses_an_unknown_one_or_no_runs() {
+        let cli = Cli::try_parse_from(["evseg", "bench", "sim", "--scenes", "one-object,two-objects"]);
+        let Ok(Cli {
+            command:
+                Some(Command::Bench {
+                    what:
+                        Some(super::BenchWhat::Sim {
+                            scenes,
+                            runs,
+                            seconds,
+                            ..
+                        }),
+                    ..
+                }),
+        }) = cli
+        else {
+            panic!("not parsed");
+        };
+        assert_eq!(scenes, ["one-object", "two-objects"]);
+        assert_eq!((runs, seconds), (3, 3.0));
+        for (bad, says) in [
+            (["--scenes", "one-object,nope"], "nope"),
+            (["--runs", "0"], "0"),
+            (["--set", "thresh=1"], "unknown setting `thresh`"),
+        ] {
+            let mut a = vec!["evseg", "bench", "sim"];
+            a.extend_from_slice(&bad);
+            let err = Cli::try_parse_from(a)
+                .err()
+                .map(|e| e.to_string())
+                .unwrap_or_default();
+            assert!(err.contains(says), "{bad:?}: {err}");
         }
     }
 }

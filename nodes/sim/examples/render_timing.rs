@@ -4,20 +4,18 @@
 
 use std::time::Instant;
 
-/// CPU time (s) of the calling thread (Linux `/proc/thread-self/schedstat`), else wall time
-/// since the first call.
+/// CPU time (s) of the calling thread ([`thread_cpu_seconds`]), else wall time since the first
+/// call.
 fn cpu_now() -> f64 {
     static START: std::sync::OnceLock<Instant> = std::sync::OnceLock::new();
     let start = *START.get_or_init(Instant::now);
-    std::fs::read_to_string("/proc/thread-self/schedstat")
-        .ok()
-        .and_then(|s| s.split_whitespace().next()?.parse::<f64>().ok())
-        .map_or_else(|| start.elapsed().as_secs_f64(), |ns| ns * 1e-9)
+    thread_cpu_seconds().unwrap_or_else(|| start.elapsed().as_secs_f64())
 }
 
 use evseg_sim::camera::Rays;
 use evseg_sim::render::FrameGeom;
 use evseg_sim::scene::Scene;
+use evseg_sim::throughput::thread_cpu_seconds;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let name = std::env::args().nth(1).unwrap_or_else(|| "one-object".into());

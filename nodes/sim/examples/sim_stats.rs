@@ -4,15 +4,7 @@
 //! `cargo run --release -p evseg-sim --example sim_stats -- one-object 1.0 [seed]`
 //! `cargo run --release -p evseg-sim --example sim_stats -- all 1.0 [seed]`
 
-use std::time::Instant;
-
-/// CPU time (s) the calling thread has run, from `/proc/thread-self/schedstat` (Linux);
-/// `None` elsewhere.
-fn thread_cpu_seconds() -> Option<f64> {
-    let s = std::fs::read_to_string("/proc/thread-self/schedstat").ok()?;
-    let ns: f64 = s.split_whitespace().next()?.parse().ok()?;
-    Some(ns * 1e-9)
-}
+use evseg_sim::throughput::time_simulation;
 
 struct Row {
     name: String,
@@ -40,21 +32,13 @@ fn run(name: &str, secs: f64, seed: u64) -> Result<Row, Box<dyn std::error::Erro
     if std::env::var("SIM_NO_SUPERSAMPLING").is_ok() {
         cfg.render.edge_supersampling = false;
     }
-    let t0 = Instant::now();
-    let mut sim = evseg_sim::Simulator::new(cfg)?;
-    let setup = t0.elapsed().as_secs_f64();
-    let cpu0 = thread_cpu_seconds();
-    let t1 = Instant::now();
     let (mut n, mut on, mut obj) = (0usize, 0usize, 0usize);
     // FNV-1a digest of every event and its truth: equal digests mean identical output.
     let mut digest = 0xcbf2_9ce4_8422_2325u64;
     let mut mix = |bits: u64| {
         digest = (digest ^ bits).wrapping_mul(0x0100_0000_01b3);
     };
-    let mut t = 0.0;
-    while t < secs.min(sim.duration()) - 1e-9 {
-        t = (t + 0.05).min(secs);
-        let c = sim.next_chunk(t);
+    let (sim, timing) = time_simulation(cfg, secs, |c| {
         n += c.events.len();
         on += c.events.p.iter().filter(|&&p| p == 1).count();
         obj += c.truth.event_object.iter().filter(|&&i| i != 0).count();
@@ -64,12 +48,8 @@ fn run(name: &str, secs: f64, seed: u64) -> Result<Row, Box<dyn std::error::Erro
             mix(c.truth.event_object[i] as u64);
             mix(((c.truth.flow_x[i].to_bits() as u64) << 32) | c.truth.flow_y[i].to_bits() as u64);
         }
-    }
-    let wall = t1.elapsed().as_secs_f64();
-    let cpu = match (cpu0, thread_cpu_seconds()) {
-        (Some(a), Some(b)) => Some(b - a),
-        _ => None,
-    };
+    })?;
+    let (t, wall, cpu, setup) = (timing.simulated_s, timing.wall_s, timing.cpu_s, timing.setup_s);
     let s = sim.stats();
     println!("  output digest {digest:016x}");
     let px = 640.0 * 480.0;

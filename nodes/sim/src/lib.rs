@@ -42,6 +42,7 @@ pub mod scene;
 pub mod settings;
 mod stable;
 pub mod texture;
+pub mod throughput;
 pub mod trajectory;
 pub mod truth;
 pub mod unstable;
