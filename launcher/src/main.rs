@@ -226,7 +226,7 @@ enum Command {
         /// A simulator setting, NAME=VALUE (repeatable, applied in order), so that the sequence
         /// differs from the preset as another camera or simulator would: contrast, c_on, c_off,
         /// c_sigma, refractory_s, noise_rate_hz, hot_pixels, hot_pixel_rate_hz, gyro_noise_std,
-        /// gyro_bias, texture_contrast, camera_motion (`evseg_sim::SETTINGS`).
+        /// gyro_bias, texture_contrast, camera_motion, edge_supersampling (`evseg_sim::SETTINGS`).
         #[arg(long = "set", value_name = "NAME=VALUE", value_parser = parse_sim_setting)]
         settings: Vec<(String, f64)>,
     },

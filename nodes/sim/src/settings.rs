@@ -42,6 +42,10 @@ pub const SETTINGS: &[(&str, &str)] = &[
         "camera_motion",
         "factor on every rate and amplitude of the camera trajectory (0 holds the camera still)",
     ),
+    (
+        "edge_supersampling",
+        "1: a pixel on a geometric edge averages 2 x 2 sub-samples (a pixel integrating its whole area); 0: its centre only",
+    ),
 ];
 
 /// The names of [`SETTINGS`], comma-separated (for help texts and errors).
@@ -87,6 +91,14 @@ pub fn apply_setting(cfg: &mut SceneConfig, name: &str, value: f64) -> Result<()
         "gyro_bias" => cfg.imu.gyro_bias = [value, -value, value],
         "texture_contrast" => crate::scale_contrast(cfg, value),
         "camera_motion" => scale_camera_motion(&mut cfg.camera_trajectory, value),
+        "edge_supersampling" => {
+            if value != 0.0 && value != 1.0 {
+                return Err(SimError::Config(format!(
+                    "setting edge_supersampling: {value} is neither 0 nor 1"
+                )));
+            }
+            cfg.render.edge_supersampling = value == 1.0;
+        }
         _ => {
             return Err(SimError::Config(format!(
                 "unknown setting '{name}'; known settings: {}",
@@ -117,7 +129,12 @@ mod tests {
         let base = preset("one-object", 1).unwrap();
         for (name, _) in SETTINGS {
             let mut cfg = base.clone();
-            apply_setting(&mut cfg, name, 3.0).unwrap();
+            // A switch takes 0 or 1: the opposite of the preset's.
+            let value = match *name {
+                "edge_supersampling" => f64::from(u8::from(!base.render.edge_supersampling)),
+                _ => 3.0,
+            };
+            apply_setting(&mut cfg, name, value).unwrap();
             assert_ne!(cfg, base, "{name} changed nothing");
         }
         let mut cfg = base.clone();
@@ -150,6 +167,13 @@ mod tests {
                 .to_string();
             assert!(err.contains("hot_pixels"), "{err}");
         }
+        let err = apply_setting(&mut cfg, "edge_supersampling", 0.5)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("edge_supersampling") && err.contains("neither 0 nor 1"),
+            "{err}"
+        );
         // Out of the simulator's range: refused when the simulator is built, naming the field.
         apply_setting(&mut cfg, "contrast", -0.2).unwrap();
         let err = crate::Simulator::new(cfg).unwrap_err().to_string();
