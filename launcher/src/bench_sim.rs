@@ -15,20 +15,26 @@ use evseg_sim::throughput::{Timing, time_simulation};
 
 use crate::spread::median_and_range;
 
-/// What to time.
-#[derive(Debug, Clone)]
+/// What to time (the options of `evseg bench sim`).
+#[derive(Debug, Clone, clap::Args)]
 pub struct SimBenchOptions {
-    /// Presets, in table order.
+    /// Presets (comma separated; default: every preset), in table order.
+    #[arg(long, value_delimiter = ',', value_parser = clap::builder::PossibleValuesParser::new(evseg_source::synthetic::PRESET_NAMES))]
     pub scenes: Vec<String>,
-    /// Sensor time per run, s.
+    /// Seconds of sensor time per run.
+    #[arg(long, default_value_t = 3.0)]
     pub seconds: f64,
     /// Scene seed.
+    #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Runs of every preset.
+    /// Runs of every preset (the median, lowest and highest are given).
+    #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u32).range(1..))]
     pub runs: u32,
-    /// Simulator settings (`evseg sim --set`), applied to every preset.
+    /// A simulator setting, NAME=VALUE, for every preset (as `evseg sim --set`).
+    #[arg(long = "set", value_name = "NAME=VALUE", value_parser = crate::parse_sim_setting)]
     pub settings: Vec<(String, f64)>,
-    /// Working folder for `bench.md` and `bench.json`.
+    /// Working folder (bench.md, bench.json).
+    #[arg(long, default_value = "runs/bench-sim")]
     pub work: PathBuf,
 }
 
@@ -98,11 +104,16 @@ pub fn cpu_model() -> String {
 
 /// Runs the benchmark, printing each run's line to standard error as it ends.
 pub fn bench(options: &SimBenchOptions) -> anyhow::Result<SimBench> {
-    if options.scenes.is_empty() {
-        anyhow::bail!("no preset to time");
-    }
-    let mut rows: Vec<SimBenchRow> = Vec::with_capacity(options.scenes.len());
-    for scene in &options.scenes {
+    let scenes: Vec<String> = if options.scenes.is_empty() {
+        evseg_source::synthetic::PRESET_NAMES
+            .iter()
+            .map(|s| s.to_string())
+            .collect()
+    } else {
+        options.scenes.clone()
+    };
+    let mut rows: Vec<SimBenchRow> = Vec::with_capacity(scenes.len());
+    for scene in &scenes {
         let cfg = evseg_source::synthetic::scene_config(
             scene,
             options.seed,

@@ -278,26 +278,7 @@ enum BenchWhat {
     },
     /// The built-in simulator's speed: sensor seconds per CPU second of its one thread for each
     /// preset (real time is 1.00), with the events per second of sensor time; runs interleaved.
-    Sim {
-        /// Presets (comma separated; default: every preset).
-        #[arg(long, value_delimiter = ',', value_parser = clap::builder::PossibleValuesParser::new(evseg_source::synthetic::PRESET_NAMES))]
-        scenes: Vec<String>,
-        /// Seconds of sensor time per run.
-        #[arg(long, default_value_t = 3.0)]
-        seconds: f64,
-        /// Seed.
-        #[arg(long, default_value_t = 1)]
-        seed: u64,
-        /// Runs of every preset (the median, lowest and highest are given).
-        #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u32).range(1..))]
-        runs: u32,
-        /// A simulator setting, NAME=VALUE, for every preset (as `evseg sim --set`).
-        #[arg(long = "set", value_name = "NAME=VALUE", value_parser = parse_sim_setting)]
-        settings: Vec<(String, f64)>,
-        /// Working folder (bench.md, bench.json).
-        #[arg(long, default_value = "runs/bench-sim")]
-        work: PathBuf,
-    },
+    Sim(bench_sim::SimBenchOptions),
     /// Events per second through source -> slicer -> sink: three processes over Zenoh against
     /// the same stages in one process.
     Transport {
@@ -478,41 +459,15 @@ fn main() -> ExitCode {
             runs,
         ),
         Command::Bench {
-            what:
-                Some(BenchWhat::Sim {
-                    scenes,
-                    seconds,
-                    seed,
-                    runs,
-                    settings,
-                    work,
-                }),
+            what: Some(BenchWhat::Sim(options)),
             ..
-        } => {
-            let scenes = if scenes.is_empty() {
-                evseg_source::synthetic::PRESET_NAMES
-                    .iter()
-                    .map(|s| s.to_string())
-                    .collect()
-            } else {
-                scenes
-            };
-            let options = bench_sim::SimBenchOptions {
-                scenes,
-                seconds,
-                seed,
-                runs,
-                settings,
-                work,
-            };
-            bench_sim::bench(&options).and_then(|b| {
-                publish_table(
-                    &options.work,
-                    &bench_sim::markdown(&b),
-                    &serde_json::to_value(&b)?,
-                )
-            })
-        }
+        } => bench_sim::bench(&options).and_then(|b| {
+            publish_table(
+                &options.work,
+                &bench_sim::markdown(&b),
+                &serde_json::to_value(&b)?,
+            )
+        }),
         Command::Bench {
             what: Some(BenchWhat::Transport { slices, work, json }),
             ..
@@ -715,21 +670,15 @@ mod tests {
         let Ok(Cli {
             command:
                 Some(Command::Bench {
-                    what:
-                        Some(super::BenchWhat::Sim {
-                            scenes,
-                            runs,
-                            seconds,
-                            ..
-                        }),
+                    what: Some(super::BenchWhat::Sim(o)),
                     ..
                 }),
         }) = cli
         else {
             panic!("not parsed");
         };
-        assert_eq!(scenes, ["one-object", "two-objects"]);
-        assert_eq!((runs, seconds), (3, 3.0));
+        assert_eq!(o.scenes, ["one-object", "two-objects"]);
+        assert_eq!((o.runs, o.seconds, o.seed), (3, 3.0, 1));
         for (bad, says) in [
             (["--scenes", "one-object,nope"], "nope"),
             (["--runs", "0"], "0"),
