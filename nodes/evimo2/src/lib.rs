@@ -43,8 +43,8 @@ pub mod writer;
 pub use error::{Evimo2Error, Result};
 pub use meta::{CameraFallback, EVIMO2_IMU_TIME_OFFSET_S, EVIMO2_IMU_TO_CAMERA, FrameTruth, MetaOptions};
 pub use reader::{
-    DepthFrame, DepthReader, EventReader, FrameEntry, MaskReader, ReadOptions, Sequence,
-    find_sequence_folders,
+    DepthFrame, DepthReader, EVENTS_T, EventReader, FrameEntry, MAX_TIME_GAP_S, MaskReader, ReadOptions,
+    Sequence, find_sequence_folders,
 };
 pub use writer::{
     DEFAULT_IMU_TOPIC, MetaForm, SequenceData, WriteOptions, write_sequence, write_sequence_with,

@@ -35,6 +35,18 @@ pub const INFO_NPZ: &str = "dataset_info.npz";
 /// EVIMO2 stores object id * this factor in masks.
 pub const MASK_ID_SCALE: u16 = 1000;
 
+/// Largest time difference, seconds, between an event and the last event kept before it (in file
+/// order) for the event to count as part of the recording. An event camera fires continually
+/// (background activity alone gives every pixel events within seconds), so an event stamped
+/// further than this from its predecessors is a corrupt time: it is dropped and counted
+/// ([`EventReader::time_outliers`]) instead of opening a gap of millions of empty time slices.
+pub const MAX_TIME_GAP_S: f64 = 10.0;
+
+/// Consecutive events beyond [`MAX_TIME_GAP_S`] from the last kept one after which the file is
+/// taken to jump (a clock reset or a shifted block, not a few corrupt values), and reading stops
+/// with an error naming the first of them.
+pub const MAX_CONSECUTIVE_TIME_OUTLIERS: u64 = 10_000;
+
 /// Events read per block while scanning times in [`EventReader::read_until`] (64 Ki events =
 /// 512 KiB of float64): large enough for sequential-read speed, small enough to stay in cache.
 const DEFAULT_SCAN_BLOCK: usize = 1 << 16;
@@ -133,7 +145,10 @@ fn is_float(d: DType) -> bool {
 ///
 /// Events come in file order. EVIMO2 files are time-sorted, but files in the wild may not be:
 /// a timestamp smaller than the previous one is counted ([`EventReader::non_monotonic`]) and passed
-/// through unchanged.
+/// through unchanged. A time that is not finite, or lies more than [`MAX_TIME_GAP_S`] from the
+/// last event kept before it (the first block's median stands in before the first), is dropped
+/// with its event and counted ([`EventReader::time_outliers`]); a run of more than
+/// [`MAX_CONSECUTIVE_TIME_OUTLIERS`] of them is an error (the times jump).
 pub struct EventReader {
     t: Column,
     xy: Column,
@@ -148,6 +163,14 @@ pub struct EventReader {
     /// Time of the last returned event (relative), for the monotonicity count.
     last_t: f64,
     non_monotonic: u64,
+    /// Absolute time of the last event kept (in file order), the reference of the gap test; the
+    /// first block's median before any is kept.
+    last_kept_abs: Option<f64>,
+    /// Events dropped for their time, and how many of them came in a row at the end.
+    time_outliers: u64,
+    consecutive_outliers: u64,
+    /// Row and stored time of the first dropped event.
+    first_outlier: Option<(u64, f64)>,
     /// Rows read per block when scanning times, see [`DEFAULT_SCAN_BLOCK`].
     scan_block: usize,
     buf: Vec<u8>,
@@ -191,11 +214,15 @@ impl EventReader {
             t_head: 0,
             last_t: f64::NEG_INFINITY,
             non_monotonic: 0,
+            last_kept_abs: None,
+            time_outliers: 0,
+            consecutive_outliers: 0,
+            first_outlier: None,
             scan_block: DEFAULT_SCAN_BLOCK,
             buf: Vec::new(),
         };
         if reader.t.rows > 0 {
-            // The first scan block (see the module docs on t0).
+            // The first scan block (see the module docs on t0); dropped times are NaN here.
             reader.fill_t(1)?;
             let earliest = reader
                 .t_cache
@@ -203,11 +230,7 @@ impl EventReader {
                 .copied()
                 .filter(|t| t.is_finite())
                 .fold(f64::INFINITY, f64::min);
-            reader.t0 = if earliest.is_finite() {
-                earliest
-            } else {
-                reader.t_cache[0]
-            };
+            reader.t0 = if earliest.is_finite() { earliest } else { 0.0 };
         }
         Ok(reader)
     }
@@ -242,6 +265,60 @@ impl EventReader {
         self.non_monotonic
     }
 
+    /// Events dropped so far for their time (not finite, or beyond [`MAX_TIME_GAP_S`] from the
+    /// events before them), with the row and stored time of the first; they are never returned.
+    pub fn time_outliers(&self) -> (u64, Option<(u64, f64)>) {
+        (self.time_outliers, self.first_outlier)
+    }
+
+    /// Marks the times of rows `first_row..` (cache entries `from..`) that are not finite or lie
+    /// beyond [`MAX_TIME_GAP_S`] from the last kept event as NaN (dropped by `take`).
+    fn screen_times(&mut self, from: usize, first_row: u64) -> Result<()> {
+        if self.last_kept_abs.is_none() {
+            let mut finite: Vec<f64> = self.t_cache[from..]
+                .iter()
+                .copied()
+                .filter(|t| t.is_finite())
+                .collect();
+            if !finite.is_empty() {
+                let mid = finite.len() / 2;
+                let (_, median, _) = finite.select_nth_unstable_by(mid, f64::total_cmp);
+                self.last_kept_abs = Some(*median);
+            }
+        }
+        for (k, t) in self.t_cache[from..].iter_mut().enumerate() {
+            let kept = match self.last_kept_abs {
+                Some(reference) => t.is_finite() && (*t - reference).abs() <= MAX_TIME_GAP_S,
+                None => false,
+            };
+            if kept {
+                self.last_kept_abs = Some(*t);
+                self.consecutive_outliers = 0;
+                continue;
+            }
+            let row = first_row + k as u64;
+            self.first_outlier.get_or_insert((row, *t));
+            self.time_outliers += 1;
+            self.consecutive_outliers += 1;
+            if self.consecutive_outliers > MAX_CONSECUTIVE_TIME_OUTLIERS {
+                let start = row + 1 - self.consecutive_outliers;
+                return Err(Evimo2Error::format(
+                    &self.t.name,
+                    self.t.header.data_offset + start * self.t.row_bytes as u64,
+                    format!(
+                        "event times jump: from event {start} on, {} events in a row lie more than \
+                         {MAX_TIME_GAP_S} s from the event before them (t = {:.6} s); the recording \
+                         is not continuous",
+                        self.consecutive_outliers,
+                        self.last_kept_abs.unwrap_or(f64::NAN)
+                    ),
+                ));
+            }
+            *t = f64::NAN;
+        }
+        Ok(())
+    }
+
     /// Ensures the time cache holds at least `want` rows from `pos` (fewer at the end of file).
     fn fill_t(&mut self, want: usize) -> Result<()> {
         let have = self.t_cache.len() - self.t_head;
@@ -261,16 +338,18 @@ impl EventReader {
         let mut buf = std::mem::take(&mut self.buf);
         self.t.read_rows(cache_end, count, &mut buf)?;
         let (dtype, big) = (self.t.header.dtype, self.t.header.big_endian);
+        let from = self.t_cache.len();
         npy::decode_f64_into(dtype, big, &buf, &mut self.t_cache);
         self.buf = buf;
-        Ok(())
+        self.screen_times(from, cache_end)
     }
 
-    /// Returns the next `count` events (cached times must already cover them).
+    /// Returns the next `count` events (cached times must already cover them), without those
+    /// whose time was dropped (`screen_times`).
     fn take(&mut self, count: usize) -> Result<Events> {
         let mut events = Events::with_capacity(count);
         let times = &self.t_cache[self.t_head..self.t_head + count];
-        for &abs in times {
+        for &abs in times.iter().filter(|t| !t.is_nan()) {
             let t = abs - self.t0;
             if t < self.last_t {
                 self.non_monotonic += 1;
@@ -278,6 +357,7 @@ impl EventReader {
             self.last_t = t;
             events.t.push(t);
         }
+        let dropped = events.t.len() < count;
         let mut buf = std::mem::take(&mut self.buf);
         self.xy.read_rows(self.pos, count, &mut buf)?;
         let xy = npy::decode_u16(self.xy.header.dtype, self.xy.header.big_endian, &buf).map_err(|bad| {
@@ -288,8 +368,9 @@ impl EventReader {
                 format!("event {row}: pixel coordinate outside 0..=65535"),
             )
         })?;
-        events.x.extend(xy.iter().step_by(2));
-        events.y.extend(xy.iter().skip(1).step_by(2));
+        let kept = |i: &usize| !dropped || !times[*i].is_nan();
+        events.x.extend((0..count).filter(kept).map(|i| xy[2 * i]));
+        events.y.extend((0..count).filter(kept).map(|i| xy[2 * i + 1]));
         self.p.read_rows(self.pos, count, &mut buf)?;
         let p =
             npy::decode_polarity(self.p.header.dtype, self.p.header.big_endian, &buf).map_err(
@@ -308,7 +389,11 @@ impl EventReader {
                     ),
                 },
             )?;
-        events.p = p;
+        events.p = if dropped {
+            (0..count).filter(kept).map(|i| p[i]).collect()
+        } else {
+            p
+        };
         self.buf = buf;
         self.t_head += count;
         self.pos += count as u64;

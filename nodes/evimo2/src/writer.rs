@@ -112,6 +112,13 @@ fn validate(folder: &Path, data: &SequenceData, options: &WriteOptions) -> Resul
     if !data.events.is_consistent() {
         return Err(bad(EVENTS_T, "event columns have different lengths".into()));
     }
+    if let Some(i) = data.events.t.iter().position(|t| !t.is_finite()) {
+        // (The index of `dataset_info.npz` steps through the times: it would never end.)
+        return Err(bad(
+            EVENTS_T,
+            format!("event {i} has time {} s, not a finite number", data.events.t[i]),
+        ));
+    }
     if options.discretization_s.is_nan() || options.discretization_s <= 0.0 {
         return Err(bad(
             INFO_NPZ,

@@ -159,6 +159,106 @@ fn non_monotonic_times_are_counted_not_fatal() {
     assert_eq!(r.non_monotonic(), 2);
 }
 
+/// The reader's count of events dropped for their time, and the row and time of the first.
+type TimeOutliers = (u64, Option<(u64, f64)>);
+
+/// Reads every event of `dir` in chunks of 333; returns them with the reader's outlier count and
+/// first outlier, or the error.
+fn read_all_chunked(dir: &std::path::Path) -> evseg_evimo2::Result<(Events, TimeOutliers)> {
+    let seq = Sequence::open(dir, &ReadOptions::default())?;
+    let mut r = seq.events()?;
+    let mut all = Events::default();
+    while let Some(c) = r.next_chunk(333)? {
+        all.extend_from(&c, 0..c.len());
+    }
+    Ok((all, r.time_outliers()))
+}
+
+#[test]
+fn corrupt_event_times_are_dropped_and_counted_not_a_gap_of_empty_slices() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut data = common::sequence();
+    // (Not farther: the writer's event index holds an entry per 10 ms of the span.)
+    data.events.t[4999] = 5000.0; // far in the future (the last event)
+    data.events.t[10] = -3000.0; // far in the past, inside the first block (t0 must not take it)
+    let finite = data.clone();
+    data.events.t[300] = f64::NAN;
+    assert!(
+        write_sequence(dir.path(), &data)
+            .unwrap_err()
+            .to_string()
+            .contains("event 300 has time NaN s"),
+        "the writer refuses what it could not index"
+    );
+    write_sequence(dir.path(), &finite).unwrap();
+    // Not-finite times written into the file as another tool might.
+    let path = dir.path().join(evseg_evimo2::EVENTS_T);
+    let mut bytes = std::fs::read(&path).unwrap();
+    let data_offset = bytes.len() - 8 * common::N_EVENTS;
+    for (i, t) in [(300, f64::NAN), (301, f64::INFINITY)] {
+        bytes[data_offset + 8 * i..data_offset + 8 * i + 8]
+            .copy_from_slice(&(t + common::T_START).to_le_bytes());
+    }
+    std::fs::write(&path, bytes).unwrap();
+    data = finite;
+    data.events.t[300] = f64::NAN;
+    data.events.t[301] = f64::INFINITY;
+    let seq = Sequence::open(dir.path(), &ReadOptions::default()).unwrap();
+    assert_eq!(seq.t0_s, common::T_START, "t0 from the kept events");
+    let (events, (dropped, first)) = read_all_chunked(dir.path()).unwrap();
+    assert_eq!(events.len(), common::N_EVENTS - 4);
+    assert_eq!(dropped, 4);
+    assert_eq!(first, Some((10, -3000.0 + common::T_START)));
+    assert!(
+        events.t.iter().all(|t| (0.0..2.0).contains(t)),
+        "every kept time is near the others"
+    );
+    // The kept events are the others, in order, with their pixels and polarities.
+    let keep: Vec<usize> = (0..common::N_EVENTS)
+        .filter(|i| ![10, 300, 301, 4999].contains(i))
+        .collect();
+    for (k, &i) in keep.iter().enumerate() {
+        assert_eq!(
+            (events.t[k], events.x[k], events.y[k], events.p[k]),
+            (
+                data.events.t[i],
+                data.events.x[i],
+                data.events.y[i],
+                data.events.p[i]
+            ),
+            "event {i}"
+        );
+    }
+}
+
+#[test]
+fn a_jump_in_event_times_is_an_error_naming_the_file_and_the_first_event() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut data = common::sequence();
+    // 70 000 more events in order (so that the events before the jump are most of the first
+    // scan block, whose median is the first reference), then more than
+    // MAX_CONSECUTIVE_TIME_OUTLIERS events shifted by a day: a block, not stray values.
+    let last = data.events.t[common::N_EVENTS - 1];
+    let copy = |d: &mut SequenceData, k: usize, t: f64| {
+        let (x, y, p) = (d.events.x[k % 100], d.events.y[k % 100], d.events.p[k % 100]);
+        d.events.push(t, x, y, p);
+    };
+    for k in 0..70_000 {
+        copy(&mut data, k, last + (k + 1) as f64 * 1e-5);
+    }
+    let jump_at = data.events.len();
+    let last = data.events.t[jump_at - 1];
+    for k in 0..evseg_evimo2::reader::MAX_CONSECUTIVE_TIME_OUTLIERS as usize + 10 {
+        copy(&mut data, k, last + 86_400.0 + k as f64 * 1e-6);
+    }
+    write_sequence(dir.path(), &data).unwrap();
+    let err = read_all_chunked(dir.path()).map(|r| r.1).unwrap_err().to_string();
+    assert!(
+        err.contains("dataset_events_t.npy") && err.contains(&format!("from event {jump_at} on")),
+        "{err}"
+    );
+}
+
 #[test]
 fn index_matches_pydvs_definition() {
     // t = 0, 0.004, ..., 0.1 (26 events), w = 0.01.

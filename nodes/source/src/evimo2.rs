@@ -34,6 +34,10 @@ pub struct Evimo2Source {
     pending: ReorderBuffer,
     /// Events whose pixel lies outside the sensor of `meta['meta']` (dropped, counted).
     pub outside_sensor: u64,
+    /// The folder (for warnings).
+    folder: std::path::PathBuf,
+    /// True once the first event dropped for its time has been reported.
+    warned_time_outlier: bool,
 }
 
 impl Evimo2Source {
@@ -75,6 +79,8 @@ impl Evimo2Source {
             reorder_window_s: DEFAULT_REORDER_WINDOW_S,
             pending: ReorderBuffer::default(),
             outside_sensor: 0,
+            folder: folder.to_path_buf(),
+            warned_time_outlier: false,
         })
     }
 
@@ -128,6 +134,16 @@ impl Evimo2Source {
             .read_until(t_read)
             .map_err(|e| SourceError::Read(e.to_string()))?;
         self.pending.push(fresh);
+        if let (false, (_, Some((row, t)))) = (self.warned_time_outlier, self.events.time_outliers()) {
+            self.warned_time_outlier = true;
+            tracing::warn!(
+                "{}: event {row} has time {t} s, not finite or more than {} s away from the events \
+                 around it in the file (a corrupt time, or the file's times jump); such events \
+                 are dropped (counted: event_times_dropped)",
+                self.folder.join(evseg_evimo2::EVENTS_T).display(),
+                evseg_evimo2::MAX_TIME_GAP_S
+            );
+        }
         Ok(())
     }
 }
@@ -301,6 +317,7 @@ impl EventSource for Evimo2Source {
         vec![
             ("events_reordered", self.pending.reordered()),
             ("times_not_increasing", self.events.non_monotonic()),
+            ("event_times_dropped", self.events.time_outliers().0),
             ("events_outside_sensor", self.outside_sensor),
             (
                 "masks_read_with_raw_ids",
