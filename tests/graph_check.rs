@@ -195,6 +195,24 @@ fn malformed_yaml_is_an_error_not_a_crash() {
 }
 
 #[test]
+fn a_reader_that_closes_the_output_early_ends_check_quietly() {
+    // `evseg check graph.yaml | true`: the reader is gone before the first print.
+    let dir = tempfile::tempdir().unwrap();
+    let g = write(dir.path(), "graph.yaml", GOOD);
+    let mut child = Command::new(bin("evseg"))
+        .args(["check", g.to_str().unwrap()])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(child.stdout.take());
+    let out = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert_ne!(out.status.code(), Some(101), "{stderr}");
+}
+
+#[test]
 fn a_missing_file_is_named() {
     let out = Command::new(bin("evseg"))
         .args(["check", "/nonexistent/graph.yaml"])

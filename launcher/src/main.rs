@@ -340,6 +340,19 @@ fn check(graph: &Path) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// For commands that only read and write files and print: a standard output closed by its
+/// reader (`evseg info rec.mcap | head`) ends the process quietly, as it ends a Unix tool, instead
+/// of a panic at the next print. Rust ignores SIGPIPE so that writes to a closed pipe or socket
+/// fail as errors; commands with network connections or child processes keep that.
+fn end_quietly_when_stdout_closes() {
+    #[cfg(unix)]
+    // SAFETY: restores the default disposition of one signal, before any thread of this process
+    // is started by the command.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
+}
+
 fn main() -> ExitCode {
     // Same allocator settings as the nodes (the in-process side of `bench transport` runs here).
     evseg_runtime::memory::tune_allocator();
@@ -358,6 +371,14 @@ fn main() -> ExitCode {
         startup_timeout: watchdog::DEFAULT_STARTUP_S,
         stall_timeout: watchdog::DEFAULT_STALL_S,
     });
+    let offline = match &command {
+        Command::Check { .. } | Command::Info { .. } | Command::Export { .. } | Command::Sim { .. } => true,
+        Command::View { connect, .. } => connect.is_none(),
+        _ => false,
+    };
+    if offline {
+        end_quietly_when_stdout_closes();
+    }
     let result = match command {
         Command::Check { graph } => check(&graph),
         Command::Info { recording } => info::info(&recording).map(|text| print!("{text}")),
