@@ -49,6 +49,15 @@ impl Default for EsimConfig {
     }
 }
 
+/// Largest background-activity or hot-pixel rate accepted, events per pixel per second. Real
+/// sensors' background activity is 0.01-10 Hz per pixel and hot pixels fire at up to a few kHz;
+/// a VGA sensor at this rate everywhere would make 300 M noise events per second, which the
+/// simulator holds in memory per chunk.
+pub const MAX_NOISE_RATE_HZ: f64 = 1000.0;
+
+/// Largest number of hot pixels accepted.
+pub const MAX_HOT_PIXELS: u32 = 100_000;
+
 impl EsimConfig {
     /// Checks the values.
     pub fn validate(&self) -> Result<(), SimError> {
@@ -78,6 +87,22 @@ impl EsimConfig {
         nonneg("refractory_s", self.refractory_s)?;
         nonneg("noise_rate_hz", self.noise_rate_hz)?;
         nonneg("hot_pixel_rate_hz", self.hot_pixel_rate_hz)?;
+        for (name, v) in [
+            ("noise_rate_hz", self.noise_rate_hz),
+            ("hot_pixel_rate_hz", self.hot_pixel_rate_hz),
+        ] {
+            if v > MAX_NOISE_RATE_HZ {
+                return Err(SimError::Config(format!(
+                    "esim.{name} = {v} Hz per pixel is above the {MAX_NOISE_RATE_HZ} Hz the simulator accepts"
+                )));
+            }
+        }
+        if self.hot_pixels > MAX_HOT_PIXELS {
+            return Err(SimError::Config(format!(
+                "esim.hot_pixels = {} is above the {MAX_HOT_PIXELS} the simulator accepts",
+                self.hot_pixels
+            )));
+        }
         Ok(())
     }
 }

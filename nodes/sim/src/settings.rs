@@ -174,6 +174,14 @@ mod tests {
             err.contains("edge_supersampling") && err.contains("neither 0 nor 1"),
             "{err}"
         );
+        // A noise rate that would hold hundreds of millions of events per chunk.
+        let mut noisy = preset("one-object", 1).unwrap();
+        apply_setting(&mut noisy, "noise_rate_hz", 1e12).unwrap();
+        let err = crate::Simulator::new(noisy).unwrap_err().to_string();
+        assert!(
+            err.contains("esim.noise_rate_hz") && err.contains("above"),
+            "{err}"
+        );
         // Out of the simulator's range: refused when the simulator is built, naming the field.
         apply_setting(&mut cfg, "contrast", -0.2).unwrap();
         let err = crate::Simulator::new(cfg).unwrap_err().to_string();

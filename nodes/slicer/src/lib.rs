@@ -11,6 +11,12 @@ use evseg_schemas::{
     CameraInfo, CameraMotion, EventPacket, Events, ImuSample, Mask, ObjectPose, Slice, Truth,
 };
 
+/// Shortest window accepted, seconds (0.1 ms: 10 000 slices per second of sensor time; a
+/// shorter one floods every stage with empty slices).
+pub const MIN_WINDOW_S: f64 = 1e-4;
+/// Longest window accepted, seconds (a minute: a slice would hold a whole recording's events).
+pub const MAX_WINDOW_S: f64 = 60.0;
+
 /// Slicer settings.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SlicerParams {
@@ -34,8 +40,8 @@ impl Default for SlicerParams {
 /// Invalid slicer input.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum SlicerError {
-    /// Window length not positive and finite.
-    #[error("window must be a positive number of seconds, got {0}")]
+    /// Window length outside [`MIN_WINDOW_S`]..=[`MAX_WINDOW_S`] (or not a number).
+    #[error("window must be within {MIN_WINDOW_S}..={MAX_WINDOW_S} s (window_ms 0.1..=60000), got {0} s")]
     Window(f64),
     /// The columns of an event packet have different lengths.
     #[error("event packet columns have different lengths")]
@@ -84,7 +90,7 @@ pub struct Slicer {
 impl Slicer {
     /// A slicer with `params`.
     pub fn new(params: SlicerParams) -> Result<Self, SlicerError> {
-        if !(params.window_s.is_finite() && params.window_s > 0.0) {
+        if !(MIN_WINDOW_S..=MAX_WINDOW_S).contains(&params.window_s) {
             return Err(SlicerError::Window(params.window_s));
         }
         Ok(Self {
@@ -391,13 +397,24 @@ mod tests {
 
     #[test]
     fn bad_input_is_refused() {
-        assert!(
-            Slicer::new(SlicerParams {
-                window_s: 0.0,
+        for window_s in [0.0, 1e-9, 1e20, f64::NAN, -0.03] {
+            let e = Slicer::new(SlicerParams {
+                window_s,
                 ..Default::default()
             })
-            .is_err()
-        );
+            .unwrap_err()
+            .to_string();
+            assert!(e.contains("window_ms 0.1..=60000"), "{e}");
+        }
+        for window_s in [MIN_WINDOW_S, MAX_WINDOW_S] {
+            assert!(
+                Slicer::new(SlicerParams {
+                    window_s,
+                    ..Default::default()
+                })
+                .is_ok()
+            );
+        }
         let mut s = Slicer::new(SlicerParams::default()).unwrap();
         let mut p = packet(&[0.0], &[]);
         p.events.x.push(3);

@@ -258,8 +258,9 @@ fn main() -> ExitCode {
             );
         }
         let batch_ms: f64 = cfg.param("batch_ms")?;
-        if !(batch_ms.is_finite() && batch_ms > 0.0) {
-            return Err(format!("batch_ms must be > 0, got {batch_ms}").into());
+        if !(0.1..=60_000.0).contains(&batch_ms) {
+            // Shorter packets flood the graph (10 000 per second of sensor time at 0.1 ms).
+            return Err(format!("batch_ms must be within 0.1..=60000 ms, got {batch_ms}").into());
         }
         let speed: f64 = cfg.param("speed")?;
         Ok(SourceNode {

@@ -30,12 +30,16 @@ pub struct Pattern {
     state: u64,
 }
 
+/// Highest rate of the pattern, events per second (100 M/s, above any sensor's sustained
+/// rate; a 10 ms packet then holds a million events).
+pub const MAX_RATE: f64 = 1e8;
+
 impl Pattern {
     /// A pattern with `params`.
     pub fn new(params: PatternParams) -> Result<Self, SourceError> {
-        if !(params.rate.is_finite() && params.rate > 0.0) {
+        if !(params.rate > 0.0 && params.rate <= MAX_RATE) {
             return Err(SourceError::Param(format!(
-                "rate must be > 0 events/s, got {}",
+                "rate must be within 0..={MAX_RATE} events/s (> 0), got {}",
                 params.rate
             )));
         }
@@ -169,13 +173,12 @@ mod tests {
 
     #[test]
     fn bad_params_are_refused() {
-        assert!(
-            Pattern::new(PatternParams {
-                rate: 0.0,
-                ..params()
-            })
-            .is_err()
-        );
+        for rate in [0.0, f64::NAN, 1e15] {
+            let e = Pattern::new(PatternParams { rate, ..params() })
+                .err()
+                .map(|e| e.to_string());
+            assert!(e.is_some_and(|e| e.contains("rate must be within")), "{rate}");
+        }
         assert!(
             Pattern::new(PatternParams {
                 seconds: f64::NAN,
