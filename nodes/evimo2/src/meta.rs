@@ -187,6 +187,22 @@ impl<'a> Field<'a> {
         self.key(key)?.f64()
     }
 
+    /// [`Field::num`] that must be finite (a time, a rate, an intrinsic): NaN or infinity is an
+    /// error naming the field, since nothing downstream can place or use it.
+    fn finite(&self, key: &str) -> Result<f64> {
+        let f = self.key(key)?;
+        let v = f.f64()?;
+        if v.is_finite() {
+            Ok(v)
+        } else {
+            Err(f.err(format!("{v} is not a finite number")))
+        }
+    }
+
+    fn finite_xyz(&self) -> Result<[f64; 3]> {
+        Ok([self.finite("x")?, self.finite("y")?, self.finite("z")?])
+    }
+
     fn int(&self) -> Result<i128> {
         self.value
             .as_i128()
@@ -408,6 +424,17 @@ fn camera_info(
             missing.join(", ")
         )));
     };
+    if !(intrinsics.iter().all(|v| v.is_finite()) && intrinsics[0] >= 1.0 && intrinsics[1] >= 1.0) {
+        return Err(m.err(format!(
+            "camera intrinsics fx, fy, cx, cy = {intrinsics:?} px are not usable (finite, focal \
+             lengths >= 1 px){}",
+            if missing.is_empty() {
+                ""
+            } else {
+                " (taken from dataset_info.npz[K])"
+            }
+        )));
+    }
     let resolution = if m.opt("res_x")?.is_some() && m.opt("res_y")?.is_some() {
         let dim = |key: &str| -> Result<u16> {
             let f = m.key(key)?;
@@ -539,9 +566,9 @@ fn imu_samples(root: &Field<'_>, t0: f64, opts: &MetaOptions) -> Result<ImuParts
         .iter()
         .map(|s| {
             Ok(ImuSample {
-                t: s.num("ts")? - t0,
-                gyro: s.key("angular_velocity")?.xyz()?,
-                accel: s.key("linear_acceleration")?.xyz()?,
+                t: s.finite("ts")? - t0,
+                gyro: s.key("angular_velocity")?.finite_xyz()?,
+                accel: s.key("linear_acceleration")?.finite_xyz()?,
             })
         })
         .collect::<Result<Vec<_>>>()?;
@@ -572,7 +599,7 @@ fn frame(entry: &Field<'_>, index: usize, t0: f64) -> Result<FrameTruth> {
         }
         None => index as u64,
     };
-    let ts = entry.num("ts")?;
+    let ts = entry.finite("ts")?;
     let camera = camera_pose(entry, t0)?;
     let mut objects = Vec::new();
     for (key, value) in entry.dict_items()? {
@@ -738,6 +765,51 @@ mod tests {
     }
 
     const CAM: &str = "'fx': 2.0, 'fy': 3.0, 'cx': 4.0, 'cy': 5.0, 'res_x': 8, 'res_y': 6";
+
+    #[test]
+    fn unusable_numbers_are_errors_naming_the_field() {
+        let pos =
+            "{'pos': {'t': {'x': 1.0, 'y': 2.0, 'z': 3.0}, 'q': {'x': 0.0, 'y': 0.0, 'z': 0.0, 'w': 1.0}}}";
+        let imu = |gx: &str| {
+            format!(
+                "'imu': {{'/i': [{{'ts': 10.0, 'angular_velocity': {{'x': {gx}, 'y': 0.0, 'z': 0.0}}, \
+                 'linear_acceleration': {{'x': 0.0, 'y': 0.0, 'z': 9.8}}}}]}}"
+            )
+        };
+        let cases = [
+            (
+                format!(
+                    "{{'meta': {{{CAM}}}, 'frames': [{{'ts': 10.5, 'cam': {pos}}}, {{'ts': nan, 'cam': {pos}}}]}}"
+                ),
+                "m: meta['frames'][1]['ts']",
+                "NaN is not a finite number",
+            ),
+            (
+                format!(
+                    "{{'meta': {{{}}}, 'frames': []}}",
+                    CAM.replace("'fx': 2.0", "'fx': 0")
+                ),
+                "m: meta['meta']",
+                "fx, fy, cx, cy = [0.0, 3.0, 4.0, 5.0] px are not usable",
+            ),
+            (
+                format!("{{'meta': {{{CAM}}}, 'frames': [], {}}}", imu("nan")),
+                "['angular_velocity']['x']",
+                "NaN is not a finite number",
+            ),
+        ];
+        for (text, at, says) in cases {
+            let e = convert_text(&text, 10.0).unwrap_err().to_string();
+            assert!(e.contains(at) && e.contains(says), "{e}");
+        }
+        assert!(
+            convert_text(
+                &format!("{{'meta': {{{CAM}}}, 'frames': [], {}}}", imu("0.5")),
+                10.0
+            )
+            .is_ok()
+        );
+    }
 
     #[test]
     fn frames_without_ids_use_positions_and_poses_fall_back_to_frames() {
