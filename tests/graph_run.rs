@@ -311,6 +311,75 @@ fn an_evimo2_folder_runs_through_the_graph_into_the_evaluator() {
 /// Runs the repository's `graph.yaml` on loopback for `seconds` of simulator time, with extra
 /// environment variables `env` for the launcher and its nodes, waiting at most `timeout`;
 /// returns the finished run and its output folder (inside `dir`).
+/// A version 1.0 `.npy` file of an empty array (`descr`, `shape` with a 0 first dimension).
+fn empty_npy(descr: &str, shape: &str) -> Vec<u8> {
+    let mut header = format!("{{'descr': '{descr}', 'fortran_order': False, 'shape': {shape}, }}");
+    while (10 + header.len() + 1) % 64 != 0 {
+        header.push(' ');
+    }
+    header.push('\n');
+    let mut bytes = b"\x93NUMPY\x01\x00".to_vec();
+    bytes.extend_from_slice(&(header.len() as u16).to_le_bytes());
+    bytes.extend_from_slice(header.as_bytes());
+    bytes
+}
+
+#[test]
+fn an_evimo2_folder_without_events_runs_and_says_so() {
+    let dir = tempfile::tempdir().unwrap();
+    let seq = dir.path().join("seq");
+    let sim = std::process::Command::new(evseg_tests::bin("evseg"))
+        .args([
+            "sim",
+            "--scene",
+            "one-object",
+            "--seconds",
+            "0.1",
+            "--out",
+            seq.to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    assert!(sim.status.success(), "{}", String::from_utf8_lossy(&sim.stderr));
+    for (file, descr, shape) in [
+        ("dataset_events_t.npy", "<f8", "(0,)"),
+        ("dataset_events_xy.npy", "<u2", "(0, 2)"),
+        ("dataset_events_p.npy", "|u1", "(0,)"),
+    ] {
+        std::fs::write(seq.join(file), empty_npy(descr, shape)).unwrap();
+    }
+    let port = free_port();
+    let graph = format!(
+        r#"name: t{port}
+zenoh:
+  machines:
+    local: {{ listen: ["tcp/127.0.0.1:{port}"] }}
+nodes:
+  - id: source
+    run: evseg-source
+    params: {{ kind: evimo2, path: "{}" }}
+  - id: slicer
+    run: evseg-slicer
+    inputs: {{ events: source/events }}
+  - id: inspect
+    run: evseg-inspect
+    inputs: {{ slices: slicer/slices }}
+"#,
+        seq.display()
+    );
+    let (g, out) = graph_file(dir.path(), &graph);
+    let run = launch(dir.path(), &g, &out).wait(Duration::from_secs(120));
+    assert!(run.status.success(), "run failed:\n{}", run.stderr);
+    let log = std::fs::read_to_string(out.join("logs").join("source.log")).unwrap();
+    assert!(log.contains("holds no events"), "{log}");
+    assert!(
+        run.stdout.contains("holds no events") || run.stderr.contains("holds no events"),
+        "the launcher lists the warning:\n{}\n{}",
+        run.stdout,
+        run.stderr
+    );
+}
+
 fn run_default_graph(
     dir: &Path,
     seconds: f64,

@@ -26,6 +26,8 @@ struct SourceNode {
     started: Option<Instant>,
     summary: SourceSummary,
     summary_path: std::path::PathBuf,
+    /// What the events come from, for messages ("EVIMO2 folder /data/seq", "file x.raw", ...).
+    input: String,
 }
 
 /// What the source writes to `source-<node>.json` when it ends.
@@ -51,6 +53,13 @@ impl Source for SourceNode {
                     counters = ?changed,
                     summary = %self.summary_path.display(),
                     "the input was not used as it stands (counts also in the summary file)"
+                );
+            }
+            if self.summary.digest.count == 0 {
+                tracing::warn!(
+                    "{}: the input holds no events (or none that could be read); the stages \
+                     received empty packets only",
+                    self.input
                 );
             }
             let json = serde_json::to_string_pretty(&self.summary)?;
@@ -279,6 +288,10 @@ fn main() -> ExitCode {
                 counters: Default::default(),
             },
             summary_path: cfg.run_dir.join(format!("source-{}.json", cfg.node)),
+            input: match cfg.param_opt::<String>("path")? {
+                Some(path) if kind == "evimo2" || kind == "file" => format!("{kind} input {path}"),
+                _ => format!("{kind} source"),
+            },
         })
     })
 }
