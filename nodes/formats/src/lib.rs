@@ -290,7 +290,7 @@ pub fn detect_format(path: &Path) -> Result<Format, DecodeError> {
         Some("raw") => Err(DecodeError::Unsupported {
             path: path.to_path_buf(),
             what: "the .raw header names no event format (no `% evt` or `% format` line): \
-                   set OpenOptions::format to Evt2 or Evt3"
+                   add a `% evt 3.0` (or 2.0) line to the header (OpenOptions::format in code)"
                 .into(),
         }),
         _ => Err(DecodeError::Unsupported {

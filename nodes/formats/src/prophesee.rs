@@ -179,7 +179,7 @@ pub(crate) fn open_raw(
             return Err(DecodeError::Unsupported {
                 path: path.to_path_buf(),
                 what: "the header gives no sensor size (no `% geometry` or `% format ...;width=;height=` \
-                       line): set OpenOptions::geometry"
+                       line): give it as width and height in the source node's camera_file (OpenOptions::geometry in code)"
                     .into(),
             });
         }

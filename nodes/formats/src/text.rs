@@ -152,7 +152,7 @@ fn scan_geometry(path: &Path, block: usize) -> Result<(u16, u16), DecodeError> {
     if !any || max_x == u16::MAX || max_y == u16::MAX {
         return Err(DecodeError::Unsupported {
             path: path.to_path_buf(),
-            what: "cannot infer the sensor size from the events: set OpenOptions::geometry".into(),
+            what: "cannot infer the sensor size from the events: give it as width and height in the source node's camera_file (OpenOptions::geometry in code)".into(),
         });
     }
     Ok((max_x + 1, max_y + 1))

@@ -44,8 +44,18 @@ pub struct FileSource {
 impl FileSource {
     /// Opens `path`; `camera_file` supplies calibration the format lacks.
     pub fn open(path: &Path, camera_file: Option<&Path>, seconds: Option<f64>) -> Result<Self, SourceError> {
-        let decoder = evseg_formats::open(path, &OpenOptions::default())
-            .map_err(|e| SourceError::Read(e.to_string()))?;
+        // A camera file's sensor size serves files that do not state theirs (EVT 3.0 without a
+        // geometry line, text); a file that states it keeps its own, checked against the camera
+        // file's by `build_camera_info`.
+        let mut options = OpenOptions::default();
+        if let Some(file) = camera_file {
+            let cam = evseg_formats::CameraFile::load(file)
+                .map_err(|e| SourceError::Param(format!("{}: {e}", path.display())))?;
+            if let (Some(w), Some(h)) = (cam.width, cam.height) {
+                options.geometry = Some((w, h));
+            }
+        }
+        let decoder = evseg_formats::open(path, &options).map_err(|e| SourceError::Read(e.to_string()))?;
         let camera = evseg_formats::build_camera_info(decoder.as_ref(), camera_file)
             .map_err(|e| SourceError::Param(format!("{}: {e}", path.display())))?;
         Ok(Self::from_decoder(decoder, camera, seconds))

@@ -92,3 +92,33 @@ fn text_events_stored_out_of_order_reach_their_batch() {
         Some("reorder_window_ms: -1 ms must be finite and >= 0")
     );
 }
+
+/// An EVT 3.0 file whose header names no sensor size takes it from the camera file (as the
+/// source node's `camera_file` gives it); without one the error says where to give it.
+#[test]
+fn a_recording_without_its_size_takes_the_camera_files() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut bytes = b"% evt 3.0\n".to_vec();
+    // Time high 1, y 700, x 1000 (EVT 3.0 words: type << 12 | payload).
+    for w in [0x8u16 << 12 | 1, 700, 0x2 << 12 | 1000] {
+        bytes.extend_from_slice(&w.to_le_bytes());
+    }
+    let raw = dir.path().join("nosize.raw");
+    std::fs::write(&raw, bytes).unwrap();
+    let e = FileSource::open(&raw, None, None)
+        .err()
+        .map(|e| e.to_string())
+        .unwrap_or_default();
+    assert!(e.contains("camera_file"), "{e}");
+    let cam = dir.path().join("cam.json");
+    std::fs::write(
+        &cam,
+        r#"{ "width": 1280, "height": 720, "fx": 1000, "fy": 1000, "cx": 639.5, "cy": 359.5, "distortion": { "model": "none" } }"#,
+    )
+    .unwrap();
+    let mut source = FileSource::open(&raw, Some(&cam), None).unwrap();
+    let camera = source.camera();
+    assert_eq!((camera.width, camera.height), (1280, 720));
+    let (events, late) = read_batches(&mut source);
+    assert_eq!((events.len(), events.x[0], events.y[0], late), (1, 1000, 700, 0));
+}
