@@ -36,6 +36,16 @@ pub fn describe(rec: &Recording) -> String {
             c.id, c.topic, c.schema, version, c.messages, c.bytes
         ));
     }
+    for c in rec.channels.values() {
+        if let Some(first) = c.gaps.first_missing {
+            s.push_str(&format!(
+                "channel {} lacks {} message(s), from sequence {first} on (lost before the \
+                 recorder, dropped in live mode, or cut out of the file): a replay in lock-step \
+                 cannot use it\n",
+                c.topic, c.gaps.missing
+            ));
+        }
+    }
     if rec.orphan_messages > 0 {
         s.push_str(&format!(
             "{} messages on undeclared channels (skipped)\n",

@@ -425,6 +425,7 @@ mod tests {
                     messages: 3,
                     bytes: 30,
                     time_ns: Some((1, 2)),
+                    gaps: Default::default(),
                 };
                 (i as u16, c)
             })

@@ -42,6 +42,38 @@ pub struct ChannelInfo {
     pub bytes: u64,
     /// Earliest and latest log time, ns since the Unix epoch (`None` when no message).
     pub time_ns: Option<(u64, u64)>,
+    /// Sequence numbers skipped between consecutive messages of the channel (in file order: a
+    /// message lost on its way to the recorder, a live-mode drop, or one cut out of the file),
+    /// with the first one skipped. A replay in lock-step would wait for them.
+    pub gaps: SequenceGaps,
+}
+
+/// Sequence numbers missing from a channel (see [`ChannelInfo::gaps`]).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct SequenceGaps {
+    /// Highest sequence number read so far.
+    pub last: Option<u32>,
+    /// Sequence numbers skipped.
+    pub missing: u64,
+    /// The first one skipped.
+    pub first_missing: Option<u32>,
+}
+
+impl SequenceGaps {
+    /// Takes the next message's sequence number (a repeated or older one, as a message
+    /// published again, skips nothing).
+    pub fn add(&mut self, seq: u32) {
+        if let Some(last) = self.last {
+            if seq > last.saturating_add(1) {
+                self.missing += u64::from(seq - last - 1);
+                self.first_missing.get_or_insert(last + 1);
+            }
+            if seq <= last {
+                return;
+            }
+        }
+        self.last = Some(seq);
+    }
 }
 
 /// An attachment of the recording.
@@ -199,6 +231,7 @@ impl<V: FnMut(MessageRef<'_>) -> Result<(), RecordError>> Walk<'_, V> {
                         messages: 0,
                         bytes: 0,
                         time_ns: None,
+                        gaps: SequenceGaps::default(),
                     },
                 );
             }
@@ -209,6 +242,7 @@ impl<V: FnMut(MessageRef<'_>) -> Result<(), RecordError>> Walk<'_, V> {
                 };
                 channel.messages += 1;
                 channel.bytes += data.len() as u64;
+                channel.gaps.add(header.sequence);
                 channel.time_ns = Some(match channel.time_ns {
                     None => (header.log_time, header.log_time),
                     Some((a, b)) => (a.min(header.log_time), b.max(header.log_time)),

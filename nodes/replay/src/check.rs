@@ -45,6 +45,14 @@ pub fn check_channels(recording: &Recording, wanted: &[Wanted]) -> Result<(), Re
             (Some(_), None) => false,
             (None, _) => true,
         };
+        if let (missing @ 1.., Some(first_missing)) = (c.gaps.missing, c.gaps.first_missing) {
+            return Err(ReplayError::Gap {
+                file: recording.file.clone(),
+                topic: w.topic.clone(),
+                missing,
+                first_missing,
+            });
+        }
         if c.schema != w.schema || !version_ok || c.message_encoding != MESSAGE_ENCODING {
             let v = |v: Option<u16>| v.map(|v| format!(" v{v}")).unwrap_or_default();
             return Err(ReplayError::WrongSchema {
@@ -91,6 +99,7 @@ mod tests {
                         messages: 0,
                         bytes: 0,
                         time_ns: None,
+                        gaps: Default::default(),
                     };
                     (i as u16, c)
                 })
@@ -136,6 +145,35 @@ mod tests {
         );
         let err = check_channels(&rec, &[wanted("old/slices", "evseg.Slice")]).unwrap_err();
         assert!(err.to_string().contains("v999"), "{err}");
+    }
+
+    #[test]
+    fn a_channel_that_skips_sequence_numbers_is_refused_naming_the_first() {
+        let v = |s| evseg_schemas::schema_version(s);
+        let mut rec = recording(&[("slicer/slices", "evseg.Slice", v("evseg.Slice"))]);
+        let gaps = &mut rec.channels.get_mut(&0).unwrap().gaps;
+        // 0, 1, 2, 4, 4 (published again), 7: sequences 3, 5 and 6 are missing.
+        for seq in [0, 1, 2, 4, 4, 7] {
+            gaps.add(seq);
+        }
+        assert_eq!((gaps.missing, gaps.first_missing), (3, Some(3)));
+        let err = check_channels(&rec, &[wanted("slicer/slices", "evseg.Slice")]).unwrap_err();
+        assert!(
+            matches!(
+                err,
+                ReplayError::Gap {
+                    missing: 3,
+                    first_missing: 3,
+                    ..
+                }
+            ),
+            "{err}"
+        );
+        assert!(
+            err.to_string()
+                .contains("run.mcap: channel `slicer/slices` lacks 3"),
+            "{err}"
+        );
     }
 
     #[test]

@@ -37,6 +37,21 @@ pub enum ReplayError {
         /// What the channel holds.
         found: String,
     },
+    /// A channel skips sequence numbers: the replayed stages, in lock-step, would wait for them.
+    #[error(
+        "{}: channel `{topic}` lacks {missing} message(s), from sequence {first_missing} on (a message lost before the recorder, a live-mode drop, or one cut out of the file); a lock-step replay would wait for them",
+        file.display()
+    )]
+    Gap {
+        /// The recording.
+        file: PathBuf,
+        /// Topic `node/output`.
+        topic: String,
+        /// Sequence numbers missing.
+        missing: u64,
+        /// The first one.
+        first_missing: u32,
+    },
     /// A recorded message is not a data frame of its channel's schema.
     #[error("{}: channel `{topic}`, message {index}: {reason}", file.display())]
     BadFrame {
