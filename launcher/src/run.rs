@@ -563,6 +563,11 @@ pub struct LoggedProblems {
     pub first: String,
     /// WARN and ERROR lines of the libraries (Zenoh's transport notices, say).
     pub library: usize,
+    /// Panics of any thread of the node (Rust's `thread '...' panicked at` lines), and the
+    /// first of those lines.
+    pub panics: usize,
+    /// The first panic line.
+    pub first_panic: String,
 }
 
 /// What the nodes of the run in `dir` logged at WARN or ERROR, per node with any, sorted by
@@ -594,8 +599,17 @@ pub fn logged_problems(dir: &Path) -> Vec<LoggedProblems> {
             errors: 0,
             first: String::new(),
             library: 0,
+            panics: 0,
+            first_panic: String::new(),
         };
         for line in text.lines() {
+            if line.starts_with("thread '") && line.contains(" panicked at ") {
+                p.panics += 1;
+                if p.first_panic.is_empty() {
+                    p.first_panic = line.to_string();
+                }
+                continue;
+            }
             // Past the time stamp: the level, then `target: message`.
             let rest = line.trim_start_matches(|c: char| !c.is_whitespace()).trim_start();
             let Some((level, message)) = rest.split_once(' ') else {
@@ -616,7 +630,7 @@ pub fn logged_problems(dir: &Path) -> Vec<LoggedProblems> {
                 p.first = message.to_string();
             }
         }
-        if p.warnings + p.errors + p.library > 0 {
+        if p.warnings + p.errors + p.library + p.panics > 0 {
             out.push(p);
         }
     }
@@ -629,22 +643,33 @@ pub fn logged_problems(dir: &Path) -> Vec<LoggedProblems> {
 pub fn problem_lines(dir: &Path, library: bool) -> Vec<String> {
     let count = |n: usize, what: &str| format!("{n} {what}{}", if n == 1 { "" } else { "s" });
     let problems = logged_problems(dir);
-    let mut lines: Vec<String> = problems
-        .iter()
-        .filter(|p| p.warnings + p.errors > 0)
-        .map(|p| {
-            let mut first: String = p.first.chars().take(300).collect();
-            if p.first.chars().count() > 300 {
-                first.push_str(" ...");
-            }
-            format!(
-                "{}: {}, {}; first: {first}",
+    let cut = |text: &str| {
+        let mut first: String = text.chars().take(300).collect();
+        if text.chars().count() > 300 {
+            first.push_str(" ...");
+        }
+        first
+    };
+    let mut lines: Vec<String> = Vec::new();
+    for p in &problems {
+        if p.warnings + p.errors > 0 {
+            lines.push(format!(
+                "{}: {}, {}; first: {}",
                 p.node,
                 count(p.warnings, "warning"),
-                count(p.errors, "error")
-            )
-        })
-        .collect();
+                count(p.errors, "error"),
+                cut(&p.first)
+            ));
+        }
+        if p.panics > 0 {
+            lines.push(format!(
+                "{}: {}; first: {}",
+                p.node,
+                count(p.panics, "panic"),
+                cut(&p.first_panic)
+            ));
+        }
+    }
     let from_libraries: usize = problems.iter().map(|p| p.library).sum();
     if library && from_libraries > 0 {
         lines.push(format!(
@@ -779,10 +804,35 @@ mod tests {
                 errors: 1,
                 first: "evseg_source::evimo2: /x: the folder has no IMU samples".into(),
                 library: 1,
+                panics: 0,
+                first_panic: String::new(),
             }
         );
         assert_eq!((found[0].node.as_str(), found[0].warnings), ("slicer", 1));
         assert!(logged_problems(&dir.path().join("none")).is_empty());
+    }
+
+    #[test]
+    fn a_panic_in_a_nodes_log_is_counted_and_listed() {
+        let dir = tempfile::tempdir().unwrap();
+        let logs = dir.path().join("logs");
+        std::fs::create_dir_all(&logs).unwrap();
+        std::fs::write(
+            logs.join("tracker.log"),
+            "2026-12-07T09:37:21Z  INFO evseg_runtime::node: stopped on request\n\
+             thread 'net-0' (4242) panicked at static_init-1.0.4/src/generic_lazy.rs:954:45:\n\
+             called `Result::unwrap()` on an `Err` value: AccessError\n",
+        )
+        .unwrap();
+        let found = logged_problems(dir.path());
+        assert_eq!((found.len(), found[0].panics, found[0].warnings), (1, 1, 0));
+        let lines = problem_lines(dir.path(), true);
+        assert_eq!(
+            lines,
+            [
+                "tracker: 1 panic; first: thread 'net-0' (4242) panicked at static_init-1.0.4/src/generic_lazy.rs:954:45:"
+            ]
+        );
     }
 
     #[test]

@@ -843,6 +843,19 @@ pub(crate) struct Running {
     _token: zenoh::liveliness::LivelinessToken,
 }
 
+impl Drop for Running {
+    /// Closes the session however the node ends (finished, stopped on request, failed), so that
+    /// Zenoh's threads are idle when the process exits: a session left open made a node stopped
+    /// by the launcher panic now and then in a Zenoh thread while the process tore down its
+    /// statics (`static_init` AccessError in `net-0`).
+    fn drop(&mut self) {
+        if !self.session.is_closed() {
+            quieten_zenoh_teardown();
+            let _ = self.session.close().wait();
+        }
+    }
+}
+
 impl Running {
     fn stats(&self, finished: bool) -> Stats {
         self.stats_source.stats(finished)
