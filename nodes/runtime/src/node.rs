@@ -1181,8 +1181,15 @@ pub(crate) fn main_wrapper<T>(
     match cli {
         Cli::Describe => match serde_json::to_string_pretty(&description) {
             Ok(s) => {
-                println!("{s}");
-                std::process::ExitCode::SUCCESS
+                use std::io::Write;
+                match writeln!(std::io::stdout().lock(), "{s}") {
+                    // A reader that stopped early (`--describe | head`) wanted no more.
+                    Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => {
+                        eprintln!("{}: cannot write the description: {e}", description.binary);
+                        std::process::ExitCode::FAILURE
+                    }
+                    _ => std::process::ExitCode::SUCCESS,
+                }
             }
             Err(e) => {
                 eprintln!("{e}");
