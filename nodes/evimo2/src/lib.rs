@@ -47,5 +47,6 @@ pub use reader::{
     Sequence, find_sequence_folders,
 };
 pub use writer::{
-    DEFAULT_IMU_TOPIC, MetaForm, SequenceData, WriteOptions, write_sequence, write_sequence_with,
+    DEFAULT_IMU_TOPIC, MetaForm, SequenceData, SequenceWriter, WriteOptions, write_sequence,
+    write_sequence_with,
 };

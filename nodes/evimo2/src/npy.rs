@@ -289,6 +289,13 @@ fn read_exact_or_truncated<R: Read>(r: &mut R, buf: &mut [u8], offset: u64, file
 /// Builds a version 1.0 header (version 2.0 if it would not fit), padded so the data starts on a
 /// 64-byte boundary as numpy ≥ 1.16 writes it.
 pub fn encode_header(descr: &str, fortran_order: bool, shape: &[usize]) -> Vec<u8> {
+    encode_header_at_least(descr, fortran_order, shape, 0)
+}
+
+/// [`encode_header`] padded with spaces to at least `min_len` bytes (rounded up to 64): a file
+/// written before its row count is known reserves the header of the largest count and rewrites
+/// it in place at the end.
+pub fn encode_header_at_least(descr: &str, fortran_order: bool, shape: &[usize], min_len: usize) -> Vec<u8> {
     let shape_text = match shape.len() {
         0 => "()".to_string(),
         1 => format!("({},)", shape[0]),
@@ -306,7 +313,7 @@ pub fn encode_header(descr: &str, fortran_order: bool, shape: &[usize]) -> Vec<u
     } else {
         (2, 4)
     };
-    let total = (8 + len_size + dict.len() + 1).div_ceil(64) * 64;
+    let total = (8 + len_size + dict.len() + 1).max(min_len).div_ceil(64) * 64;
     let header_len = total - 8 - len_size;
     let mut out = Vec::with_capacity(total);
     out.extend_from_slice(MAGIC);

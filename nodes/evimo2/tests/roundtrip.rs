@@ -260,6 +260,68 @@ fn a_jump_in_event_times_is_an_error_naming_the_file_and_the_first_event() {
 }
 
 #[test]
+fn a_sequence_written_as_it_arrives_equals_one_written_whole() {
+    let data = common::sequence();
+    let whole = tempfile::tempdir().unwrap();
+    write_sequence(whole.path(), &data).unwrap();
+    let streamed = tempfile::tempdir().unwrap();
+    let opts = WriteOptions {
+        block_events: 1000,
+        ..WriteOptions::default()
+    };
+    let mut w =
+        evseg_evimo2::SequenceWriter::create(streamed.path(), &data.camera, data.t_start_s, &opts).unwrap();
+    for (a, b) in [(0, 1), (1, 2345), (2345, common::N_EVENTS)] {
+        let mut part = Events::default();
+        part.extend_from(&data.events, a..b);
+        w.push_events(&part).unwrap();
+    }
+    for (f, m) in data.frames.iter().zip(&data.masks) {
+        w.push_mask(f.id, m).unwrap();
+    }
+    let n = w
+        .finish(&data.imu_topic, &data.imu, &data.camera_poses, &data.frames)
+        .unwrap();
+    assert_eq!(n, common::N_EVENTS as u64);
+    for file in [
+        "dataset_events_t.npy",
+        "dataset_events_xy.npy",
+        "dataset_events_p.npy",
+        "dataset_mask.npz",
+        "dataset_info.npz",
+    ] {
+        assert_eq!(
+            std::fs::read(whole.path().join(file)).unwrap(),
+            std::fs::read(streamed.path().join(file)).unwrap(),
+            "{file}"
+        );
+    }
+}
+
+#[test]
+fn the_streaming_writer_names_a_bad_time_by_its_row_and_frames_that_do_not_match_the_masks() {
+    let data = common::sequence();
+    let dir = tempfile::tempdir().unwrap();
+    let mut w = evseg_evimo2::SequenceWriter::create(dir.path(), &data.camera, 0.0, &WriteOptions::default())
+        .unwrap();
+    let mut part = Events::default();
+    part.extend_from(&data.events, 0..10);
+    w.push_events(&part).unwrap();
+    part.t[3] = f64::INFINITY;
+    let e = w.push_events(&part).unwrap_err().to_string();
+    assert!(
+        e.contains("dataset_events_t.npy") && e.contains("event 13 has time inf"),
+        "{e}"
+    );
+    w.push_mask(data.frames[0].id, &data.masks[0]).unwrap();
+    let e = w
+        .finish(&data.imu_topic, &data.imu, &data.camera_poses, &data.frames)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("dataset_mask.npz") && e.contains("1 masks for"), "{e}");
+}
+
+#[test]
 fn index_matches_pydvs_definition() {
     // t = 0, 0.004, ..., 0.1 (26 events), w = 0.01.
     let t: Vec<f64> = (0..26).map(|i| i as f64 * 0.004).collect();

@@ -93,7 +93,7 @@ pub fn write_evimo2_config(
     resolution_scale: f64,
     out: &std::path::Path,
 ) -> Result<u64, SourceError> {
-    use evseg_evimo2::{FrameTruth, SequenceData, write_sequence};
+    use evseg_evimo2::{FrameTruth, SequenceWriter, WriteOptions};
     if !(resolution_scale.is_finite() && resolution_scale > 0.0 && resolution_scale <= 8.0) {
         return Err(SourceError::Param(format!(
             "resolution scale must be in (0, 8], got {resolution_scale}"
@@ -104,57 +104,59 @@ pub fn write_evimo2_config(
     }
     let mut sim = Simulator::new(config).map_err(|e| SourceError::Param(e.to_string()))?;
     let camera = sim.camera_info();
-    let mut events = evseg_schemas::Events::default();
-    let (mut imu, mut poses, mut masks, mut objects) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let write_err = |e: evseg_evimo2::Evimo2Error| SourceError::Read(e.to_string());
+    // Events and masks go to their files as they are simulated; only the small ground truth
+    // (poses at 200 Hz, IMU, the masks' times) is kept for the meta written at the end.
+    let mut writer =
+        SequenceWriter::create(out, &camera, 0.0, &WriteOptions::default()).map_err(write_err)?;
+    let (mut imu, mut poses, mut mask_times, mut objects) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     let step = 0.05;
     let mut t: f64 = 0.0;
     while !sim.is_finished() {
         t += step;
         let chunk = sim.next_chunk(t.min(sim.duration()));
-        let n = chunk.events.len();
-        events.extend_from(&chunk.events, 0..n);
+        writer.push_events(&chunk.events).map_err(write_err)?;
+        for m in &chunk.truth.masks {
+            writer.push_mask(mask_times.len() as u64, m).map_err(write_err)?;
+            mask_times.push(m.t);
+        }
         imu.extend(chunk.imu);
         poses.extend(chunk.truth.camera);
-        masks.extend(chunk.truth.masks);
         objects.extend(chunk.truth.objects);
     }
+    poses.sort_by(|a, b| a.t.total_cmp(&b.t));
+    objects.sort_by(|a, b| a.t.total_cmp(&b.t));
     // One ground-truth frame per mask: the camera pose nearest in time (the trajectory is sampled
-    // at 200 Hz, masks at 60 Hz) and the object poses of the mask's instant.
-    let frames = masks
+    // at 200 Hz, masks at 60 Hz) and the object poses of the mask's instant. Both lists are in
+    // time order (chunk after chunk), so each is searched by bisection.
+    let frames: Vec<FrameTruth> = mask_times
         .iter()
         .enumerate()
-        .map(|(k, m)| {
-            let camera = poses
-                .iter()
-                .min_by(|a: &&evseg_schemas::CameraMotion, b| (a.t - m.t).abs().total_cmp(&(b.t - m.t).abs()))
+        .map(|(k, &mt)| {
+            let after = poses.partition_point(|p: &evseg_schemas::CameraMotion| p.t < mt);
+            let camera = [after.checked_sub(1), Some(after)]
+                .into_iter()
+                .flatten()
+                .filter_map(|i| poses.get(i))
+                .min_by(|a, b| (a.t - mt).abs().total_cmp(&(b.t - mt).abs()))
                 .copied();
-            let objs = objects
+            let first = objects.partition_point(|o: &evseg_schemas::ObjectPose| o.t < mt - 1e-9);
+            let objs = objects[first..]
                 .iter()
-                .filter(|o: &&evseg_schemas::ObjectPose| (o.t - m.t).abs() < 1e-9)
+                .take_while(|o| o.t <= mt + 1e-9)
                 .copied()
                 .collect();
             FrameTruth {
                 id: k as u64,
-                t: m.t,
+                t: mt,
                 camera,
                 objects: objs,
             }
         })
         .collect();
-    let count = events.len() as u64;
-    let data = SequenceData {
-        events,
-        t_start_s: 0.0,
-        camera,
-        imu_topic: evseg_evimo2::DEFAULT_IMU_TOPIC.into(),
-        imu,
-        camera_poses: poses,
-        frames,
-        masks,
-        depth_mm: None,
-    };
-    write_sequence(out, &data).map_err(|e| SourceError::Read(e.to_string()))?;
-    Ok(count)
+    writer
+        .finish(evseg_evimo2::DEFAULT_IMU_TOPIC, &imu, &poses, &frames)
+        .map_err(write_err)
 }
 
 #[cfg(test)]
