@@ -2,8 +2,8 @@
 //!
 //! Time convention of everything this module returns: seconds **relative to the first event**,
 //! i.e. `t = t_file - t0` where `t0` is the earliest time among the first 65 536 stored events of
-//! `dataset_events_t.npy` (absolute, seconds on the EVIMO2 sequence clock, the clock of every
-//! `ts` in meta). In a time-sorted file, as EVIMO2's own, that is `dataset_events_t.npy[0]`; in a
+//! `dataset_events_t.npy` that is kept (not dropped for its time, see [`EventReader`]; absolute,
+//! seconds on the EVIMO2 sequence clock, the clock of every `ts` in meta). In a time-sorted file, as EVIMO2's own, that is `dataset_events_t.npy[0]`; in a
 //! file stored out of order it keeps the earliest events at non-negative times. `t0` is kept as
 //! [`Sequence::t0_s`] and, rounded to µs, as [`CameraInfo::time_origin_us`]. A folder with no events has `t0 = 0`. IMU sample times
 //! are on the IMU clock (add [`CameraInfo::imu_time_offset_s`] for camera time).
