@@ -169,6 +169,8 @@ pub struct EventReader {
     /// Events dropped for their time, and how many of them came in a row at the end.
     time_outliers: u64,
     consecutive_outliers: u64,
+    /// Dropped events that `take` has passed over (the others are still in the time cache).
+    outliers_passed: u64,
     /// Row and stored time of the first dropped event.
     first_outlier: Option<(u64, f64)>,
     /// Rows read per block when scanning times, see [`DEFAULT_SCAN_BLOCK`].
@@ -217,6 +219,7 @@ impl EventReader {
             last_kept_abs: None,
             time_outliers: 0,
             consecutive_outliers: 0,
+            outliers_passed: 0,
             first_outlier: None,
             scan_block: DEFAULT_SCAN_BLOCK,
             buf: Vec::new(),
@@ -274,48 +277,72 @@ impl EventReader {
     /// Marks the times of rows `first_row..` (cache entries `from..`) that are not finite or lie
     /// beyond [`MAX_TIME_GAP_S`] from the last kept event as NaN (dropped by `take`).
     fn screen_times(&mut self, from: usize, first_row: u64) -> Result<()> {
+        let block = &self.t_cache[from..];
+        let near = |a: f64, b: f64| (b - a).abs() <= MAX_TIME_GAP_S;
+        // The usual block: every time within the gap of the one before it (the first of the
+        // file's: of itself; NaN fails every comparison), all kept. Tested without a carried
+        // dependency, so it vectorises.
+        let Some(&first) = block.first() else {
+            return Ok(());
+        };
+        if near(self.last_kept_abs.unwrap_or(first), first)
+            && block.windows(2).fold(true, |ok, w| ok & near(w[0], w[1]))
+        {
+            self.consecutive_outliers = 0;
+            self.last_kept_abs = block.last().copied();
+            return Ok(());
+        }
         if self.last_kept_abs.is_none() {
-            let mut finite: Vec<f64> = self.t_cache[from..]
-                .iter()
-                .copied()
-                .filter(|t| t.is_finite())
-                .collect();
+            // Before any is kept, the block's median stands in (robust to a few bad times).
+            let mut finite: Vec<f64> = block.iter().copied().filter(|t| t.is_finite()).collect();
             if !finite.is_empty() {
                 let mid = finite.len() / 2;
                 let (_, median, _) = finite.select_nth_unstable_by(mid, f64::total_cmp);
                 self.last_kept_abs = Some(*median);
             }
         }
-        for (k, t) in self.t_cache[from..].iter_mut().enumerate() {
-            let kept = match self.last_kept_abs {
-                Some(reference) => t.is_finite() && (*t - reference).abs() <= MAX_TIME_GAP_S,
-                None => false,
-            };
-            if kept {
-                self.last_kept_abs = Some(*t);
+        let Some(mut reference) = self.last_kept_abs else {
+            // No finite time in the block: every one is dropped.
+            for k in from..self.t_cache.len() {
+                self.drop_time(k, first_row + (k - from) as u64, f64::NAN)?;
+            }
+            return Ok(());
+        };
+        for k in from..self.t_cache.len() {
+            let t = self.t_cache[k];
+            // (A NaN fails the comparison; an infinity lies beyond any gap.)
+            if near(reference, t) {
+                reference = t;
                 self.consecutive_outliers = 0;
-                continue;
+            } else {
+                self.drop_time(k, first_row + (k - from) as u64, reference)?;
             }
-            let row = first_row + k as u64;
-            self.first_outlier.get_or_insert((row, *t));
-            self.time_outliers += 1;
-            self.consecutive_outliers += 1;
-            if self.consecutive_outliers > MAX_CONSECUTIVE_TIME_OUTLIERS {
-                let start = row + 1 - self.consecutive_outliers;
-                return Err(Evimo2Error::format(
-                    &self.t.name,
-                    self.t.header.data_offset + start * self.t.row_bytes as u64,
-                    format!(
-                        "event times jump: from event {start} on, {} events in a row lie more than \
-                         {MAX_TIME_GAP_S} s from the event before them (t = {:.6} s); the recording \
-                         is not continuous",
-                        self.consecutive_outliers,
-                        self.last_kept_abs.unwrap_or(f64::NAN)
-                    ),
-                ));
-            }
-            *t = f64::NAN;
         }
+        self.last_kept_abs = Some(reference);
+        Ok(())
+    }
+
+    /// Drops the time of cache entry `k` (file row `row`; `reference` the last kept time):
+    /// counts it, marks it NaN for `take`, and fails once too many came in a row.
+    #[cold]
+    fn drop_time(&mut self, k: usize, row: u64, reference: f64) -> Result<()> {
+        self.first_outlier.get_or_insert((row, self.t_cache[k]));
+        self.time_outliers += 1;
+        self.consecutive_outliers += 1;
+        if self.consecutive_outliers > MAX_CONSECUTIVE_TIME_OUTLIERS {
+            let start = row + 1 - self.consecutive_outliers;
+            return Err(Evimo2Error::format(
+                &self.t.name,
+                self.t.header.data_offset + start * self.t.row_bytes as u64,
+                format!(
+                    "event times jump: from event {start} on, {} events in a row lie more than \
+                     {MAX_TIME_GAP_S} s from the event before them (t = {reference:.6} s); the \
+                     recording is not continuous",
+                    self.consecutive_outliers
+                ),
+            ));
+        }
+        self.t_cache[k] = f64::NAN;
         Ok(())
     }
 
@@ -349,7 +376,14 @@ impl EventReader {
     fn take(&mut self, count: usize) -> Result<Events> {
         let mut events = Events::with_capacity(count);
         let times = &self.t_cache[self.t_head..self.t_head + count];
-        for &abs in times.iter().filter(|t| !t.is_nan()) {
+        // Dropped times are rare: the columns are copied whole unless one may lie in the block
+        // (some were dropped that were not yet passed over).
+        let dropped = self.time_outliers > self.outliers_passed && times.iter().any(|t| t.is_nan());
+        for &abs in times {
+            if dropped && abs.is_nan() {
+                self.outliers_passed += 1;
+                continue;
+            }
             let t = abs - self.t0;
             if t < self.last_t {
                 self.non_monotonic += 1;
@@ -357,7 +391,6 @@ impl EventReader {
             self.last_t = t;
             events.t.push(t);
         }
-        let dropped = events.t.len() < count;
         let mut buf = std::mem::take(&mut self.buf);
         self.xy.read_rows(self.pos, count, &mut buf)?;
         let xy = npy::decode_u16(self.xy.header.dtype, self.xy.header.big_endian, &buf).map_err(|bad| {
@@ -368,9 +401,14 @@ impl EventReader {
                 format!("event {row}: pixel coordinate outside 0..=65535"),
             )
         })?;
-        let kept = |i: &usize| !dropped || !times[*i].is_nan();
-        events.x.extend((0..count).filter(kept).map(|i| xy[2 * i]));
-        events.y.extend((0..count).filter(kept).map(|i| xy[2 * i + 1]));
+        let kept = |i: &usize| !times[*i].is_nan();
+        if dropped {
+            events.x.extend((0..count).filter(kept).map(|i| xy[2 * i]));
+            events.y.extend((0..count).filter(kept).map(|i| xy[2 * i + 1]));
+        } else {
+            events.x.extend(xy.iter().step_by(2));
+            events.y.extend(xy.iter().skip(1).step_by(2));
+        }
         self.p.read_rows(self.pos, count, &mut buf)?;
         let p =
             npy::decode_polarity(self.p.header.dtype, self.p.header.big_endian, &buf).map_err(
