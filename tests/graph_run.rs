@@ -342,24 +342,14 @@ fn an_evimo2_folder_without_events_runs_and_says_so() {
     ] {
         std::fs::write(seq.join(file), empty_npy(descr, shape)).unwrap();
     }
+    // The pattern graph of these tests with the folder as its source.
     let port = free_port();
-    let graph = format!(
-        r#"name: t{port}
-zenoh:
-  machines:
-    local: {{ listen: ["tcp/127.0.0.1:{port}"] }}
-nodes:
-  - id: source
-    run: evseg-source
-    params: {{ kind: evimo2, path: "{}" }}
-  - id: slicer
-    run: evseg-slicer
-    inputs: {{ events: source/events }}
-  - id: inspect
-    run: evseg-inspect
-    inputs: {{ slices: slicer/slices }}
-"#,
-        seq.display()
+    let pattern = "params: { kind: pattern, rate: 1000, seconds: 1, batch_ms: 10, seed: 3 }";
+    let graph = graph(port, "lockstep", 1000, 1.0, 0.0, "");
+    assert!(graph.contains(pattern), "{graph}");
+    let graph = graph.replace(
+        pattern,
+        &format!("params: {{ kind: evimo2, path: \"{}\" }}", seq.display()),
     );
     let (g, out) = graph_file(dir.path(), &graph);
     let run = launch(dir.path(), &g, &out).wait(Duration::from_secs(120));
