@@ -944,6 +944,10 @@ fn sequence_folders_below(root: &Path) -> (Vec<PathBuf>, bool) {
     let mut found = Vec::new();
     let mut level = vec![root.to_path_buf()];
     let mut visits = 0usize;
+    // Each folder once, whatever links lead to it, and never one that holds `root` (a link to
+    // `.` or to an ancestor would list the tree again, or folders outside it).
+    let root_real = root.canonicalize().unwrap_or_else(|_| root.to_path_buf());
+    let mut seen = std::collections::HashSet::from([root_real.clone()]);
     for _ in 0..SEQUENCE_SEARCH_DEPTH {
         let mut next = Vec::new();
         for dir in &level {
@@ -955,6 +959,10 @@ fn sequence_folders_below(root: &Path) -> (Vec<PathBuf>, bool) {
                 .filter(|p| p.is_dir())
                 .collect();
             children.sort();
+            children.retain(|p| {
+                p.canonicalize()
+                    .is_ok_and(|real| !root_real.starts_with(&real) && seen.insert(real))
+            });
             for child in children {
                 visits += 1;
                 if visits > SEQUENCE_SEARCH_VISITS {

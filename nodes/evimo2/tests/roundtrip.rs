@@ -334,3 +334,22 @@ fn index_matches_pydvs_definition() {
         vec![0]
     );
 }
+
+#[cfg(unix)]
+#[test]
+fn links_back_into_the_tree_do_not_list_a_sequence_twice() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path().join("fan");
+    write_sequence(&root.join("seq"), &common::sequence()).unwrap();
+    // Links to the root itself, to its parent (which holds it) and a second name of the sequence.
+    for (name, target) in [("l1", "."), ("l2", ".."), ("again", "seq")] {
+        std::os::unix::fs::symlink(target, root.join(name)).unwrap();
+    }
+    let (found, complete) = evseg_evimo2::find_sequence_folders(&root);
+    assert!(complete);
+    assert_eq!(
+        found,
+        vec![root.join("again")],
+        "one of the two names, the first in order"
+    );
+}
