@@ -306,10 +306,16 @@ fn init_tracing() {
 
 /// Prints a bench's table and writes it as `bench.md`, with `json` as `bench.json`, into `work`.
 fn publish_table(work: &Path, md: &str, json: &serde_json::Value) -> anyhow::Result<()> {
+    use anyhow::Context;
     println!("{md}");
-    std::fs::create_dir_all(work)?;
-    std::fs::write(work.join("bench.md"), md)?;
-    std::fs::write(work.join("bench.json"), serde_json::to_string_pretty(json)?)?;
+    std::fs::create_dir_all(work).with_context(|| format!("cannot create {}", work.display()))?;
+    for (name, text) in [
+        ("bench.md", md.to_string()),
+        ("bench.json", serde_json::to_string_pretty(json)?),
+    ] {
+        let path = work.join(name);
+        std::fs::write(&path, text).with_context(|| format!("cannot write {}", path.display()))?;
+    }
     Ok(())
 }
 
@@ -567,6 +573,10 @@ fn main() -> ExitCode {
             quiet,
             record,
         } => {
+            if let Err(e) = replay::check_record_target(&recording, record.as_deref()) {
+                eprintln!("error: {e:#}");
+                return ExitCode::FAILURE;
+            }
             let opts = run::RunOptions {
                 graph,
                 instance,

@@ -356,9 +356,40 @@ pub fn output_key(instance: &str, node: &NodeSpec, output: &str) -> String {
     }
 }
 
+/// Refuses a `--record` file that is the recording being replayed (the recorder would truncate
+/// it before the replay reads it).
+pub fn check_record_target(
+    recording: &std::path::Path,
+    record: Option<&std::path::Path>,
+) -> anyhow::Result<()> {
+    if let Some(record) = record
+        && let (Ok(a), Ok(b)) = (recording.canonicalize(), record.canonicalize())
+        && a == b
+    {
+        anyhow::bail!(
+            "--record {} is the recording being replayed: recording the replay there would \
+             overwrite it; give another file",
+            record.display()
+        );
+    }
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn recording_a_replay_onto_its_own_recording_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let rec = dir.path().join("run.mcap");
+        std::fs::write(&rec, b"x").unwrap();
+        let same = dir.path().join(".").join("run.mcap");
+        let e = check_record_target(&rec, Some(&same)).unwrap_err().to_string();
+        assert!(e.contains("is the recording being replayed"), "{e}");
+        assert!(check_record_target(&rec, Some(&dir.path().join("b.mcap"))).is_ok());
+        assert!(check_record_target(&rec, None).is_ok());
+    }
 
     fn graph() -> Graph {
         let node = |id: &str, inputs: serde_json::Value, outputs: serde_json::Value| {
