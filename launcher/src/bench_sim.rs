@@ -15,6 +15,10 @@ use evseg_sim::throughput::{Timing, time_simulation};
 
 use crate::spread::median_and_range;
 
+/// Shortest sensor time per run, s: one render chunk of the simulator is 50 ms, and a run much
+/// shorter than that times start-up, not simulation.
+pub const MIN_SECONDS: f64 = 0.05;
+
 /// What to time (the options of `evseg bench sim`).
 #[derive(Debug, Clone, clap::Args)]
 pub struct SimBenchOptions {
@@ -104,6 +108,10 @@ pub fn cpu_model() -> String {
 
 /// Runs the benchmark, printing each run's line to standard error as it ends.
 pub fn bench(options: &SimBenchOptions) -> anyhow::Result<SimBench> {
+    // Shorter runs time nothing but the first chunk's set-up (and 0 events give no rate).
+    if options.seconds.is_nan() || options.seconds < MIN_SECONDS {
+        anyhow::bail!("--seconds {} must be at least {MIN_SECONDS}", options.seconds);
+    }
     let scenes: Vec<String> = if options.scenes.is_empty() {
         evseg_source::synthetic::PRESET_NAMES
             .iter()
@@ -130,6 +138,10 @@ pub fn bench(options: &SimBenchOptions) -> anyhow::Result<SimBench> {
             runs: Vec::new(),
         });
     }
+    // The table is written there at the end: a folder that cannot be made fails now, not after
+    // every run.
+    std::fs::create_dir_all(&options.work)
+        .with_context(|| format!("cannot create the working folder {}", options.work.display()))?;
     for run in 1..=options.runs {
         for row in &mut rows {
             let cfg = evseg_source::synthetic::scene_config(
@@ -269,7 +281,7 @@ mod tests {
             seed: 1,
             runs: 1,
             settings: Vec::new(),
-            work: PathBuf::from("unused"),
+            work: tempfile::tempdir().unwrap().path().join("never-made"),
         };
         let e = format!("{:#}", bench(&o).unwrap_err());
         assert!(e.contains("no-such-scene"), "{e}");
@@ -281,7 +293,18 @@ mod tests {
             "{e}"
         );
         o.settings.clear();
-        o.seconds = f64::NAN;
-        assert!(bench(&o).is_err());
+        for seconds in [f64::NAN, 1e-9] {
+            o.seconds = seconds;
+            let e = format!("{:#}", bench(&o).unwrap_err());
+            assert!(e.contains("must be at least 0.05"), "{e}");
+        }
+        o.seconds = 0.05;
+        let file = tempfile::NamedTempFile::new().unwrap();
+        o.work = file.path().join("sub");
+        let e = format!("{:#}", bench(&o).unwrap_err());
+        assert!(
+            e.contains("cannot create the working folder") && e.contains("sub"),
+            "{e}"
+        );
     }
 }
