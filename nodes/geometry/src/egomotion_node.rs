@@ -63,9 +63,21 @@ pub fn describe_egomotion(d: Describe, defaults: &EgomotionParams) -> Describe {
         )
 }
 
+/// Most columns of the refinement's depth grid: a cell per 2.5 px of a 640 px wide sensor
+/// (the default is 8); the grid's memory grows with the square of it.
+pub const MAX_DEPTH_GRID_COLS: usize = 256;
+
 /// Reads the parameters declared by [`describe_egomotion`] from the node's config (the
 /// launcher fills in the defaults, so each must be present).
 pub fn egomotion_from_config(cfg: &NodeConfig) -> Result<EgomotionParams, RuntimeError> {
+    let grid_cols: usize = cfg.param("depth_grid_cols")?;
+    if !(1..=MAX_DEPTH_GRID_COLS).contains(&grid_cols) {
+        return Err(RuntimeError::Param {
+            node: cfg.node.clone(),
+            name: "depth_grid_cols".into(),
+            reason: format!("{grid_cols} is outside 1..={MAX_DEPTH_GRID_COLS}"),
+        });
+    }
     Ok(EgomotionParams {
         svm: SvmParams {
             c: cfg.param("svm_c")?,
@@ -74,7 +86,7 @@ pub fn egomotion_from_config(cfg: &NodeConfig) -> Result<EgomotionParams, Runtim
         min_confidence: cfg.param("egomotion_min_confidence")?,
         min_samples: cfg.param("egomotion_min_samples")?,
         refine_iterations: cfg.param("refine_iterations")?,
-        grid_cols: cfg.param("depth_grid_cols")?,
+        grid_cols,
         min_cell_samples: cfg.param("min_cell_samples")?,
         density_cell_px: cfg.param("egomotion_density_cell_px")?,
         huber_k: cfg.param("refine_huber_k")?,
@@ -91,6 +103,25 @@ mod tests {
 
     fn config(params: serde_json::Map<String, serde_json::Value>) -> NodeConfig {
         NodeConfig::with_params("merger", params)
+    }
+
+    #[test]
+    fn a_depth_grid_outside_its_range_is_refused_naming_the_parameter() {
+        let description =
+            describe_egomotion(Describe::new("evseg-test", "test"), &EgomotionParams::default()).build();
+        for cols in [0u64, 257, 1_000_000_000] {
+            let mut params: serde_json::Map<String, serde_json::Value> = description
+                .params
+                .iter()
+                .map(|p| (p.name.clone(), p.default.clone()))
+                .collect();
+            params.insert("depth_grid_cols".into(), cols.into());
+            let e = egomotion_from_config(&config(params)).unwrap_err().to_string();
+            assert!(
+                e.contains("parameter `depth_grid_cols`") && e.contains("1..=256"),
+                "{e}"
+            );
+        }
     }
 
     #[test]
