@@ -16,12 +16,14 @@ pub struct SmoothGrid {
     count: Vec<f64>,
 }
 
-/// A 1-D Gaussian kernel with peak 1, radius `ceil(3 sigma)`.
-fn kernel(sigma: f64) -> Vec<f64> {
+/// A 1-D Gaussian kernel with peak 1, radius `ceil(3 sigma)`, at most `max_radius` (taps beyond
+/// the grid's extent only meet the zeros outside it, so a cap at the grid's size changes
+/// nothing, and a huge sigma cannot allocate a huge kernel).
+fn kernel(sigma: f64, max_radius: usize) -> Vec<f64> {
     if sigma.is_nan() || sigma <= 0.0 {
         return vec![1.0];
     }
-    let r = (3.0 * sigma).ceil() as i64;
+    let r = (3.0 * sigma).ceil().min(max_radius as f64) as i64;
     (-r..=r)
         .map(|i| (-(i * i) as f64 / (2.0 * sigma * sigma)).exp())
         .collect()
@@ -80,7 +82,7 @@ impl SmoothGrid {
 
     /// Blurs both grids with a Gaussian of standard deviation `sigma_px` pixels.
     pub fn blur(&mut self, sigma_px: f64) {
-        let k = kernel(sigma_px / f64::from(self.cell_px));
+        let k = kernel(sigma_px / f64::from(self.cell_px), self.cols.max(self.rows));
         for g in [&mut self.sum, &mut self.count] {
             let h = blur_axis(g, self.cols, self.rows, &k, true);
             *g = blur_axis(&h, self.cols, self.rows, &k, false);
@@ -117,6 +119,22 @@ mod tests {
         assert!((l + r - 4.0).abs() < 1e-9 && l > 1.2 && r < 2.8, "{l} {r}");
         // Support: 4 pixels per cell, blurred with peak-1 kernels -> more than 4.
         assert!(g.get(10, 10).unwrap().1 > 4.0);
+    }
+
+    #[test]
+    fn a_smoothing_wider_than_the_grid_is_the_grids_mean_and_bounded() {
+        // 1e300 px once asked for a kernel of 1e300 taps ("capacity overflow"); the kernel
+        // stops at the grid's extent, which changes nothing.
+        let mut wide = SmoothGrid::new(40, 20, 2);
+        wide.add(0, 0, 1.0);
+        wide.add(39, 19, 3.0);
+        let mut huge = wide.clone();
+        wide.blur(1e6);
+        huge.blur(1e300);
+        for (u, v) in [(0, 0), (20, 10), (39, 19)] {
+            let ((h, hn), (w, wn)) = (huge.get(u, v).unwrap(), wide.get(u, v).unwrap());
+            assert!((h - 2.0).abs() < 1e-9 && (h - w).abs() < 1e-6 && (hn - wn).abs() < 1e-6);
+        }
     }
 
     #[test]
