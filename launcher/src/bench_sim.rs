@@ -121,6 +121,8 @@ pub fn bench(options: &SimBenchOptions) -> anyhow::Result<SimBench> {
         options.scenes.clone()
     };
     let mut rows: Vec<SimBenchRow> = Vec::with_capacity(scenes.len());
+    // Each preset's configuration, checked once and cloned for every run.
+    let mut configs = Vec::with_capacity(scenes.len());
     for scene in &scenes {
         let cfg = evseg_source::synthetic::scene_config(
             scene,
@@ -137,21 +139,15 @@ pub fn bench(options: &SimBenchOptions) -> anyhow::Result<SimBench> {
             height: cfg.camera.height,
             runs: Vec::new(),
         });
+        configs.push(cfg);
     }
     // The table is written there at the end: a folder that cannot be made fails now, not after
     // every run.
     std::fs::create_dir_all(&options.work)
         .with_context(|| format!("cannot create the working folder {}", options.work.display()))?;
     for run in 1..=options.runs {
-        for row in &mut rows {
-            let cfg = evseg_source::synthetic::scene_config(
-                &row.scene,
-                options.seed,
-                Some(options.seconds),
-                &options.settings,
-            )
-            .with_context(|| format!("preset `{}`", row.scene))?;
-            let (_, timing) = time_simulation(cfg, options.seconds, |_| {})
+        for (row, cfg) in rows.iter_mut().zip(&configs) {
+            let (_, timing) = time_simulation(cfg.clone(), options.seconds, |_| {})
                 .with_context(|| format!("simulating preset `{}`", row.scene))?;
             eprintln!(
                 "run {run}/{}: {:<15} {:.2} M events/s of sensor time, {:.3} sensor-s per {}-s (setup {:.2} s)",
