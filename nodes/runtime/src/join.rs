@@ -160,9 +160,10 @@ impl Joiner {
             return Ok(JoinState::Finished);
         }
         let seq = if self.live {
-            match self.live_candidate() {
-                Some(s) => s,
-                None => return Ok(self.finished_or_waiting()),
+            match self.live_step() {
+                LiveStep::Take(s) => s,
+                LiveStep::Wait => return Ok(JoinState::Waiting),
+                LiveStep::Finish => return Ok(JoinState::Finished),
             }
         } else {
             if !self.started {
@@ -259,44 +260,75 @@ impl Joiner {
         first
     }
 
-    fn finished_or_waiting(&self) -> JoinState {
-        if self.main_ports().all(|p| p.end.is_some() && p.pending.is_empty()) {
-            JoinState::Finished
-        } else {
-            JoinState::Waiting
+    /// Live mode: the newest sequence number every main port can have, dropping older partial
+    /// sets (counted). Frames of one port arrive in order (they may be lost, not overtaken), so
+    /// the newest frame of the port that is furthest behind bounds what can still complete. A
+    /// set waits only while that bound can still move: once the ports that hold it have ended,
+    /// the newest set complete among the frames held is taken, and when none is, nothing can
+    /// complete any more and the node is finished (the frames held are counted as dropped).
+    /// Before, a run whose slow stage ended on a set another port had lost waited forever.
+    fn live_step(&mut self) -> LiveStep {
+        if self.main_ports().any(|p| p.end.is_some() && p.pending.is_empty()) {
+            return self.live_finish();
         }
+        let mut cand: Option<u64> = None;
+        for p in self.main_ports() {
+            match p.pending.keys().next_back() {
+                Some(&newest) => cand = Some(cand.map_or(newest, |c| c.min(newest))),
+                None => return LiveStep::Wait,
+            }
+        }
+        let Some(cand) = cand else { return LiveStep::Wait };
+        let complete = |j: &Self, s: u64| j.main_ports().all(|p| p.pending.contains_key(&s));
+        let take = if complete(self, cand) {
+            cand
+        } else {
+            // The ports whose newest frame is `cand` may still receive newer ones.
+            let bound_can_move = self
+                .main_ports()
+                .any(|p| p.end.is_none() && p.pending.keys().next_back() == Some(&cand));
+            if bound_can_move {
+                return LiveStep::Wait;
+            }
+            let Some(&older) = self.main_ports().min_by_key(|p| p.pending.len()).and_then(|p| {
+                p.pending
+                    .range(..cand)
+                    .rev()
+                    .find(|(s, _)| complete(self, **s))
+                    .map(|(s, _)| s)
+            }) else {
+                return self.live_finish();
+            };
+            older
+        };
+        let mut dropped = 0;
+        for p in self.ports.iter_mut().filter(|p| !p.feedback) {
+            let keep = p.pending.split_off(&take);
+            dropped += p.pending.len() as u64;
+            p.pending = keep;
+        }
+        self.dropped += dropped;
+        LiveStep::Take(take)
     }
 
-    /// Live mode: the newest sequence number every main port can have, dropping older partial sets.
-    fn live_candidate(&mut self) -> Option<u64> {
-        let mut cand: Option<u64> = None;
-        for p in self.ports.iter().filter(|p| !p.feedback) {
-            match p.pending.keys().next_back() {
-                // The newest frame of the port bounds what can still complete.
-                Some(&newest) => cand = Some(cand.map_or(newest, |c| c.min(newest))),
-                None => return None,
-            }
+    /// Live mode: no set can complete any more; the frames held are dropped (counted).
+    fn live_finish(&mut self) -> LiveStep {
+        for p in self.ports.iter_mut().filter(|p| !p.feedback) {
+            self.dropped += p.pending.len() as u64;
+            p.pending.clear();
         }
-        let cand = cand?;
-        // Every main port has a frame >= cand; the set for cand completes only if all have it.
-        if self
-            .ports
-            .iter()
-            .filter(|p| !p.feedback)
-            .all(|p| p.pending.contains_key(&cand))
-        {
-            let mut dropped = 0;
-            for p in self.ports.iter_mut().filter(|p| !p.feedback) {
-                let keep = p.pending.split_off(&cand);
-                dropped += p.pending.len() as u64;
-                p.pending = keep;
-            }
-            self.dropped += dropped;
-            Some(cand)
-        } else {
-            None
-        }
+        LiveStep::Finish
     }
+}
+
+/// What live mode does next.
+enum LiveStep {
+    /// Hand out the set of this sequence number.
+    Take(u64),
+    /// Wait for more frames.
+    Wait,
+    /// No set can complete any more.
+    Finish,
 }
 
 #[cfg(test)]
@@ -391,6 +423,52 @@ mod tests {
         let e = j.poll().unwrap_err();
         assert_eq!(e.ended, "a");
         assert_eq!(e.other, "b");
+    }
+
+    #[test]
+    fn live_finishes_when_the_ends_leave_no_set_to_complete() {
+        // The slow port's last frame (5) was lost on the other port: nothing can complete.
+        let mut j = Joiner::new(&[("fast".into(), false), ("slow".into(), false)], true);
+        for s in [4, 6, 7] {
+            j.push(0, frame(s, FrameKind::Data));
+        }
+        j.push(1, frame(5, FrameKind::Data));
+        assert!(
+            matches!(j.poll().unwrap(), JoinState::Waiting),
+            "the slow port may still send 6"
+        );
+        j.push(1, frame(6, FrameKind::End));
+        assert!(matches!(j.poll().unwrap(), JoinState::Finished));
+        assert_eq!(j.dropped(), 4);
+    }
+
+    #[test]
+    fn live_takes_an_older_complete_set_once_the_bound_cannot_move() {
+        let mut j = Joiner::new(&[("fast".into(), false), ("slow".into(), false)], true);
+        for s in [3, 4, 6] {
+            j.push(0, frame(s, FrameKind::Data));
+        }
+        j.push(1, frame(3, FrameKind::Data));
+        j.push(1, frame(5, FrameKind::Data));
+        assert!(matches!(j.poll().unwrap(), JoinState::Waiting));
+        j.push(1, frame(6, FrameKind::End));
+        assert_eq!(ready(&mut j).seq, 3);
+        // Left: 4 and 6 on `fast`, 5 on `slow`; `slow` ended, so none of them can complete.
+        assert!(matches!(j.poll().unwrap(), JoinState::Finished));
+        assert_eq!(j.dropped(), 3);
+    }
+
+    #[test]
+    fn live_waits_for_a_port_that_has_not_ended() {
+        let mut j = Joiner::new(&[("a".into(), false), ("b".into(), false)], true);
+        j.push(0, frame(0, FrameKind::Data));
+        j.push(0, frame(1, FrameKind::End));
+        assert!(matches!(j.poll().unwrap(), JoinState::Waiting));
+        j.push(1, frame(0, FrameKind::Data));
+        assert_eq!(ready(&mut j).seq, 0);
+        j.push(1, frame(1, FrameKind::End));
+        assert!(matches!(j.poll().unwrap(), JoinState::Finished));
+        assert_eq!(j.dropped(), 0);
     }
 
     #[test]
