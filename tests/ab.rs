@@ -153,3 +153,59 @@ fn swapping_the_learned_flow_into_the_default_graph_is_fitted_with_notes() {
         "{b}"
     );
 }
+
+#[test]
+fn changes_variant_b_could_not_show_are_refused_before_anything_runs() {
+    // `--from slicer` replays the source and the slicer: swapping or setting them in B would
+    // change nothing, and two swaps of one node would mix two binaries' edits. Each is refused
+    // naming the flag and the node, before the (missing) recording is read.
+    let dir = tempfile::tempdir().unwrap();
+    let graph = workspace_root().join("graph.yaml");
+    let work = dir.path().join("w");
+    let cases: [(&[&str], &str); 5] = [
+        (
+            &["--swap", "slicer=evseg-slicer"],
+            "--swap `slicer=evseg-slicer`: node `slicer` is replayed from the recording",
+        ),
+        (
+            &[
+                "--swap",
+                "flow=evseg-normal-flow-learned",
+                "--swap",
+                "flow=evseg-normal-flow",
+            ],
+            "node `flow` is already swapped",
+        ),
+        (
+            &["--set-b", "source.seconds=1"],
+            "--set-b `source.seconds=1`: node `source` is replayed from the recording",
+        ),
+        (
+            &["--set", "slicer.window_ms=20"],
+            "--set `slicer.window_ms=20`: node `slicer` is replayed from the recording",
+        ),
+        (
+            &["--set-b", "flow.no_such_parameter=1"],
+            "--set-b `flow.no_such_parameter=1`: node `flow` has no parameter",
+        ),
+    ];
+    for (extra, expected) in cases {
+        let mut args = vec![
+            "ab",
+            graph.to_str().unwrap(),
+            "--recording",
+            "missing.mcap",
+            "--work",
+            work.to_str().unwrap(),
+        ];
+        args.extend_from_slice(extra);
+        let r = evseg(dir.path(), &args);
+        assert!(!r.status.success(), "{extra:?} must be refused");
+        assert!(r.stderr.contains(expected), "{extra:?}:\n{}", r.stderr);
+        assert!(
+            !r.stderr.contains("missing.mcap"),
+            "{extra:?}: checked before the recording:\n{}",
+            r.stderr
+        );
+    }
+}

@@ -264,4 +264,27 @@ fn a_recording_without_a_needed_channel_or_of_another_schema_is_refused_before_a
         ],
     );
     assert!(!run.ok && run.stderr.contains("--speed 0"), "{}", run.stderr);
+    // So is an override of a replayed node, which would change nothing.
+    let (run, _) = evseg(
+        dir,
+        "set",
+        &[
+            "replay",
+            "ok.mcap",
+            "--graph",
+            "GRAPH",
+            "--from",
+            "slicer",
+            "--set",
+            "slicer.window_ms=20",
+        ],
+    );
+    assert!(
+        !run.ok
+            && run
+                .stderr
+                .contains("--set `slicer.window_ms=20`: node `slicer` is replayed from the recording"),
+        "{}",
+        run.stderr
+    );
 }

@@ -113,10 +113,25 @@ fn graph_b(o: &AbOptions, resolver: &crate::resolve::BinaryResolver) -> anyhow::
     let file = o.graph.display().to_string();
     let mut text = std::fs::read_to_string(&o.graph).with_context(|| format!("cannot read {file}"))?;
     let describe = |b: &str| resolver.describe(b).map(|(_, d)| d);
+    let graph = crate::run::load_graph(&o.graph, resolver)?;
+    let replaced = crate::replay::upstream(&graph, &o.from)?;
+    let mut swapped: Vec<&str> = Vec::new();
     for s in &o.swap {
         let (node, binary) = s
             .split_once('=')
             .with_context(|| format!("--swap `{s}`: expected node=binary"))?;
+        anyhow::ensure!(
+            !swapped.contains(&node),
+            "--swap `{s}`: node `{node}` is already swapped by an earlier --swap; give one binary per node"
+        );
+        swapped.push(node);
+        anyhow::ensure!(
+            !replaced.contains(node),
+            "--swap `{s}`: node `{node}` is replayed from the recording, not run (`--from {}` \
+             replays it and every node upstream of it), so variant B would not run `{binary}`; \
+             replay from a node that does not depend on `{node}`",
+            o.from
+        );
         let adapted = evseg_graph::swap_adapted(&file, &text, node, binary, &describe)?;
         for note in &adapted.notes {
             eprintln!("note: variant B, {note}");
@@ -137,9 +152,17 @@ pub fn ab(o: &AbOptions) -> anyhow::Result<Vec<AbFigure>> {
     let dir = o.graph.parent().map(Path::to_path_buf).unwrap_or_default();
     let resolver = crate::resolve::BinaryResolver::new(&dir);
     let b_graph = graph_b(o, &resolver)?;
-    // Variant B's graph is checked before anything runs (a swapped binary with other ports or
-    // parameters is reported with variant B's file, line and column).
-    crate::run::load_graph(&b_graph, &resolver)?;
+    // Both variants are checked before anything runs: variant B's graph (a swapped binary with
+    // other ports or parameters is reported with variant B's file, line and column), every
+    // override with the flag it came from, and that what B changes is run, not replayed.
+    let mut a = crate::run::load_graph(&o.graph, &resolver)?;
+    crate::run::apply_overrides_of(&mut a, &o.set, "--set")?;
+    let mut b = crate::run::load_graph(&b_graph, &resolver)?;
+    crate::run::apply_overrides_of(&mut b, &o.set, "--set")?;
+    crate::run::apply_overrides_of(&mut b, &o.set_b, "--set-b")?;
+    let replaced = crate::replay::upstream(&a, &o.from)?;
+    crate::replay::refuse_overrides_of_replayed(&replaced, &o.from, &o.set, "--set")?;
+    crate::replay::refuse_overrides_of_replayed(&replaced, &o.from, &o.set_b, "--set-b")?;
     let mut rows = Vec::new();
     for rec in &o.recordings {
         let seq = rec

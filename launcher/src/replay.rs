@@ -41,6 +41,28 @@ pub struct ReplaySpec {
     pub speed: Option<f64>,
 }
 
+/// Refuses overrides (`flag` `node.param=value`, e.g. `--set`) of nodes that `from` replays
+/// (the set [`upstream`] gives): such a node is not run, so the value would change nothing,
+/// and a comparison or evaluation that seems to include it would silently not.
+pub fn refuse_overrides_of_replayed(
+    replaced: &BTreeSet<String>,
+    from: &str,
+    sets: &[String],
+    flag: &str,
+) -> anyhow::Result<()> {
+    for s in sets {
+        let node = s.split_once('.').map_or(s.as_str(), |(n, _)| n);
+        if replaced.contains(node) {
+            bail!(
+                "{flag} `{s}`: node `{node}` is replayed from the recording, not run (`--from {from}` \
+                 replays it and every node upstream of it), so the value would change nothing; \
+                 to run `{node}`, replay from a node that does not depend on it (or use `evseg run`)"
+            );
+        }
+    }
+    Ok(())
+}
+
 /// The replay point and every node it depends on through non-feedback inputs.
 pub fn upstream(graph: &Graph, from: &str) -> anyhow::Result<BTreeSet<String>> {
     if graph.node(from).is_none() {
@@ -144,14 +166,16 @@ fn missing_optional(recording: &Recording, optional: &[Wanted]) -> Result<BTreeS
 
 impl ReplayPlan {
     /// Works out what `spec` replaces in `graph` (before any recorder is added) and checks the
-    /// recording holds every output a remaining node consumes. Reads the whole recording once.
-    pub fn new(graph: &Graph, spec: &ReplaySpec) -> anyhow::Result<Self> {
+    /// recording holds every output a remaining node consumes, and that no override in `sets`
+    /// (`--set`) is of a replayed node. Reads the whole recording once.
+    pub fn new(graph: &Graph, spec: &ReplaySpec, sets: &[String]) -> anyhow::Result<Self> {
         if let Some(s) = spec.speed
             && !(s.is_finite() && s > 0.0)
         {
             bail!("--speed {s}: must be a number > 0 (leave it out to replay as fast as credits allow)");
         }
         let replaced = upstream(graph, &spec.from)?;
+        refuse_overrides_of_replayed(&replaced, &spec.from, sets, "--set")?;
         if graph.nodes.iter().all(|n| replaced.contains(&n.id)) {
             bail!(
                 "--from `{}`: no node of the graph runs downstream of it, nothing to replay into",

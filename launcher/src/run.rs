@@ -83,27 +83,33 @@ pub fn load_graph(path: &Path, resolver: &BinaryResolver) -> anyhow::Result<Grap
 
 /// Applies `node.param=value` overrides, checking node and parameter exist.
 pub(crate) fn apply_overrides(graph: &mut Graph, sets: &[String]) -> anyhow::Result<()> {
+    apply_overrides_of(graph, sets, "--set")
+}
+
+/// [`apply_overrides`] with the errors naming the command-line flag `flag` the overrides came
+/// from (`evseg ab`'s `--set-b`).
+pub(crate) fn apply_overrides_of(graph: &mut Graph, sets: &[String], flag: &str) -> anyhow::Result<()> {
     for s in sets {
         let (lhs, value) = s
             .split_once('=')
-            .with_context(|| format!("--set `{s}`: expected node.param=value"))?;
+            .with_context(|| format!("{flag} `{s}`: expected node.param=value"))?;
         let (node, param) = lhs
             .split_once('.')
-            .with_context(|| format!("--set `{s}`: expected node.param=value"))?;
+            .with_context(|| format!("{flag} `{s}`: expected node.param=value"))?;
         let spec = graph
             .nodes
             .iter_mut()
             .find(|n| n.id == node)
-            .with_context(|| format!("--set `{s}`: the graph has no node `{node}`"))?;
+            .with_context(|| format!("{flag} `{s}`: the graph has no node `{node}`"))?;
         let old = spec.params.get(param).with_context(|| {
             let known: Vec<&String> = spec.params.keys().collect();
-            format!("--set `{s}`: node `{node}` has no parameter `{param}` (known: {known:?})")
+            format!("{flag} `{s}`: node `{node}` has no parameter `{param}` (known: {known:?})")
         })?;
         let new =
             serde_json::from_str(value).unwrap_or_else(|_| serde_json::Value::String(value.to_string()));
         let same_kind = std::mem::discriminant(old) == std::mem::discriminant(&new) || old.is_null();
         if !same_kind {
-            bail!("--set `{s}`: parameter `{param}` of `{node}` takes values like {old}, got {new}");
+            bail!("{flag} `{s}`: parameter `{param}` of `{node}` takes values like {old}, got {new}");
         }
         spec.params.insert(param.to_string(), new);
     }
@@ -296,7 +302,7 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
         Some(spec) if opts.machine.is_some() => {
             bail!("replay runs every remaining node on this machine; --machine is not supported ({spec:?})")
         }
-        Some(spec) => Some(crate::replay::ReplayPlan::new(&graph, spec)?),
+        Some(spec) => Some(crate::replay::ReplayPlan::new(&graph, spec, &opts.set)?),
         None => None,
     };
     let machine = match &opts.machine {
