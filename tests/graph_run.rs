@@ -583,6 +583,40 @@ fn a_producer_blocked_for_credit_keeps_its_stats_current() {
     );
 }
 
+/// A node computing a long slice is reported as such: its heartbeat keeps the launcher's view
+/// current while its loop is inside the slice, and the stall message names it as busy instead
+/// of listing its counters from before the slice as if it were waiting for input. The planar
+/// segmenter is made 60 s slower on slice 2 (`evseg_runtime::node::SLOW_SLICE_ENV`).
+#[test]
+fn a_stall_names_the_node_computing_a_long_slice() {
+    let dir = tempfile::tempdir().unwrap();
+    let env = [("EVSEG_TEST_SLOW_SLICE", "planar/2=60")];
+    let (run, _) = run_default_graph_with(
+        dir.path(),
+        0.3,
+        &env,
+        &["--startup-timeout", "0", "--stall-timeout", "6"],
+        Duration::from_secs(120),
+    );
+    assert!(
+        !run.status.success(),
+        "the run should have stopped:\n{}",
+        run.stderr
+    );
+    assert!(
+        run.stderr.contains("`planar` has been computing one slice for"),
+        "{}",
+        run.stderr
+    );
+    assert!(
+        run.stderr
+            .lines()
+            .any(|l| l.trim_start().starts_with("planar:") && l.contains("computing a slice for")),
+        "{}",
+        run.stderr
+    );
+}
+
 /// A feedback consumer whose final progress never arrives (the planar segmenter, which never
 /// needs the background merger's last slice) and which then exits must not fail the run: the
 /// producer counts a consumer that left during its drain as finished (seen once in `evseg

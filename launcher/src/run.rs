@@ -25,6 +25,10 @@ pub const CRASH_LOG_LINES: usize = 20;
 /// How long a finished run waits for nodes' final stats still on their way through the router.
 const FINAL_STATS_WAIT: Duration = Duration::from_secs(2);
 
+/// The progress line shows a node's time inside its current slice once it exceeds this,
+/// seconds.
+const SHOW_COMPUTING_AFTER_S: f64 = 3.0;
+
 /// What `evseg run` was asked to do.
 #[derive(Debug, Clone, Default)]
 pub struct RunOptions {
@@ -259,6 +263,10 @@ impl Display {
                 Some(s) => {
                     let mark = if s.finished { "✓" } else { "" };
                     line.push_str(&format!(" {id}:{}{mark}", s.processed));
+                    // A slice that has lasted a while: the node is computing, not stuck.
+                    if let Some(c) = s.computing_s.filter(|&c| c >= SHOW_COMPUTING_AFTER_S) {
+                        line.push_str(&format!("(computing {c:.0}s)"));
+                    }
                     dropped += s.dropped;
                     refused += s.refused;
                     missed += s.missed;

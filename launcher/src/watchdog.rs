@@ -36,7 +36,8 @@
 //! - **stall** (lock-step only): when no node's published, processed or finished counters
 //!   change for [`WatchdogSettings::stall`], the run stops with every node's counters, instead
 //!   of waiting forever. Receipts do not count: a stalled lock-step graph keeps receiving the
-//!   duplicates its idle producers publish again each second.
+//!   duplicates its idle producers publish again each second. A node whose heartbeat says it
+//!   has been computing one slice ([`Stats::computing_s`]) is named as busy, not as waiting.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::time::{Duration, Instant};
@@ -335,10 +336,27 @@ fn silent_inputs(s: &Stats) -> String {
 
 /// The message of a stalled run: every node's counters.
 fn stall_message(limit: Duration, nodes: &[NodeSpec], stats: &BTreeMap<String, Stats>) -> String {
-    let mut text = format!(
-        "no node made progress for {:.0} s (lock-step run stalled); counters per node:",
-        limit.as_secs_f64()
-    );
+    let computing: Vec<String> = nodes
+        .iter()
+        .filter_map(|n| {
+            let s = stats.get(&n.id)?;
+            s.computing_s
+                .map(|c| format!("`{}` has been computing one slice for {c:.0} s", n.id))
+        })
+        .collect();
+    let mut text = if computing.is_empty() {
+        format!(
+            "no node made progress for {:.0} s (lock-step run stalled); counters per node:",
+            limit.as_secs_f64()
+        )
+    } else {
+        format!(
+            "no node made progress for {:.0} s: {} (busy, not waiting for input; if a slice \
+             of this configuration can take that long, raise --stall-timeout); counters per node:",
+            limit.as_secs_f64(),
+            computing.join(", ")
+        )
+    };
     for n in nodes {
         let line = match stats.get(&n.id) {
             Some(s) => format!(
@@ -348,7 +366,10 @@ fn stall_message(limit: Duration, nodes: &[NodeSpec], stats: &BTreeMap<String, S
                 s.processed,
                 s.last_seq.map_or("-".into(), |q| q.to_string()),
                 if s.finished { ", finished" } else { "" },
-                silent_inputs(s)
+                match s.computing_s {
+                    Some(c) => format!(", computing a slice for {c:.0} s"),
+                    None => silent_inputs(s),
+                }
             ),
             None => "no stats received".into(),
         };
@@ -650,5 +671,30 @@ mod tests {
                 .is_empty()
         );
         assert!(WatchdogSettings::from_seconds(-1.0, 5.0).is_err());
+    }
+
+    #[test]
+    fn a_stall_names_a_node_computing_a_long_slice_instead_of_its_inputs() {
+        let nodes = [node("src", &[]), node("a", &[("src", false)])];
+        let t0 = Instant::now();
+        let mut w = Watchdog::new(settings(), t0);
+        let all = |_: &str| true;
+        let mut st: BTreeMap<String, Stats> = [stats("src", 0, 5), stats("a", 3, 2)].into();
+        assert!(w.check(t0, &nodes, &all, &st, true).is_empty());
+        st.get_mut("a").unwrap().computing_s = Some(119.6);
+        let a = w.check(t0 + Duration::from_secs(120), &nodes, &all, &st, true);
+        assert!(
+            matches!(&a[..], [Action::Stop(m)] if m.contains("`a` has been computing one slice for 120 s")
+                && m.contains("--stall-timeout")
+                && m.contains("a: received 3, published 2, processed 0, last seq -, computing a slice for 120 s")),
+            "{a:?}"
+        );
+        // Without the heartbeat's figure the message is the plain stall.
+        st.get_mut("a").unwrap().computing_s = None;
+        let a = w.check(t0 + Duration::from_secs(121), &nodes, &all, &st, true);
+        assert!(
+            matches!(&a[..], [Action::Stop(m)] if m.contains("lock-step run stalled") && !m.contains("computing")),
+            "{a:?}"
+        );
     }
 }

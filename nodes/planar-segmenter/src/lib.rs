@@ -66,6 +66,11 @@ pub use previous::{PreviousForeground, PreviousParams};
 pub use smooth::SmoothGrid;
 pub use two_means::{TwoMeans, two_means, two_means_on_power};
 
+/// Largest accepted [`FitParams::iterations`] (`robust_iterations`), rounds.
+pub const MAX_ROBUST_ITERATIONS: usize = 1000;
+/// Largest accepted [`PlanarParams::two_means_iter`], iterations.
+pub const MAX_TWO_MEANS_ITER: usize = 10_000;
+
 /// Settings of the planar segmenter.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PlanarParams {
@@ -424,6 +429,23 @@ impl PlanarSegmenter {
         }
         if q.cell_px == 0 {
             return bad("previous_cell_px", "0".into(), "must be >= 1");
+        }
+        // Bounds that keep a slice's work finite: the weights settle in a handful of rounds
+        // and 1-D Lloyd in a handful of iterations, so these are far above any useful value
+        // (20 000 reweighting rounds took minutes per slice and looked like a hang).
+        if params.fit.iterations > MAX_ROBUST_ITERATIONS {
+            return bad(
+                "robust_iterations",
+                params.fit.iterations.to_string(),
+                "must be at most 1000",
+            );
+        }
+        if !(1..=MAX_TWO_MEANS_ITER).contains(&params.two_means_iter) {
+            return bad(
+                "two_means_iter",
+                params.two_means_iter.to_string(),
+                "must be within 1..=10000",
+            );
         }
         if params.min_confidence.is_nan() || params.min_support.is_nan() {
             return bad("min_confidence/min_support", "NaN".into(), "must be numbers");

@@ -134,7 +134,7 @@ fn main() -> ExitCode {
         "in a slice fitted without the previous foreground and the previous fit (the first), the weight of the view's centre, rising linearly to 1 at the border (1 = off)",
     )
     .param(SLOPE_PARAM, SLOPE_DEFAULT, SLOPE_PARAM_DOC)
-    .param("robust_iterations", d.fit.iterations, "reweighting rounds")
+    .param("robust_iterations", d.fit.iterations, "reweighting rounds of a robust fit, at most 1000")
     .param("ridge", d.fit.ridge, "Tikhonov regularization per equation")
     .param("cell_px", d.cell_px, "smoothing grid cell, pixels")
     .param(
@@ -162,7 +162,7 @@ fn main() -> ExitCode {
         d.split_power,
         "the 2-means split runs on smoothed residuals to this power (1 = linear, the paper; 0 = logarithms)",
     )
-    .param("two_means_iter", d.two_means_iter, "most 2-means iterations")
+    .param("two_means_iter", d.two_means_iter, "most 2-means iterations, 1..=10000")
     .param(
         "classify_invalid",
         d.classify_invalid,

@@ -779,3 +779,29 @@ fn the_first_fit_weighs_the_view_border_more() {
     assert_eq!(a, ramped);
     assert_eq!(b, fresh);
 }
+
+#[test]
+fn iteration_counts_beyond_their_bounds_are_refused_naming_the_parameter() {
+    let d = PlanarParams::default();
+    let mut many_rounds = d;
+    many_rounds.fit.iterations = MAX_ROBUST_ITERATIONS + 1;
+    let mut no_iterations = d;
+    no_iterations.two_means_iter = 0;
+    let mut many_iterations = d;
+    many_iterations.two_means_iter = MAX_TWO_MEANS_ITER + 1;
+    for (p, name) in [
+        (many_rounds, "robust_iterations"),
+        (no_iterations, "two_means_iter"),
+        (many_iterations, "two_means_iter"),
+    ] {
+        let e = PlanarSegmenter::new(p)
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
+        assert!(e.contains(name), "{name}: {e}");
+    }
+    let mut at_bounds = d;
+    at_bounds.fit.iterations = MAX_ROBUST_ITERATIONS;
+    at_bounds.two_means_iter = MAX_TWO_MEANS_ITER;
+    assert!(PlanarSegmenter::new(at_bounds).is_ok());
+}

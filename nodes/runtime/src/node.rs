@@ -210,6 +210,22 @@ fn deaf_once_from_env(node: &str) -> Option<Deaf> {
         .then_some(deaf)
 }
 
+/// Environment variable that makes a node's logic take `seconds` longer on one slice
+/// (`node/seq=seconds`), as a slow configuration would: for tests of how a long slice is
+/// reported (the heartbeat and the launcher's stall message).
+pub const SLOW_SLICE_ENV: &str = "EVSEG_TEST_SLOW_SLICE";
+
+/// This node's entry of [`SLOW_SLICE_ENV`]: the slice and the extra time.
+fn slow_slice_from_env(node: &str) -> Option<(u64, Duration)> {
+    let v = std::env::var(SLOW_SLICE_ENV).ok()?;
+    let (target, seconds) = v.split_once('=')?;
+    let (n, seq) = target.split_once('/')?;
+    let seconds: f64 = seconds.parse().ok()?;
+    (n == node && seconds.is_finite() && seconds >= 0.0)
+        .then(|| Some((seq.parse().ok()?, Duration::from_secs_f64(seconds))))
+        .flatten()
+}
+
 /// The input port of this node named by [`DROP_DONE_ENV`], if any.
 fn drop_done_from_env(node: &str) -> Option<String> {
     let v = std::env::var(DROP_DONE_ENV).ok()?;
@@ -335,6 +351,8 @@ impl Outputs {
             // Resends in a row of frames from the same one on (no consumer progress between).
             let mut resends_from_same = 0u32;
             let mut last_from = None;
+            let counters = self.stats_while_blocked.as_ref().map(|s| s.counters.clone());
+            let _waiting = counters.as_deref().map(CreditWait::new);
             while !book.wait_until(&node, &watch, Some(RESEND_AFTER), |consumed, _| {
                 has_credit(consumed, &consumers, seq, window)
             })? {
@@ -668,6 +686,22 @@ fn feedback_consumer_done(consumed: u64, sent: u64, alive: bool) -> bool {
     !alive && consumed.saturating_add(1) >= sent
 }
 
+/// Marks the node's counters as waiting for credit while alive.
+struct CreditWait<'a>(&'a Counters);
+
+impl<'a> CreditWait<'a> {
+    fn new(c: &'a Counters) -> Self {
+        c.waiting_for_credit.store(true, Ordering::Relaxed);
+        Self(c)
+    }
+}
+
+impl Drop for CreditWait<'_> {
+    fn drop(&mut self) {
+        self.0.waiting_for_credit.store(false, Ordering::Relaxed);
+    }
+}
+
 /// A heap copy of a frame to publish again. Never the same buffer: a frame in shared memory
 /// that a consumer could not read once stays unreadable. Zenoh's shared-memory watchdog marks
 /// a buffer invalid for good when a process misses its 100 ms confirmation deadline (a starved
@@ -771,9 +805,30 @@ pub(crate) struct Counters {
     pub(crate) missed: AtomicU64,
     pub(crate) last_seq: AtomicU64,
     pub(crate) busy_ns: AtomicU64,
+    /// When the node's logic began its current slice (or source step); `None` between them.
+    pub(crate) in_slice_since: std::sync::Mutex<Option<Instant>>,
+    /// True while a lock-step publish waits for credit (not the node's own work).
+    pub(crate) waiting_for_credit: std::sync::atomic::AtomicBool,
 }
 
 impl Counters {
+    /// Marks the start (`true`) or the end of a slice (or source step) of the node's logic.
+    pub(crate) fn mark_slice(&self, started: bool) {
+        if let Ok(mut since) = self.in_slice_since.lock() {
+            *since = started.then(Instant::now);
+        }
+    }
+
+    /// Seconds inside the current slice, when the node is computing (in a slice and not
+    /// waiting for credit).
+    fn computing_s(&self) -> Option<f64> {
+        if self.waiting_for_credit.load(Ordering::Relaxed) {
+            return None;
+        }
+        let since = *self.in_slice_since.lock().ok()?;
+        since.map(|t| t.elapsed().as_secs_f64())
+    }
+
     /// Counts a data message received on input `port`.
     pub(crate) fn count_receipt(&self, port: usize) {
         self.received.fetch_add(1, Ordering::Relaxed);
@@ -820,6 +875,7 @@ impl StatsSource {
             busy_s: c.busy_ns.load(Ordering::Relaxed) as f64 * 1e-9,
             finished,
             up_s: self.started.elapsed().as_secs_f64(),
+            computing_s: c.computing_s(),
         }
     }
 
@@ -839,6 +895,8 @@ pub(crate) struct Running {
     schemas: HashMap<String, String>,
     pub(crate) inbox: Arc<Inbox>,
     stats_source: StatsSource,
+    /// Set to end the heartbeat thread ([`spawn_heartbeat`]).
+    heartbeat: Arc<std::sync::atomic::AtomicBool>,
     _handles: Vec<Box<dyn std::any::Any + Send>>,
     _token: zenoh::liveliness::LivelinessToken,
 }
@@ -849,6 +907,7 @@ impl Drop for Running {
     /// by the launcher panic now and then in a Zenoh thread while the process tore down its
     /// statics (`static_init` AccessError in `net-0`).
     fn drop(&mut self) {
+        self.heartbeat.store(true, Ordering::Relaxed);
         if !self.session.is_closed() {
             quieten_zenoh_teardown();
             let _ = self.session.close().wait();
@@ -1109,6 +1168,7 @@ pub(crate) fn connect(cfg: NodeConfig) -> Result<Running, RuntimeError> {
     };
     let mut outputs = outputs;
     outputs.stats_while_blocked = Some(stats_source.clone());
+    let heartbeat = spawn_heartbeat(stats_source.clone());
     Ok(Running {
         cfg,
         session,
@@ -1117,9 +1177,44 @@ pub(crate) fn connect(cfg: NodeConfig) -> Result<Running, RuntimeError> {
         schemas,
         inbox,
         stats_source,
+        heartbeat,
         _handles: handles,
         _token: token,
     })
+}
+
+/// How often a node inside a long slice publishes its stats from [`spawn_heartbeat`]'s thread.
+const HEARTBEAT: Duration = Duration::from_secs(1);
+
+/// Starts the thread that publishes the node's stats every [`HEARTBEAT`] while its logic has
+/// been inside one slice for longer than that: the node's loop publishes them only between
+/// slices, so without it a node computing a long slice looked to the launcher like one waiting
+/// for input (a stall message that blamed its inputs). Ends when the returned flag is set.
+fn spawn_heartbeat(stats: StatsSource) -> Arc<std::sync::atomic::AtomicBool> {
+    let stop = Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let flag = stop.clone();
+    let spawned = std::thread::Builder::new()
+        .name("evseg-heartbeat".into())
+        .spawn(move || {
+            let tick = Duration::from_millis(100);
+            let mut last = Instant::now();
+            while !flag.load(Ordering::Relaxed) {
+                std::thread::sleep(tick);
+                if last.elapsed() >= HEARTBEAT
+                    && stats
+                        .counters
+                        .computing_s()
+                        .is_some_and(|s| s >= HEARTBEAT.as_secs_f64())
+                {
+                    stats.publish(false);
+                    last = Instant::now();
+                }
+            }
+        });
+    if let Err(e) = spawned {
+        tracing::warn!("no heartbeat thread ({e}): a long slice will not be reported while it runs");
+    }
+    stop
 }
 
 /// Runs a stage node: `--describe` prints `description` as JSON; `--config FILE` runs it.
@@ -1257,16 +1352,17 @@ fn source_loop<S: Source>(mut run: Running, source: &mut S) -> Result<(), Runtim
             return Err(RuntimeError::Stopped);
         }
         let t0 = Instant::now();
-        let more = source
-            .step(&mut run.outputs)
-            .map_err(|e| match e.downcast::<RuntimeError>() {
-                Ok(rt) => *rt,
-                Err(source) => RuntimeError::Logic {
-                    node: run.cfg.node.clone(),
-                    seq: run.outputs.published.load(Ordering::Relaxed),
-                    source,
-                },
-            })?;
+        run.counters.mark_slice(true);
+        let step = source.step(&mut run.outputs);
+        run.counters.mark_slice(false);
+        let more = step.map_err(|e| match e.downcast::<RuntimeError>() {
+            Ok(rt) => *rt,
+            Err(source) => RuntimeError::Logic {
+                node: run.cfg.node.clone(),
+                seq: run.outputs.published.load(Ordering::Relaxed),
+                source,
+            },
+        })?;
         let waited = run.outputs.take_waited_ns();
         run.counters.busy_ns.fetch_add(
             (t0.elapsed().as_nanos() as u64).saturating_sub(waited),
@@ -1290,6 +1386,7 @@ fn stage_loop<S: Stage>(mut run: Running, stage: &mut S) -> Result<(), RuntimeEr
         .map(|i| (i.port.clone(), i.feedback))
         .collect();
     let mut joiner = Joiner::new(&ports, run.cfg.mode == Mode::Live);
+    let slow_slice = slow_slice_from_env(&run.cfg.node);
     let mut gaps = SeqGaps::new(ports.len());
     let mut stats_clock = StatsClock::new();
     // The last progress published and when (repeated while idle in lock-step mode).
@@ -1372,9 +1469,10 @@ fn stage_loop<S: Stage>(mut run: Running, stage: &mut S) -> Result<(), RuntimeEr
                 JoinState::Waiting => break,
                 JoinState::Finished => {
                     let t0 = Instant::now();
-                    stage
-                        .finish(&mut run.outputs)
-                        .map_err(|e| logic_error(&run, u64::MAX, e))?;
+                    run.counters.mark_slice(true);
+                    let done = stage.finish(&mut run.outputs);
+                    run.counters.mark_slice(false);
+                    done.map_err(|e| logic_error(&run, u64::MAX, e))?;
                     let waited = run.outputs.take_waited_ns();
                     run.counters.busy_ns.fetch_add(
                         (t0.elapsed().as_nanos() as u64).saturating_sub(waited),
@@ -1389,9 +1487,15 @@ fn stage_loop<S: Stage>(mut run: Running, stage: &mut S) -> Result<(), RuntimeEr
                         cfg: &run.cfg,
                         joined: &joined,
                     };
-                    stage
-                        .process(&inputs, &mut run.outputs)
-                        .map_err(|e| logic_error(&run, joined.seq, e))?;
+                    run.counters.mark_slice(true);
+                    if let Some((seq, extra)) = slow_slice
+                        && seq == joined.seq
+                    {
+                        std::thread::sleep(extra);
+                    }
+                    let done = stage.process(&inputs, &mut run.outputs);
+                    run.counters.mark_slice(false);
+                    done.map_err(|e| logic_error(&run, joined.seq, e))?;
                     let waited = run.outputs.take_waited_ns();
                     run.counters.busy_ns.fetch_add(
                         (t0.elapsed().as_nanos() as u64).saturating_sub(waited),

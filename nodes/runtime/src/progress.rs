@@ -54,6 +54,12 @@ pub struct Stats {
     /// launcher's start-up watchdog). 0 from a node that does not send it.
     #[serde(default)]
     pub up_s: f64,
+    /// Seconds the node's logic has been inside its current slice (or source step), when it is
+    /// and is not waiting for credit; `None` between slices. Published about once a second
+    /// while a slice lasts over a second, so the launcher tells a node computing a long slice
+    /// from one waiting for input. `None` from a node that does not send it.
+    #[serde(default)]
+    pub computing_s: Option<f64>,
 }
 
 #[cfg(test)]
