@@ -7,6 +7,7 @@ mod bench_sim;
 mod bench_transport;
 mod export;
 mod info;
+mod peers;
 mod record;
 mod replay;
 mod resolve;

@@ -437,6 +437,13 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
     let mut watchdog = crate::watchdog::Watchdog::new(opts.watchdog, start);
     let mut restarts: Vec<String> = Vec::new();
     let lockstep = graph.mode == evseg_graph::Mode::Lockstep;
+    let mut peers = crate::peers::PeerWatch::new(
+        &graph,
+        &opts.graph.display().to_string(),
+        opts.machine.as_deref(),
+        &listen,
+        &connect,
+    );
     loop {
         if signals::stop_requested() {
             display.clear();
@@ -513,6 +520,13 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
                     stop_all(&mut fleet.0);
                     bail!("{why}\nlogs in {}", dir.join("logs").display());
                 }
+            }
+        }
+        if peers.pending() && start.elapsed() >= crate::peers::PEER_WARN_AFTER {
+            let routers = session.info().routers_zid().wait().count();
+            if let Some(warning) = peers.check(start.elapsed(), routers, &snapshot) {
+                display.clear();
+                eprintln!("{warning}");
             }
         }
         display.update(start.elapsed().as_secs_f64(), &order, &snapshot, false);
