@@ -54,27 +54,28 @@ impl Default for EvalParams {
 impl EvalParams {
     /// Checks ranges and consistency.
     pub fn validate(&self) -> Result<(), EvalError> {
+        // Named as the node's parameters are, in milliseconds (`max_gap_ms=-1`, not `max_gap_s`).
         let pos = |name: &'static str, v: f64| {
             if v.is_finite() && v > 0.0 {
                 Ok(())
             } else {
                 Err(EvalError::Param {
                     name,
-                    reason: format!("must be a positive number of seconds, got {v}"),
+                    reason: format!("must be a positive number of milliseconds, got {}", v * 1e3),
                 })
             }
         };
-        pos("default_mask_period_s", self.default_mask_period_s)?;
-        pos("max_gap_s", self.max_gap_s)?;
-        pos("lookahead_s", self.lookahead_s)?;
+        pos("default_mask_period_ms", self.default_mask_period_s)?;
+        pos("max_gap_ms", self.max_gap_s)?;
+        pos("lookahead_ms", self.lookahead_s)?;
         if self.lookahead_s < self.max_gap_s || self.lookahead_s < self.default_mask_period_s / 2.0 {
             return Err(EvalError::Param {
-                name: "lookahead_s",
+                name: "lookahead_ms",
                 reason: format!(
-                    "{} s is shorter than max_gap_s ({} s) or half the mask period ({} s)",
-                    self.lookahead_s,
-                    self.max_gap_s,
-                    self.default_mask_period_s / 2.0
+                    "{} ms is shorter than max_gap_ms ({} ms) or half of default_mask_period_ms ({} ms)",
+                    self.lookahead_s * 1e3,
+                    self.max_gap_s * 1e3,
+                    self.default_mask_period_s * 1e3 / 2.0
                 ),
             });
         }
@@ -91,5 +92,38 @@ impl EvalParams {
             });
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Times are reported as the node's `_ms` parameters, in milliseconds.
+    #[test]
+    fn time_errors_name_the_node_parameter_in_milliseconds() {
+        let d = EvalParams::default();
+        let e = EvalParams {
+            max_gap_s: -1e-3,
+            ..d.clone()
+        }
+        .validate()
+        .unwrap_err()
+        .to_string();
+        assert_eq!(
+            e,
+            "parameter max_gap_ms: must be a positive number of milliseconds, got -1"
+        );
+        let e = EvalParams {
+            lookahead_s: 0.05,
+            ..d
+        }
+        .validate()
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.starts_with("parameter lookahead_ms: 50 ms is shorter than max_gap_ms (100 ms)"),
+            "{e}"
+        );
     }
 }

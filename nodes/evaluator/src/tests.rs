@@ -453,7 +453,7 @@ fn malformed_input_is_an_error_not_a_panic_and_leaves_the_evaluator_usable() {
     assert!(matches!(
         Evaluator::new(p),
         Err(EvalError::Param {
-            name: "lookahead_s",
+            name: "lookahead_ms",
             ..
         })
     ));

@@ -219,7 +219,7 @@ impl WideFitParams {
         }
         if !(self.min_speed_px_s.is_finite() && self.min_speed_px_s >= 0.0) {
             return Err(ParamsError::Range {
-                name: "wide_min_speed",
+                name: "wide_min_speed_px_s",
                 rule: ">= 0",
                 value: self.min_speed_px_s,
             });
@@ -270,14 +270,14 @@ pub enum ParamsError {
         /// Pixels in the window.
         window: usize,
     },
-    /// A time or speed that must be finite and positive (or >= 0) is not.
+    /// A time, angle or speed that must be finite and positive (or >= 0) is not.
     #[error("{name} must be a finite number {rule}, got {value}")]
     Range {
-        /// Parameter name.
+        /// The node's parameter (`evseg-normal-flow --describe`), with its unit in the name.
         name: &'static str,
         /// The rule broken.
         rule: &'static str,
-        /// The value given.
+        /// The value given, in the parameter's unit (ms, degrees, px/s).
         value: f64,
     },
 }
@@ -303,11 +303,14 @@ impl PlaneFitParams {
         }
         if self.max_direction_sd_rad.is_nan() || self.max_direction_sd_rad <= 0.0 {
             return Err(ParamsError::Range {
-                name: "max_direction_sd",
-                rule: "> 0 (infinite = no test)",
-                value: self.max_direction_sd_rad,
+                name: "max_direction_sd_deg",
+                rule: "> 0 (null = no test)",
+                value: self.max_direction_sd_rad.to_degrees(),
             });
         }
+        // (the node's parameter, its value in the parameter's unit, the rule holds, the rule):
+        // the error speaks of what the user set (`dt_min_ms=-1`, not `dt_min -0.001`).
+        let (ms, deg) = (1e3, 180.0 / std::f64::consts::PI);
         let checks: [(&'static str, f64, bool, &'static str); 9] = [
             (
                 "check_skip_confidence",
@@ -316,14 +319,14 @@ impl PlaneFitParams {
                 ">= 0 (above 1: every fit is checked)",
             ),
             (
-                "check_skip_direction_sd",
-                self.check_skip_direction_sd_rad,
+                "check_skip_direction_sd_deg",
+                self.check_skip_direction_sd_rad * deg,
                 self.check_skip_direction_sd_rad >= 0.0,
                 ">= 0",
             ),
             (
-                "check_max_angle",
-                self.check_max_angle_rad,
+                "check_max_angle_deg",
+                self.check_max_angle_rad * deg,
                 self.check_max_angle_rad > 0.0,
                 "> 0",
             ),
@@ -333,11 +336,26 @@ impl PlaneFitParams {
                 self.check_max_speed_diff > 0.0,
                 "> 0",
             ),
-            ("lookahead", self.lookahead_s, self.lookahead_s >= 0.0, ">= 0"),
-            ("dt_min", self.dt_min_s, self.dt_min_s >= 0.0, ">= 0"),
-            ("dt_max", self.dt_max_s, self.dt_max_s > self.dt_min_s, "> dt_min"),
-            ("outlier", self.outlier_s, self.outlier_s > 0.0, "> 0"),
-            ("max_speed", self.max_speed_px_s, self.max_speed_px_s > 0.0, "> 0"),
+            (
+                "lookahead_ms",
+                self.lookahead_s * ms,
+                self.lookahead_s >= 0.0,
+                ">= 0",
+            ),
+            ("dt_min_ms", self.dt_min_s * ms, self.dt_min_s >= 0.0, ">= 0"),
+            (
+                "dt_max_ms",
+                self.dt_max_s * ms,
+                self.dt_max_s > self.dt_min_s,
+                "> dt_min_ms",
+            ),
+            ("outlier_ms", self.outlier_s * ms, self.outlier_s > 0.0, "> 0"),
+            (
+                "max_speed_px_s",
+                self.max_speed_px_s,
+                self.max_speed_px_s > 0.0,
+                "> 0",
+            ),
         ];
         if !(0.0..1.0).contains(&self.min_confidence) {
             return Err(ParamsError::Range {
@@ -352,5 +370,61 @@ impl PlaneFitParams {
             }
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// An out-of-range setting is reported as the node's parameter, in its unit: what the user
+    /// set in graph.yaml (`dt_min_ms=-1`), not the library's field (`dt_min -0.001`).
+    #[test]
+    fn range_errors_name_the_node_parameter_in_its_unit() {
+        let d = PlaneFitParams::default();
+        let cases = [
+            (
+                PlaneFitParams {
+                    dt_min_s: -1e-3,
+                    ..d
+                },
+                "dt_min_ms must be a finite number >= 0, got -1",
+            ),
+            (
+                PlaneFitParams {
+                    dt_max_s: d.dt_min_s,
+                    ..d
+                },
+                "dt_max_ms must be a finite number > dt_min_ms",
+            ),
+            (
+                PlaneFitParams {
+                    max_direction_sd_rad: -std::f64::consts::PI,
+                    ..d
+                },
+                "max_direction_sd_deg must be a finite number > 0 (null = no test), got -180",
+            ),
+            (
+                PlaneFitParams {
+                    check_max_angle_rad: 0.0,
+                    ..d
+                },
+                "check_max_angle_deg must be a finite number > 0, got 0",
+            ),
+        ];
+        for (p, expected) in cases {
+            let e = p.validate().map_err(|e| e.to_string()).err().unwrap_or_default();
+            assert!(e.starts_with(expected), "`{e}` vs `{expected}`");
+        }
+        let wide = WideFitParams {
+            min_speed_px_s: -1.0,
+            ..WideFitParams::default()
+        };
+        let e = wide
+            .validate(&d)
+            .map_err(|e| e.to_string())
+            .err()
+            .unwrap_or_default();
+        assert!(e.starts_with("wide_min_speed_px_s must be"), "{e}");
     }
 }

@@ -94,7 +94,11 @@ impl Oversegmenter {
             }))
         };
         if params.k == 0 || params.k >= UNASSIGNED as usize {
-            return bad("k", params.k.to_string(), "must be in 1..65535");
+            return bad(
+                "k",
+                params.k.to_string(),
+                "must be in 1..=65534 (65535 marks events without flow)",
+            );
         }
         if !(params.lambda.is_finite() && params.lambda >= 0.0) {
             return bad("lambda", params.lambda.to_string(), "must be finite and >= 0");
