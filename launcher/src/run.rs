@@ -416,7 +416,7 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
         let cfg_path = dir.join("config").join(format!("{}.json", node.id));
         std::fs::write(&cfg_path, serde_json::to_string_pretty(&cfg)?)?;
         let log = dir.join("logs").join(format!("{}.log", node.id));
-        let origin = format!("{}:{}:{}", opts.graph.display(), node.span.line, node.span.column);
+        let origin = node_origin(&opts.graph, node);
         let p = NodeProcess::spawn(&node.id, &binary, &cfg_path, &log, origin)
             .with_context(|| format!("cannot start node `{}` ({})", node.id, binary.display()))?;
         fleet.0.push(p);
@@ -556,6 +556,23 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
         shared_memory: graph.shared_memory.enabled,
         restarts,
     })
+}
+
+/// Where a node comes from, for messages: its place in the graph file (`graph.yaml:41:5`), or,
+/// for a node the launcher added (no place in the file), what it was added for.
+fn node_origin(graph_file: &Path, node: &NodeSpec) -> String {
+    if node.span.line > 0 {
+        return format!("{}:{}:{}", graph_file.display(), node.span.line, node.span.column);
+    }
+    let why = match node.binary.as_str() {
+        crate::record::RECORDER_BINARY => {
+            let file = node.params.get("path").and_then(|p| p.as_str()).unwrap_or("?");
+            format!("to record the run into {file}")
+        }
+        crate::replay::REPLAY_BINARY => "to replay the recording".to_string(),
+        _ => "to the graph".to_string(),
+    };
+    format!("{}, added by the launcher {why}", node.binary)
 }
 
 /// The run's facts stored in a recording (`evseg.run` metadata record).
@@ -798,6 +815,30 @@ pub fn summary(outcome: &RunOutcome, order: &[String]) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_node_the_launcher_added_is_named_by_what_it_is_for_not_by_line_zero() {
+        let node = |binary: &str, line: usize| -> NodeSpec {
+            let mut n: NodeSpec = serde_json::from_value(serde_json::json!({
+                "id": "n", "binary": binary, "machine": "local",
+                "params": {"path": "/data/run.mcap"}, "inputs": [], "outputs": [],
+                "restart": {"policy": "never", "max": 3},
+            }))
+            .unwrap();
+            n.span = evseg_graph::Span::new(line, 5);
+            n
+        };
+        let g = Path::new("graph.yaml");
+        assert_eq!(node_origin(g, &node("evseg-slicer", 41)), "graph.yaml:41:5");
+        assert_eq!(
+            node_origin(g, &node(crate::record::RECORDER_BINARY, 0)),
+            "evseg-recorder, added by the launcher to record the run into /data/run.mcap"
+        );
+        assert_eq!(
+            node_origin(g, &node(crate::replay::REPLAY_BINARY, 0)),
+            "evseg-replay, added by the launcher to replay the recording"
+        );
+    }
 
     #[test]
     fn logged_problems_count_evseg_warnings_and_errors_per_node_and_quote_the_first() {

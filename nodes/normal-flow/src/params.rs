@@ -384,10 +384,7 @@ mod tests {
         let d = PlaneFitParams::default();
         let cases = [
             (
-                PlaneFitParams {
-                    dt_min_s: -1e-3,
-                    ..d
-                },
+                PlaneFitParams { dt_min_s: -1e-3, ..d },
                 "dt_min_ms must be a finite number >= 0, got -1",
             ),
             (

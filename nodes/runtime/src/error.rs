@@ -70,13 +70,42 @@ pub enum RuntimeError {
     #[error("stopped by signal")]
     Stopped,
     /// The node's logic failed.
-    #[error("node {node}, slice {seq}: {source}")]
+    #[error("node {node}, {}: {source}", slice_label(*seq))]
     Logic {
         /// Node id.
         node: String,
-        /// Sequence number being processed.
+        /// Sequence number being processed; `u64::MAX` while finishing (after the last slice).
         seq: u64,
         /// The logic's error.
         source: BoxError,
     },
+}
+
+/// "slice 7", or "at the end of the stream" for [`RuntimeError::Logic`]'s `u64::MAX` (an error
+/// of a stage's `finish`, e.g. an evaluator that cannot write its report folder).
+fn slice_label(seq: u64) -> String {
+    if seq == u64::MAX {
+        "at the end of the stream".to_string()
+    } else {
+        format!("slice {seq}")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_logic_error_while_finishing_says_so_instead_of_a_huge_slice_number() {
+        let e = |seq| RuntimeError::Logic {
+            node: "evaluator".into(),
+            seq,
+            source: "cannot write report".into(),
+        };
+        assert_eq!(e(3).to_string(), "node evaluator, slice 3: cannot write report");
+        assert_eq!(
+            e(u64::MAX).to_string(),
+            "node evaluator, at the end of the stream: cannot write report"
+        );
+    }
 }
