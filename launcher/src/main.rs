@@ -70,8 +70,8 @@ enum Command {
         /// began publishing (one subscription never reached its producer); 0 = never.
         #[arg(long, default_value_t = watchdog::DEFAULT_STARTUP_S)]
         startup_timeout: f64,
-        /// Stop a lock-step run in which no node made progress for this many seconds, naming
-        /// every node's counters; 0 = wait forever.
+        /// Stop a lock-step run (a live run: once its sources have finished) in which no node
+        /// made progress for this many seconds, naming every node's counters; 0 = wait forever.
         #[arg(long, default_value_t = watchdog::DEFAULT_STALL_S)]
         stall_timeout: f64,
     },

@@ -33,9 +33,11 @@
 //!   inputs' producers have (in both stalls the launcher had the slicer's stats from before
 //!   it blocked waiting for credit, "published 0": a blocked producer sent none until
 //!   2026-12-07, and a stats message can still be lost).
-//! - **stall** (lock-step only): when no node's published, processed or finished counters
-//!   change for [`WatchdogSettings::stall`], the run stops with every node's counters, instead
-//!   of waiting forever. Receipts do not count: a stalled lock-step graph keeps receiving the
+//! - **stall**: when no node's published, processed or finished counters change for
+//!   [`WatchdogSettings::stall`], the run stops with every node's counters, instead of waiting
+//!   forever. In live mode only once every source has finished (before that a source may
+//!   idle: a camera with nothing to see); a live run hung that way about once in six when a
+//!   slow stage ended on a slice another input had lost (fixed in the joiner since). Receipts do not count: a stalled lock-step graph keeps receiving the
 //!   duplicates its idle producers publish again each second. A node whose heartbeat says it
 //!   has been computing one slice ([`Stats::computing_s`]) is named as busy, not as waiting.
 
@@ -168,11 +170,19 @@ impl Watchdog {
             self.last_counters = counters;
             self.last_change = now;
         }
-        if lockstep
+        // Live mode: a source may idle (a camera with nothing to see), so only once every
+        // source has finished can nothing more come.
+        let sources_done = || {
+            nodes
+                .iter()
+                .filter(|n| n.inputs.iter().all(|i| i.feedback))
+                .all(|n| stats.get(&n.id).is_some_and(|s| s.finished))
+        };
+        if (lockstep || sources_done())
             && let Some(limit) = self.settings.stall
             && now.duration_since(self.last_change) >= limit
         {
-            actions.push(Action::Stop(stall_message(limit, nodes, stats)));
+            actions.push(Action::Stop(stall_message(limit, nodes, stats, lockstep)));
         }
         actions
     }
@@ -335,7 +345,17 @@ fn silent_inputs(s: &Stats) -> String {
 }
 
 /// The message of a stalled run: every node's counters.
-fn stall_message(limit: Duration, nodes: &[NodeSpec], stats: &BTreeMap<String, Stats>) -> String {
+fn stall_message(
+    limit: Duration,
+    nodes: &[NodeSpec],
+    stats: &BTreeMap<String, Stats>,
+    lockstep: bool,
+) -> String {
+    let what = if lockstep {
+        "lock-step run stalled"
+    } else {
+        "live run stalled after its sources finished"
+    };
     let computing: Vec<String> = nodes
         .iter()
         .filter_map(|n| {
@@ -346,7 +366,7 @@ fn stall_message(limit: Duration, nodes: &[NodeSpec], stats: &BTreeMap<String, S
         .collect();
     let mut text = if computing.is_empty() {
         format!(
-            "no node made progress for {:.0} s (lock-step run stalled); counters per node:",
+            "no node made progress for {:.0} s ({what}); counters per node:",
             limit.as_secs_f64()
         )
     } else {
@@ -531,6 +551,32 @@ mod tests {
         assert!(
             w.check(later, &nodes, &all, &no_stats, false).is_empty(),
             "live, no stats"
+        );
+    }
+
+    /// Live mode: a run whose sources still run may idle; once they have all finished, a run
+    /// in which nothing changes for the stall limit is stopped.
+    #[test]
+    fn a_live_run_stalls_only_after_its_sources_finished() {
+        let nodes = [node("src", &[]), node("a", &[("src", false)])];
+        let t0 = Instant::now();
+        let all = |_: &str| true;
+        let mut st: BTreeMap<String, Stats> = [stats("src", 0, 5), stats("a", 5, 3)].into();
+        let mut w = Watchdog::new(settings(), t0);
+        assert!(w.check(t0, &nodes, &all, &st, false).is_empty());
+        let late = t0 + Duration::from_secs(500);
+        assert!(
+            w.check(late, &nodes, &all, &st, false).is_empty(),
+            "the source may idle"
+        );
+        st.get_mut("src").unwrap().finished = true;
+        // Finishing is a change: the clock starts again.
+        let t1 = late + Duration::from_secs(1);
+        assert!(w.check(t1, &nodes, &all, &st, false).is_empty());
+        let a = w.check(t1 + Duration::from_secs(120), &nodes, &all, &st, false);
+        assert!(
+            matches!(&a[..], [Action::Stop(m)] if m.contains("live run stalled after its sources finished")),
+            "{a:?}"
         );
     }
 
