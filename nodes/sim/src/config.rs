@@ -137,6 +137,9 @@ impl SceneConfig {
             )));
         }
         self.camera.validate()?;
+        self.camera_trajectory
+            .validate("camera_trajectory")
+            .map_err(SimError::Config)?;
         self.scene.validate()?;
         self.esim.validate()?;
         self.imu.validate()?;

@@ -42,6 +42,11 @@ pub const PRESET_NAMES: &[&str] = &[
 /// world x, camera y = world -z).
 pub const CAMERA_LOOKING_FORWARD: Mat3 = [[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]];
 
+/// Seconds the presets' camera walks forward before turning back (see
+/// [`crate::trajectory::Signal::reverse_every_s`]): it turns over the last
+/// [`crate::trajectory::REVERSAL_S`] of each such period.
+pub const CAMERA_WALK_S: f64 = 6.0;
+
 /// The configuration of preset `name` with `seed`.
 pub fn preset(name: &str, seed: u64) -> Result<SceneConfig, SimError> {
     let mut b = Builder::new(name, seed);
@@ -258,7 +263,14 @@ impl Builder {
         let camera = RigidTrajectory {
             position: [
                 Signal::constant(0.0).with(0.12, 0.5, ph()),
-                Signal::linear(0.0, 0.15).with(0.06, 0.7, ph()),
+                // Forward at 0.15 m/s, turning over the sixth second and walking back, and
+                // so on: the same as a steady walk for the first 5 s (every bench sequence),
+                // and at most 0.8 m from the start however long a sequence runs. (A steady
+                // walk took the camera into the objects after 8-10 s: one-object at 1 to
+                // 0.3 m from the box, and the simulator 20 times slower.)
+                Signal::linear(0.0, 0.15)
+                    .reversing_every(CAMERA_WALK_S)
+                    .with(0.06, 0.7, ph()),
                 Signal::constant(1.2).with(0.05, 0.8, ph()),
             ],
             base_rotation: CAMERA_LOOKING_FORWARD,

@@ -100,6 +100,9 @@ impl SceneContent {
             if b.half_extents.iter().any(|h| !(h.is_finite() && *h > 0.0)) {
                 return Err(SimError::Config(format!("{what}: half_extents must be > 0")));
             }
+            b.trajectory
+                .validate(&format!("{what}.trajectory"))
+                .map_err(SimError::Config)?;
             b.texture.validate(what)
         };
         for (i, b) in self.boxes.iter().enumerate() {

@@ -16,7 +16,12 @@ pub struct Sinusoid {
     pub phase_rad: f64,
 }
 
-/// A smooth scalar signal `offset + rate * t + sum of sinusoids` (t in seconds).
+/// Seconds over which a signal's rate reverses when it has [`Signal::reverse_every_s`] (a
+/// half-cosine from `+rate` to `-rate`, ending at each multiple of the period).
+pub const REVERSAL_S: f64 = 1.0;
+
+/// A smooth scalar signal `offset + rate * t + sum of sinusoids` (t in seconds); with
+/// [`Signal::reverse_every_s`] the rate part goes forth and back instead of growing for ever.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct Signal {
     /// Value at t = 0 apart from the sinusoids (m or rad).
@@ -25,6 +30,12 @@ pub struct Signal {
     pub rate: f64,
     /// Sinusoidal terms.
     pub terms: Vec<Sinusoid>,
+    /// When set (seconds, above [`REVERSAL_S`]), the rate reverses smoothly over the
+    /// [`REVERSAL_S`] before every multiple of this period, alternately to `-rate` and back
+    /// to `rate`: identical to `rate * t` until `reverse_every_s - REVERSAL_S`, and bounded
+    /// (a walk forth and back) however long the signal runs. `None`: a constant rate.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reverse_every_s: Option<f64>,
 }
 
 impl Signal {
@@ -34,6 +45,7 @@ impl Signal {
             offset,
             rate: 0.0,
             terms: Vec::new(),
+            reverse_every_s: None,
         }
     }
 
@@ -43,6 +55,48 @@ impl Signal {
             offset,
             rate,
             terms: Vec::new(),
+            reverse_every_s: None,
+        }
+    }
+
+    /// The rate part reversing every `period_s` (builder style, see
+    /// [`Signal::reverse_every_s`]).
+    pub fn reversing_every(mut self, period_s: f64) -> Self {
+        self.reverse_every_s = Some(period_s);
+        self
+    }
+
+    /// Checks [`Signal::reverse_every_s`]: finite and above [`REVERSAL_S`].
+    pub fn validate(&self) -> Result<(), String> {
+        match self.reverse_every_s {
+            Some(p) if !(p.is_finite() && p > REVERSAL_S) => Err(format!(
+                "reverse_every_s = {p} must be a finite number of seconds above {REVERSAL_S}"
+            )),
+            _ => Ok(()),
+        }
+    }
+
+    /// The rate part per unit rate: its value, first and second derivatives at `t` (s).
+    fn ramp(&self, t: f64) -> (f64, f64, f64) {
+        let Some(period) = self.reverse_every_s else {
+            return (t, 1.0, 0.0);
+        };
+        // Within one cycle of two periods: forth (rate 1), a half-cosine turn over the last
+        // REVERSAL_S of the period, back (rate -1), and a turn again; each cycle ends where
+        // it began, so the value stays within [0, period - REVERSAL_S + REVERSAL_S / pi].
+        let (tau, pi) = (REVERSAL_S, std::f64::consts::PI);
+        let u = t.rem_euclid(2.0 * period);
+        let straight = period - tau;
+        if u <= straight {
+            (u, 1.0, 0.0)
+        } else if u <= period {
+            let a = pi * (u - straight) / tau;
+            (straight + tau / pi * a.sin(), a.cos(), -pi / tau * a.sin())
+        } else if u <= 2.0 * period - tau {
+            (straight - (u - period), -1.0, 0.0)
+        } else {
+            let a = pi * (u - (2.0 * period - tau)) / tau;
+            (-tau / pi * a.sin(), -a.cos(), pi / tau * a.sin())
         }
     }
 
@@ -58,9 +112,10 @@ impl Signal {
 
     /// Value, first and second time derivatives at `t` (s).
     pub fn eval(&self, t: f64) -> (f64, f64, f64) {
-        let mut v = self.offset + self.rate * t;
-        let mut d = self.rate;
-        let mut dd = 0.0;
+        let (r, dr, ddr) = self.ramp(t);
+        let mut v = self.offset + self.rate * r;
+        let mut d = self.rate * dr;
+        let mut dd = self.rate * ddr;
         for s in &self.terms {
             let w = std::f64::consts::TAU * s.freq_hz;
             let (sn, cs) = (w * t + s.phase_rad).sin_cos();
@@ -122,6 +177,17 @@ pub struct RigidTrajectory {
 }
 
 impl RigidTrajectory {
+    /// Checks every signal (see [`Signal::validate`]); the error names the field under `what`.
+    pub fn validate(&self, what: &str) -> Result<(), String> {
+        for (k, sig) in self.position.iter().enumerate() {
+            sig.validate().map_err(|e| format!("{what}.position[{k}]: {e}"))?;
+        }
+        for (k, sig) in self.angles.iter().enumerate() {
+            sig.validate().map_err(|e| format!("{what}.angles[{k}]: {e}"))?;
+        }
+        Ok(())
+    }
+
     /// A body resting at `position` with rotation `base_rotation`.
     pub fn fixed(position: Vec3, base_rotation: Mat3) -> Self {
         Self {
@@ -179,6 +245,45 @@ impl RigidTrajectory {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_reversing_rate_is_a_steady_walk_first_then_smooth_and_bounded() {
+        let steady = Signal::linear(0.3, 0.15).with(0.06, 0.7, 0.4);
+        let walk = steady.clone().reversing_every(6.0);
+        // The same as the steady walk until the first turn begins.
+        for k in 0..=500 {
+            let t = k as f64 * 0.01;
+            assert_eq!(walk.eval(t), steady.eval(t), "t = {t}");
+        }
+        // Derivatives agree with finite differences everywhere (turns included), the value is
+        // continuous, and the rate part stays within [0, (6 - 1 + 1 / pi) 0.15] plus the sinusoid.
+        let h = 1e-5;
+        let top = 0.3 + 0.15 * (5.0 + 1.0 / std::f64::consts::PI) + 0.06 + 1e-9;
+        let mut last = walk.eval(0.0).0;
+        for k in 1..60_000 {
+            let t = k as f64 * 0.001;
+            let (v, d, dd) = walk.eval(t);
+            let (vp, dp, _) = walk.eval(t + h);
+            let (vm, dm, _) = walk.eval(t - h);
+            assert!(((vp - vm) / (2.0 * h) - d).abs() < 1e-4, "t = {t}");
+            assert!(((dp - dm) / (2.0 * h) - dd).abs() < 1e-2, "t = {t}");
+            assert!((v - last).abs() < 1e-3, "jump at t = {t}");
+            assert!(
+                v <= top && v >= 0.3 - 0.15 / std::f64::consts::PI - 0.06 - 1e-9,
+                "t = {t}: {v}"
+            );
+            assert!(d.abs() <= walk.max_rate() + 1e-12);
+            last = v;
+        }
+        assert!(Signal::linear(0.0, 1.0).reversing_every(0.5).validate().is_err());
+        assert!(
+            Signal::linear(0.0, 1.0)
+                .reversing_every(f64::NAN)
+                .validate()
+                .is_err()
+        );
+        assert!(walk.validate().is_ok());
+    }
 
     fn wobbly() -> RigidTrajectory {
         RigidTrajectory {
