@@ -87,14 +87,27 @@ impl BinaryResolver {
 fn run_describe(path: &Path, timeout: Duration) -> Result<NodeDescription, String> {
     use std::io::Read;
     use std::os::unix::process::CommandExt;
-    let mut child = Command::new(path)
-        .arg("--describe")
-        .stdin(Stdio::null())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .process_group(0)
-        .spawn()
-        .map_err(|e| format!("cannot start {}: {e}", path.display()))?;
+    let spawn = || {
+        Command::new(path)
+            .arg("--describe")
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .process_group(0)
+            .spawn()
+    };
+    // A binary just written (a build, a test's script) can be busy for a moment: another
+    // thread's child forked while it was open for writing holds it until that child execs.
+    let mut tries = 0;
+    let mut child = loop {
+        match spawn() {
+            Err(e) if e.raw_os_error() == Some(libc::ETXTBSY) && tries < 20 => {
+                tries += 1;
+                std::thread::sleep(Duration::from_millis(25));
+            }
+            other => break other.map_err(|e| format!("cannot start {}: {e}", path.display()))?,
+        }
+    };
     let reader = |pipe: Option<Box<dyn Read + Send>>| {
         let (tx, rx) = std::sync::mpsc::channel();
         std::thread::spawn(move || {
