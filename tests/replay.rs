@@ -288,3 +288,114 @@ fn a_recording_without_a_needed_channel_or_of_another_schema_is_refused_before_a
         run.stderr
     );
 }
+
+/// A copy of the recording at `from` without the messages of `drop` (`(topic, seq)`): a
+/// recording with gaps, as a live run's recorder that could not keep up leaves.
+fn copy_without(from: &Path, to: &Path, drop: &[(&str, u64)]) {
+    let mut specs: Vec<ChannelSpec> = Vec::new();
+    let mut messages: Vec<(usize, Envelope, Vec<u8>)> = Vec::new();
+    evseg_recorder::read::read(from, |m| {
+        let port = match specs.iter().position(|c| c.topic == m.channel.topic) {
+            Some(p) => p,
+            None => {
+                specs.push(ChannelSpec {
+                    topic: m.channel.topic.clone(),
+                    schema: m.channel.schema.clone(),
+                    version: m.channel.version.unwrap_or(0),
+                    metadata: m.channel.metadata.clone(),
+                });
+                specs.len() - 1
+            }
+        };
+        let (envelope, _) = codec::decode_header(m.data).expect("recorded frame header");
+        if !drop.contains(&(m.channel.topic.as_str(), envelope.seq)) {
+            messages.push((port, envelope, m.data.to_vec()));
+        }
+        Ok(())
+    })
+    .expect("read recording");
+    let mut w = McapRecorder::create(to, &specs, &WriterSettings::default()).unwrap();
+    for (port, envelope, data) in &messages {
+        w.write_frame(*port, envelope, data).unwrap();
+    }
+    w.finish().unwrap();
+}
+
+/// A recording with gaps (a live run's drops) is refused, naming the channel and the way out;
+/// with `--skip-gaps` the slices every replayed channel holds are replayed, renumbered, and
+/// evaluated with their own sensor times.
+#[test]
+fn a_recording_with_gaps_replays_the_slices_every_channel_holds_with_skip_gaps() {
+    evseg_tests::bin_dir();
+    let dir = tempfile::tempdir().unwrap();
+    let dir = dir.path();
+    let (orig, _) = evseg(
+        dir,
+        "orig",
+        &["run", "GRAPH", "--out", "orig", "-q", "--record", "orig.mcap"],
+    );
+    assert!(orig.ok, "recorded run failed:\n{}", orig.stderr);
+    // Slice 3's truth and slice 6's events lost; slice 10, the last, lost on both.
+    copy_without(
+        &dir.join("orig.mcap"),
+        &dir.join("gaps.mcap"),
+        &[
+            ("slicer/truth", 3),
+            ("slicer/slices", 6),
+            ("slicer/slices", 10),
+            ("slicer/truth", 10),
+        ],
+    );
+    let base = [
+        "replay",
+        "gaps.mcap",
+        "--graph",
+        "GRAPH",
+        "--from",
+        "slicer",
+        "-q",
+    ];
+    let (run, _) = evseg(dir, "refused", &[&base[..], &["--out", "refused"]].concat());
+    assert!(
+        !run.ok,
+        "a recording with gaps must be refused without --skip-gaps"
+    );
+    assert!(
+        run.stderr.contains("lacks 1 message(s), from sequence") && run.stderr.contains("--skip-gaps"),
+        "{}",
+        run.stderr
+    );
+    let (run, run_dir) = evseg(
+        dir,
+        "skip",
+        &[
+            &base[..],
+            &["--out", "skip", "--skip-gaps", "--record", "skip.mcap"],
+        ]
+        .concat(),
+    );
+    assert!(
+        run.ok,
+        "replay with --skip-gaps failed:\n{}\n{}",
+        run.stdout, run.stderr
+    );
+    assert!(
+        run.stderr
+            .contains("replaying the 8 slices every replayed channel holds, renumbered 0..8"),
+        "{}",
+        run.stderr
+    );
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(run_dir.join("report/report.json")).unwrap()).unwrap();
+    assert_eq!(report["sequence"]["windows"].as_u64(), Some(8), "{report}");
+    // The replayed slices are numbered 0..8 and keep their recorded sensor times.
+    let (got, _) = frames(&dir.join("skip.mcap"));
+    let (want, _) = frames(&dir.join("orig.mcap"));
+    let seqs: Vec<u64> = got["slicer/slices"].iter().map(|(e, _)| e.seq).collect();
+    assert_eq!(seqs, (0..8).collect::<Vec<u64>>());
+    let kept: Vec<u64> = vec![0, 1, 2, 4, 5, 7, 8, 9];
+    for (new, old) in kept.iter().enumerate() {
+        let (g, w) = (&got["slicer/slices"][new], &want["slicer/slices"][*old as usize]);
+        assert_eq!((g.0.t_start, g.0.t_end, &g.1), (w.0.t_start, w.0.t_end, &w.1));
+    }
+}

@@ -200,6 +200,7 @@ pub fn ab(o: &AbOptions) -> anyhow::Result<Vec<AbFigure>> {
                         recording: rec.clone(),
                         from: o.from.clone(),
                         speed: None,
+                        skip_gaps: false,
                     }),
                     ..RunOptions::default()
                 },

@@ -109,6 +109,10 @@ enum Command {
         /// Record this run's outputs (the replayed ones too) into this MCAP file.
         #[arg(long)]
         record: Option<PathBuf>,
+        /// Replay a recording with gaps (a live run's drops): only the slices every replayed
+        /// channel holds, renumbered 0, 1, 2, ...; without it such a recording is refused.
+        #[arg(long)]
+        skip_gaps: bool,
     },
     /// Compare two variants of a graph on the same recordings: A as written, B with node
     /// binaries swapped and/or parameters changed; prints the evaluator's figures side by side
@@ -573,6 +577,7 @@ fn main() -> ExitCode {
             set,
             quiet,
             record,
+            skip_gaps,
         } => {
             if let Err(e) = replay::check_record_target(&recording, record.as_deref()) {
                 eprintln!("error: {e:#}");
@@ -590,6 +595,7 @@ fn main() -> ExitCode {
                     recording,
                     from,
                     speed,
+                    skip_gaps,
                 }),
                 ..run::RunOptions::default()
             };

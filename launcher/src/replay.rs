@@ -18,7 +18,7 @@ use std::path::PathBuf;
 use anyhow::{Context, bail};
 use evseg_graph::{Consumer, Graph, NodeSpec, OutputSpec, RestartPolicy};
 use evseg_recorder::read::Recording;
-use evseg_replay::check::{Wanted, check_channels, check_recording};
+use evseg_replay::check::{Wanted, check_channels, check_recording_with};
 use evseg_replay::error::ReplayError;
 use evseg_schemas::keys;
 
@@ -36,6 +36,9 @@ pub struct ReplaySpec {
     pub recording: PathBuf,
     /// The replay point: this node and the nodes upstream of it are replayed, not run.
     pub from: String,
+    /// Replay a recording with gaps: only the slices every replayed channel holds, renumbered
+    /// (`evseg replay --skip-gaps`, see `evseg_replay::keep`); otherwise a gap is refused.
+    pub skip_gaps: bool,
     /// Playback speed relative to the recorded publish times; `None` = as fast as lock-step
     /// credits allow.
     pub speed: Option<f64>,
@@ -107,6 +110,8 @@ pub struct ReplayPlan {
     /// Topics (`node/output`) missing from the recording whose live consumers all take them on
     /// optional ports: not replayed, and those ports left unwired.
     unwired: BTreeSet<String>,
+    /// With `skip_gaps`: the slices replayed (renumbered) and the topics they were found on.
+    kept: Option<(evseg_replay::keep::KeptSlices, BTreeSet<String>)>,
 }
 
 /// The outputs of the `replaced` nodes that nodes staying live read, split into those some
@@ -150,10 +155,14 @@ fn replayed_outputs(graph: &Graph, replaced: &BTreeSet<String>) -> (Vec<Wanted>,
 
 /// The topics of `optional` (outputs read only on optional ports) that `recording` does not
 /// have. One it has with another schema is still an error.
-fn missing_optional(recording: &Recording, optional: &[Wanted]) -> Result<BTreeSet<String>, ReplayError> {
+fn missing_optional(
+    recording: &Recording,
+    optional: &[Wanted],
+    allow_gaps: bool,
+) -> Result<BTreeSet<String>, ReplayError> {
     let mut missing = BTreeSet::new();
     for w in optional {
-        match check_channels(recording, std::slice::from_ref(w)) {
+        match evseg_replay::check::check_channels_with(recording, std::slice::from_ref(w), allow_gaps) {
             Ok(()) => {}
             Err(ReplayError::MissingChannel { .. }) => {
                 missing.insert(w.topic.clone());
@@ -185,8 +194,47 @@ impl ReplayPlan {
         let (wanted, optional) = replayed_outputs(graph, &replaced);
         let file = std::path::absolute(&spec.recording)
             .with_context(|| format!("recording {}", spec.recording.display()))?;
-        let recording = check_recording(&file, &wanted).map_err(|e| anyhow::anyhow!("{e}"))?;
-        let unwired = missing_optional(&recording, &optional).map_err(|e| anyhow::anyhow!("{e}"))?;
+        let recording =
+            check_recording_with(&file, &wanted, spec.skip_gaps).map_err(|e| anyhow::anyhow!("{e}"))?;
+        let unwired =
+            missing_optional(&recording, &optional, spec.skip_gaps).map_err(|e| anyhow::anyhow!("{e}"))?;
+        let kept = if spec.skip_gaps {
+            let topics: Vec<String> = wanted
+                .iter()
+                .chain(optional.iter().filter(|w| !unwired.contains(&w.topic)))
+                .map(|w| w.topic.clone())
+                .collect();
+            let report =
+                evseg_replay::keep::kept_slices(&file, &topics).map_err(|e| anyhow::anyhow!("{e}"))?;
+            let left_out: Vec<String> = report
+                .channels
+                .iter()
+                .filter(|(_, (_, out))| *out > 0)
+                .map(|(t, (n, out))| format!("{t}: {out} of {n}"))
+                .collect();
+            if report.kept.is_empty() {
+                bail!(
+                    "{}: no slice is held by every replayed channel ({topics:?}); nothing to replay",
+                    file.display()
+                );
+            }
+            eprintln!(
+                "note: --skip-gaps: replaying the {} slices every replayed channel holds, renumbered \
+                 0..{} ({} slice number(s) held by no channel; left out, held by some channels \
+                 only: {})",
+                report.kept.len(),
+                report.kept.len(),
+                report.missing_everywhere,
+                if left_out.is_empty() {
+                    "none".to_string()
+                } else {
+                    left_out.join(", ")
+                }
+            );
+            Some((report.kept, topics.into_iter().collect()))
+        } else {
+            None
+        };
         for w in optional.iter().filter(|w| unwired.contains(&w.topic)) {
             eprintln!(
                 "note: {} has no `{}`; the optional input {} is left unwired",
@@ -220,6 +268,7 @@ impl ReplayPlan {
             replaced,
             recording,
             unwired,
+            kept,
         })
     }
 
@@ -253,6 +302,11 @@ impl ReplayPlan {
                     continue;
                 }
                 let only_recorder = live.iter().all(|c| is_recorder(graph, &c.node));
+                // Renumbered slices are matched on the topics they were found on only.
+                if only_recorder && self.kept.as_ref().is_some_and(|(_, topics)| !topics.contains(&t)) {
+                    unrecorded.push(t);
+                    continue;
+                }
                 if only_recorder {
                     let w = Wanted {
                         topic: t.clone(),
@@ -305,9 +359,18 @@ impl ReplayPlan {
         }
         let mut params = serde_json::Map::new();
         params.insert("path".into(), self.file.display().to_string().into());
-        let limits = self.limits(&outputs);
-        if !limits.is_empty() {
-            params.insert("limits".into(), serde_json::Value::Object(limits));
+        match &self.kept {
+            // The slices every channel holds: a cut-off recording's last slices are left out
+            // the same way, so no limits are needed.
+            Some((kept, _)) => {
+                params.insert("keep".into(), serde_json::to_value(kept)?);
+            }
+            None => {
+                let limits = self.limits(&outputs);
+                if !limits.is_empty() {
+                    params.insert("limits".into(), serde_json::Value::Object(limits));
+                }
+            }
         }
         params.insert(
             "speed".into(),
@@ -500,16 +563,18 @@ mod tests {
             recording: "r.mcap".into(),
             from: "slicer".into(),
             speed: Some(2.0),
+            skip_gaps: false,
         };
         let replaced = upstream(g, &spec.from).unwrap();
         let (_, optional) = replayed_outputs(g, &replaced);
-        let unwired = missing_optional(&recording, &optional).unwrap();
+        let unwired = missing_optional(&recording, &optional, false).unwrap();
         ReplayPlan {
             replaced,
             file: "/r.mcap".into(),
             spec,
             recording,
             unwired,
+            kept: None,
         }
     }
 
@@ -619,7 +684,7 @@ mod tests {
             c.schema = "other".into();
         }
         assert!(matches!(
-            missing_optional(&rec, &optional),
+            missing_optional(&rec, &optional, false),
             Err(ReplayError::WrongSchema { .. })
         ));
         // Read on a required port, the channel is required (a missing one is an error).

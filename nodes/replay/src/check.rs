@@ -24,6 +24,16 @@ pub struct Wanted {
 /// with the expected schema name, the schema's current version (when the schema is one of the
 /// pipeline's) and the evseg message encoding. Errors name the file and the channel.
 pub fn check_channels(recording: &Recording, wanted: &[Wanted]) -> Result<(), ReplayError> {
+    check_channels_with(recording, wanted, false)
+}
+
+/// [`check_channels`], letting channels with gaps pass when `allow_gaps` (a replay that keeps
+/// only the slices every channel holds, [`crate::keep`]).
+pub fn check_channels_with(
+    recording: &Recording,
+    wanted: &[Wanted],
+    allow_gaps: bool,
+) -> Result<(), ReplayError> {
     let by_topic: BTreeMap<&str, &ChannelInfo> = recording
         .channels
         .values()
@@ -45,7 +55,9 @@ pub fn check_channels(recording: &Recording, wanted: &[Wanted]) -> Result<(), Re
             (Some(_), None) => false,
             (None, _) => true,
         };
-        if let (missing @ 1.., Some(first_missing)) = (c.gaps.missing, c.gaps.first_missing) {
+        if let (false, missing @ 1.., Some(first_missing)) =
+            (allow_gaps, c.gaps.missing, c.gaps.first_missing)
+        {
             return Err(ReplayError::Gap {
                 file: recording.file.clone(),
                 topic: w.topic.clone(),
@@ -71,8 +83,18 @@ pub fn check_channels(recording: &Recording, wanted: &[Wanted]) -> Result<(), Re
 /// can say how complete the file is ([`Recording::completeness`]) and how many messages each
 /// channel has.
 pub fn check_recording(path: &Path, wanted: &[Wanted]) -> Result<Recording, ReplayError> {
+    check_recording_with(path, wanted, false)
+}
+
+/// [`check_recording`], letting channels with gaps pass when `allow_gaps` (see
+/// [`check_channels_with`]).
+pub fn check_recording_with(
+    path: &Path,
+    wanted: &[Wanted],
+    allow_gaps: bool,
+) -> Result<Recording, ReplayError> {
     let recording = evseg_recorder::read::read(path, |_| Ok(()))?;
-    check_channels(&recording, wanted)?;
+    check_channels_with(&recording, wanted, allow_gaps)?;
     Ok(recording)
 }
 

@@ -39,7 +39,7 @@ pub enum ReplayError {
     },
     /// A channel skips sequence numbers: the replayed stages, in lock-step, would wait for them.
     #[error(
-        "{}: channel `{topic}` lacks {missing} message(s), from sequence {first_missing} on (a message lost before the recorder, a live-mode drop, or one cut out of the file); a lock-step replay would wait for them",
+        "{}: channel `{topic}` lacks {missing} message(s), from sequence {first_missing} on (a message lost before the recorder, a live-mode drop, or one cut out of the file); a lock-step replay would wait for them. `evseg replay --skip-gaps` replays the slices every replayed channel holds, renumbered",
         file.display()
     )]
     Gap {

@@ -13,6 +13,7 @@
 
 pub mod check;
 pub mod error;
+pub mod keep;
 pub mod schedule;
 
 pub use error::ReplayError;

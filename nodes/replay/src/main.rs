@@ -17,6 +17,7 @@ use std::time::{Duration, Instant};
 use evseg_recorder::RecordError;
 use evseg_recorder::read::Recording;
 use evseg_replay::ReplayError;
+use evseg_replay::keep::KeptSlices;
 use evseg_replay::schedule::{Pacing, Pending, Scheduler};
 use evseg_runtime::describe::Describe;
 use evseg_runtime::transport::POLL;
@@ -48,6 +49,11 @@ fn description() -> evseg_schemas::describe::NodeDescription {
         "most frames replayed per output (object: topic -> count; null = all); the launcher sets it for a cut-off recording so that the outputs of one node end at the same slice",
     )
     .param(
+        "keep",
+        serde_json::Value::Null,
+        "slices to replay, renumbered 0, 1, 2, ... in order (`{\"ranges\": [[start, end], ...]}` of recorded slice numbers; null = every frame, numbers as recorded); `evseg replay --skip-gaps` sets it to the slices every replayed channel holds",
+    )
+    .param(
         "read_ahead",
         READ_AHEAD,
         "recorded frames held in memory ahead of publishing (>= 1)",
@@ -76,6 +82,10 @@ struct Replay {
     read_ahead: usize,
     published: u64,
     started: Option<Instant>,
+    /// Slices replayed, renumbered (`keep`); `None`: every frame as recorded.
+    keep: Option<KeptSlices>,
+    /// Frames left out by `keep`.
+    left_out: u64,
 }
 
 fn param_err(name: &str, reason: impl std::fmt::Display) -> ReplayError {
@@ -112,6 +122,10 @@ fn make(cfg: &NodeConfig) -> Result<Replay, BoxError> {
         .iter()
         .map(|(t, _)| limits_by_topic.get(t).copied().unwrap_or(u64::MAX))
         .collect();
+    let keep: Option<KeptSlices> = cfg.param_opt("keep")?;
+    if let Some(k) = &keep {
+        k.validate().map_err(|e| param_err("keep", e))?;
+    }
     let (tx, rx) = sync_channel(read_ahead);
     let reader_file = file.clone();
     let reader = std::thread::Builder::new()
@@ -131,6 +145,8 @@ fn make(cfg: &NodeConfig) -> Result<Replay, BoxError> {
         read_ahead,
         published: 0,
         started: None,
+        keep,
+        left_out: 0,
     })
 }
 
@@ -185,14 +201,24 @@ impl Replay {
                 envelope.schema
             )));
         }
+        let (seq, bytes) = match &self.keep {
+            None => (envelope.seq, raw.bytes),
+            Some(keep) => match keep.rank(envelope.seq) {
+                None => {
+                    self.left_out += 1;
+                    return Ok(());
+                }
+                Some(n) => (n, codec::with_seq(&raw.bytes, n).map_err(|e| bad(e.to_string()))?),
+            },
+        };
         self.sched.push(Pending {
             port: raw.port,
             order: self.order,
             index: raw.index,
             log_ns: raw.log_ns,
-            seq: envelope.seq,
+            seq,
             t_end: envelope.t_end,
-            bytes: raw.bytes,
+            bytes,
         });
         self.order += 1;
         Ok(())
@@ -255,6 +281,7 @@ impl Source for Replay {
                 let secs = self.started.map_or(0.0, |t| t.elapsed().as_secs_f64());
                 tracing::info!(
                     frames = self.published,
+                    left_out = self.left_out,
                     seconds = secs,
                     per_second = self.published as f64 / secs.max(1e-9),
                     "replay finished"
