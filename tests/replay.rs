@@ -398,4 +398,32 @@ fn a_recording_with_gaps_replays_the_slices_every_channel_holds_with_skip_gaps()
         let (g, w) = (&got["slicer/slices"][new], &want["slicer/slices"][*old as usize]);
         assert_eq!((g.0.t_start, g.0.t_end, &g.1), (w.0.t_start, w.0.t_end, &w.1));
     }
+    // `evseg ab --skip-gaps` replays the same slices into both variants (B = A here: every
+    // difference is 0).
+    let listen = format!("tcp/127.0.0.1:{}", free_port());
+    let (run, _) = evseg(
+        dir,
+        "ab",
+        &[
+            "ab",
+            "GRAPH",
+            "--recording",
+            "gaps.mcap",
+            "--skip-gaps",
+            "--work",
+            "ab-work",
+            "--listen",
+            &listen,
+        ],
+    );
+    assert!(run.ok, "ab --skip-gaps failed:\n{}\n{}", run.stdout, run.stderr);
+    let rows: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join("ab-work/ab.json")).unwrap()).unwrap();
+    let iou = rows
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|r| r["figure"] == "IoU events (%)")
+        .unwrap();
+    assert!(iou["a"].is_number() && iou["difference"] == 0.0, "{rows}");
 }

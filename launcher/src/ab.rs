@@ -41,6 +41,9 @@ pub struct AbOptions {
     /// Router listen endpoints of variant A replacing the graph's (default: a free loopback
     /// port). Variant B's router listens on a free loopback port and connects to these.
     pub listen: Vec<String>,
+    /// Replay recordings with gaps, keeping the slices every replayed channel holds
+    /// (`evseg replay --skip-gaps`); both variants get the same slices.
+    pub skip_gaps: bool,
 }
 
 /// The figures compared, as (label, JSON pointer into report.json, scale).
@@ -200,7 +203,7 @@ pub fn ab(o: &AbOptions) -> anyhow::Result<Vec<AbFigure>> {
                         recording: rec.clone(),
                         from: o.from.clone(),
                         speed: None,
-                        skip_gaps: false,
+                        skip_gaps: o.skip_gaps,
                     }),
                     ..RunOptions::default()
                 },

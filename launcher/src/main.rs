@@ -145,6 +145,10 @@ enum Command {
         /// B's router listens on a free loopback port and connects to it.
         #[arg(long)]
         listen: Vec<String>,
+        /// Replay recordings with gaps (a live run's drops) in both variants: only the slices
+        /// every replayed channel holds, renumbered (as `evseg replay --skip-gaps`).
+        #[arg(long)]
+        skip_gaps: bool,
     },
     /// Describe a recording: channels, schemas, message counts, time span, metadata, and
     /// whether it is complete (a cut-off file is read up to its last complete chunk).
@@ -547,6 +551,7 @@ fn main() -> ExitCode {
             set_b,
             work,
             listen,
+            skip_gaps,
         } => {
             let o = ab::AbOptions {
                 graph,
@@ -557,6 +562,7 @@ fn main() -> ExitCode {
                 set_b,
                 work,
                 listen,
+                skip_gaps,
             };
             ab::ab(&o).and_then(|rows| {
                 let md = ab::markdown(&rows, &o);
