@@ -18,8 +18,9 @@ use std::path::PathBuf;
 use anyhow::{Context, bail};
 use evseg_graph::{Consumer, Graph, NodeSpec, OutputSpec, RestartPolicy};
 use evseg_recorder::read::Recording;
-use evseg_replay::check::{Wanted, check_channels, check_recording_with};
+use evseg_replay::check::{Wanted, check_channels, check_channels_with, check_recording_with};
 use evseg_replay::error::ReplayError;
+use evseg_replay::keep::{KeptSlices, kept_slices};
 use evseg_schemas::keys;
 
 use crate::record::RECORDER_BINARY;
@@ -111,7 +112,7 @@ pub struct ReplayPlan {
     /// optional ports: not replayed, and those ports left unwired.
     unwired: BTreeSet<String>,
     /// With `skip_gaps`: the slices replayed (renumbered) and the topics they were found on.
-    kept: Option<(evseg_replay::keep::KeptSlices, BTreeSet<String>)>,
+    kept: Option<(KeptSlices, BTreeSet<String>)>,
 }
 
 /// The outputs of the `replaced` nodes that nodes staying live read, split into those some
@@ -162,7 +163,7 @@ fn missing_optional(
 ) -> Result<BTreeSet<String>, ReplayError> {
     let mut missing = BTreeSet::new();
     for w in optional {
-        match evseg_replay::check::check_channels_with(recording, std::slice::from_ref(w), allow_gaps) {
+        match check_channels_with(recording, std::slice::from_ref(w), allow_gaps) {
             Ok(()) => {}
             Err(ReplayError::MissingChannel { .. }) => {
                 missing.insert(w.topic.clone());
@@ -171,6 +172,36 @@ fn missing_optional(
         }
     }
     Ok(missing)
+}
+
+/// `--skip-gaps`: the slices every one of `topics` holds in the recording `file`, with a note
+/// of what is left out; an error when none is.
+fn slices_every_channel_holds(file: &std::path::Path, topics: &[String]) -> anyhow::Result<KeptSlices> {
+    let report = kept_slices(file, topics).map_err(|e| anyhow::anyhow!("{e}"))?;
+    if report.kept.is_empty() {
+        bail!(
+            "{}: no slice is held by every replayed channel ({topics:?}); nothing to replay",
+            file.display()
+        );
+    }
+    let left_out: Vec<String> = report
+        .channels
+        .iter()
+        .filter(|(_, (_, out))| *out > 0)
+        .map(|(t, (n, out))| format!("{t}: {out} of {n}"))
+        .collect();
+    eprintln!(
+        "note: --skip-gaps: replaying the {n} slices every replayed channel holds, renumbered \
+         0..{n} ({} slice number(s) held by no channel; left out, held by some channels only: {})",
+        report.missing_everywhere,
+        if left_out.is_empty() {
+            "none".to_string()
+        } else {
+            left_out.join(", ")
+        },
+        n = report.kept.len(),
+    );
+    Ok(report.kept)
 }
 
 impl ReplayPlan {
@@ -204,34 +235,10 @@ impl ReplayPlan {
                 .chain(optional.iter().filter(|w| !unwired.contains(&w.topic)))
                 .map(|w| w.topic.clone())
                 .collect();
-            let report =
-                evseg_replay::keep::kept_slices(&file, &topics).map_err(|e| anyhow::anyhow!("{e}"))?;
-            let left_out: Vec<String> = report
-                .channels
-                .iter()
-                .filter(|(_, (_, out))| *out > 0)
-                .map(|(t, (n, out))| format!("{t}: {out} of {n}"))
-                .collect();
-            if report.kept.is_empty() {
-                bail!(
-                    "{}: no slice is held by every replayed channel ({topics:?}); nothing to replay",
-                    file.display()
-                );
-            }
-            eprintln!(
-                "note: --skip-gaps: replaying the {} slices every replayed channel holds, renumbered \
-                 0..{} ({} slice number(s) held by no channel; left out, held by some channels \
-                 only: {})",
-                report.kept.len(),
-                report.kept.len(),
-                report.missing_everywhere,
-                if left_out.is_empty() {
-                    "none".to_string()
-                } else {
-                    left_out.join(", ")
-                }
-            );
-            Some((report.kept, topics.into_iter().collect()))
+            Some((
+                slices_every_channel_holds(&file, &topics)?,
+                topics.into_iter().collect(),
+            ))
         } else {
             None
         };

@@ -160,6 +160,74 @@ pub fn kept_slices(path: &Path, topics: &[String]) -> Result<GapReport, ReplayEr
 #[cfg(test)]
 mod tests {
     use super::*;
+    use evseg_recorder::write::{ChannelSpec, McapRecorder, WriterSettings};
+    use evseg_schemas::messages::Metrics;
+
+    /// Per message of a test channel: (seq, t_end) of a frame, or `None` for bytes that are not
+    /// a frame.
+    type TestFrames = Vec<Option<(u64, f64)>>;
+
+    /// A recording of `Metrics` channels with the given messages.
+    fn recording(path: &Path, channels: &[(&str, TestFrames)]) {
+        let specs: Vec<ChannelSpec> = channels
+            .iter()
+            .map(|(t, _)| ChannelSpec {
+                topic: t.to_string(),
+                schema: "evseg.Metrics".into(),
+                version: 1,
+                metadata: BTreeMap::new(),
+            })
+            .collect();
+        let mut w = McapRecorder::create(path, &specs, &WriterSettings::default()).unwrap();
+        for (port, (_, frames)) in channels.iter().enumerate() {
+            for f in frames {
+                let (seq, t_end) = f.unwrap_or((0, 0.0));
+                let envelope = codec::data_envelope::<Metrics>(seq, t_end - 0.03, t_end);
+                let bytes = match f {
+                    Some(_) => codec::encode(seq, t_end - 0.03, t_end, &Metrics::default()).unwrap(),
+                    None => b"\xff\xff not a frame".to_vec(),
+                };
+                w.write_frame(port, &envelope, &bytes).unwrap();
+            }
+        }
+        w.finish().unwrap();
+    }
+
+    #[test]
+    fn slices_held_by_every_channel_are_kept_and_bad_input_is_named() {
+        let dir = tempfile::tempdir().unwrap();
+        let t = |s: u64| Some((s, 0.03 * (s + 1) as f64));
+        let topics = ["a/x".to_string(), "a/y".to_string()];
+        let path = dir.path().join("gaps.mcap");
+        recording(
+            &path,
+            &[
+                ("a/x", vec![t(0), t(1), t(3), t(4)]),
+                ("a/y", vec![t(0), t(2), t(3), t(4)]),
+            ],
+        );
+        let r = kept_slices(&path, &topics).unwrap();
+        assert_eq!(r.kept, KeptSlices::from_sorted([0, 3, 4]));
+        assert_eq!(r.channels["a/x"], (4, 1));
+        assert_eq!(r.missing_everywhere, 0);
+        // A message that is not a frame: named by channel and index.
+        let path = dir.path().join("bad.mcap");
+        recording(&path, &[("a/x", vec![t(0), None]), ("a/y", vec![t(0)])]);
+        let e = kept_slices(&path, &topics).unwrap_err().to_string();
+        assert!(e.contains("channel `a/x`, message 1"), "{e}");
+        // Channels numbered differently (the same number, other sensor times): refused.
+        let path = dir.path().join("other.mcap");
+        let late = |s: u64| Some((s, 0.01 * (s + 1) as f64));
+        recording(
+            &path,
+            &[("a/x", vec![t(0), t(1)]), ("a/y", vec![late(0), late(1)])],
+        );
+        let e = kept_slices(&path, &topics).unwrap_err().to_string();
+        assert!(e.contains("cover different sensor times"), "{e}");
+        // Not a recording at all.
+        std::fs::write(dir.path().join("text.mcap"), "hello").unwrap();
+        assert!(kept_slices(&dir.path().join("text.mcap"), &topics).is_err());
+    }
 
     #[test]
     fn kept_slices_are_renumbered_in_order() {
