@@ -28,7 +28,8 @@ pub struct PeerWatch {
     connect: Vec<String>,
     /// The graph file, as the user gave it (for the command in the hint).
     graph_file: String,
-    warned: bool,
+    /// Checked once after [`PEER_WARN_AFTER`] (warned or found well): nothing more to do.
+    done: bool,
 }
 
 impl PeerWatch {
@@ -59,28 +60,29 @@ impl PeerWatch {
             listen: listen.to_vec(),
             connect: connect.to_vec(),
             graph_file: graph_file.to_string(),
-            warned: false,
+            done: false,
         }
     }
 
-    /// True while there is something to watch that has not been warned of (the caller may
-    /// skip asking Zenoh for its routers otherwise).
+    /// True while there is something to watch that has not been checked (the caller may skip
+    /// asking Zenoh for its routers otherwise).
     pub fn pending(&self) -> bool {
-        !self.warned && (!self.others.is_empty() || !self.connect.is_empty())
+        !self.done && (!self.others.is_empty() || !self.connect.is_empty())
     }
 
-    /// The warning to give now (once), `elapsed` into the run with `routers` other routers
-    /// connected to this one and the nodes' latest `stats`; `None` when all is well, too early,
-    /// or already said.
+    /// The warning to give now, `elapsed` into the run with `routers` other routers connected
+    /// to this one and the nodes' latest `stats`; `None` when too early, when all is well, or
+    /// once checked (the run is checked once, at the first call after [`PEER_WARN_AFTER`]).
     pub fn check(
         &mut self,
         elapsed: Duration,
         routers: usize,
         stats: &BTreeMap<String, Stats>,
     ) -> Option<String> {
-        if self.warned || elapsed < PEER_WARN_AFTER {
+        if self.done || elapsed < PEER_WARN_AFTER {
             return None;
         }
+        self.done = true;
         let silent: Vec<&(String, Vec<String>)> = self
             .others
             .iter()
@@ -90,7 +92,6 @@ impl PeerWatch {
         if silent.is_empty() && !unanswered {
             return None;
         }
-        self.warned = true;
         let secs = elapsed.as_secs();
         let endpoints = format!(
             "this launcher's router listens on {:?} and connects to {:?}",
@@ -182,9 +183,11 @@ nodes:
         // The machine without nodes is not waited for; the warning is given once.
         assert!(!m.contains("idle"), "{m}");
         assert_eq!(w.check(late * 2, 0, &heard(&["b"])), None);
-        // Heard from: nothing to say.
+        // Heard from: nothing to say, and nothing more to watch.
         let mut w = PeerWatch::new(&g, "two.yaml", Some("base"), &listen, &connect);
+        assert!(w.pending());
         assert_eq!(w.check(late, 1, &heard(&["a", "b"])), None);
+        assert!(!w.pending());
         // Connected but silent: another instance or graph.
         let mut w = PeerWatch::new(&g, "two.yaml", Some("base"), &listen, &connect);
         let m = w.check(late, 1, &heard(&["b"])).expect("a warning");
