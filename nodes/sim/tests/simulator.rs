@@ -426,3 +426,33 @@ fn invalid_configurations_are_rejected_with_the_field_named() {
     // A config from JSON with a wrong type is a serde error, not a panic.
     assert!(serde_json::from_str::<SceneConfig>("{\"name\": 3}").is_err());
 }
+
+/// A box far outside the view, beside the camera with a corner behind its image plane, does not
+/// set the render steps: it cannot be seen, and is skipped like any box well outside the view.
+/// enter-leave's boxes flying on (as they did until session 47) passed 10-14 m beside the
+/// camera after 7 s, and its yaw brought a corner to the image plane: the box was bounded as if
+/// it were 0.1 m in front of the camera, 9 780 and 17 100 render steps in 7-8 s and 9-10 s
+/// against about 500 with nothing in view.
+#[test]
+fn a_box_beside_the_camera_out_of_view_does_not_set_the_steps() {
+    let mut cfg = preset("enter-leave", 7).unwrap().with_resolution_scale(0.25);
+    cfg.duration_s = 10.0;
+    for o in &mut cfg.scene.objects {
+        o.shape.trajectory.position[0].reverse_every_s = None;
+    }
+    let mut sim = Simulator::new(cfg).unwrap();
+    let mut steps_per_second = Vec::new();
+    let mut t = 0.0;
+    while t < 10.0 - 1e-9 {
+        let before = sim.stats().steps;
+        let end = t + 1.0;
+        while t < end - 1e-9 {
+            t = (t + 0.1f64).min(end);
+            sim.next_chunk(t);
+        }
+        steps_per_second.push(sim.stats().steps - before);
+    }
+    let first = steps_per_second[..5].iter().max().copied().unwrap_or(0);
+    let late = steps_per_second[7..].iter().max().copied().unwrap_or(0);
+    assert!(late <= first, "steps per second {steps_per_second:?}");
+}
