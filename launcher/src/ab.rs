@@ -111,13 +111,15 @@ fn read_report(dir: &Path) -> anyhow::Result<Value> {
 }
 
 /// Writes variant B's graph file into `work` and returns its path; `resolver` describes the
-/// binaries.
-fn graph_b(o: &AbOptions, resolver: &crate::resolve::BinaryResolver) -> anyhow::Result<PathBuf> {
+/// binaries, `replaced` are the nodes `--from` replays (which a swap would not reach).
+fn graph_b(
+    o: &AbOptions,
+    resolver: &crate::resolve::BinaryResolver,
+    replaced: &std::collections::BTreeSet<String>,
+) -> anyhow::Result<PathBuf> {
     let file = o.graph.display().to_string();
     let mut text = std::fs::read_to_string(&o.graph).with_context(|| format!("cannot read {file}"))?;
     let describe = |b: &str| resolver.describe(b).map(|(_, d)| d);
-    let graph = crate::run::load_graph(&o.graph, resolver)?;
-    let replaced = crate::replay::upstream(&graph, &o.from)?;
     let mut swapped: Vec<&str> = Vec::new();
     for s in &o.swap {
         let (node, binary) = s
@@ -154,16 +156,16 @@ pub fn ab(o: &AbOptions) -> anyhow::Result<Vec<AbFigure>> {
     // One resolver for the swap and the check, so that each binary is described once.
     let dir = o.graph.parent().map(Path::to_path_buf).unwrap_or_default();
     let resolver = crate::resolve::BinaryResolver::new(&dir);
-    let b_graph = graph_b(o, &resolver)?;
     // Both variants are checked before anything runs: variant B's graph (a swapped binary with
     // other ports or parameters is reported with variant B's file, line and column), every
     // override with the flag it came from, and that what B changes is run, not replayed.
     let mut a = crate::run::load_graph(&o.graph, &resolver)?;
+    let replaced = crate::replay::upstream(&a, &o.from)?;
+    let b_graph = graph_b(o, &resolver, &replaced)?;
     crate::run::apply_overrides_of(&mut a, &o.set, "--set")?;
     let mut b = crate::run::load_graph(&b_graph, &resolver)?;
     crate::run::apply_overrides_of(&mut b, &o.set, "--set")?;
     crate::run::apply_overrides_of(&mut b, &o.set_b, "--set-b")?;
-    let replaced = crate::replay::upstream(&a, &o.from)?;
     crate::replay::refuse_overrides_of_replayed(&replaced, &o.from, &o.set, "--set")?;
     crate::replay::refuse_overrides_of_replayed(&replaced, &o.from, &o.set_b, "--set-b")?;
     let mut rows = Vec::new();

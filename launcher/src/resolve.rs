@@ -85,7 +85,6 @@ impl BinaryResolver {
 /// buffer cannot block it), and after `timeout` ([`DESCRIBE_TIMEOUT`]) its whole process group
 /// is killed (a wrapper script's own children too: killing only the script left them running).
 fn run_describe(path: &Path, timeout: Duration) -> Result<NodeDescription, String> {
-    use std::io::Read;
     use std::os::unix::process::CommandExt;
     let spawn = || {
         Command::new(path)
@@ -108,19 +107,8 @@ fn run_describe(path: &Path, timeout: Duration) -> Result<NodeDescription, Strin
             other => break other.map_err(|e| format!("cannot start {}: {e}", path.display()))?,
         }
     };
-    let reader = |pipe: Option<Box<dyn Read + Send>>| {
-        let (tx, rx) = std::sync::mpsc::channel();
-        std::thread::spawn(move || {
-            let mut buf = Vec::new();
-            if let Some(mut p) = pipe {
-                let _ = p.read_to_end(&mut buf);
-            }
-            let _ = tx.send(buf);
-        });
-        rx
-    };
-    let stdout = reader(child.stdout.take().map(|p| Box::new(p) as Box<dyn Read + Send>));
-    let stderr = reader(child.stderr.take().map(|p| Box::new(p) as Box<dyn Read + Send>));
+    let stdout = read_in_background(child.stdout.take());
+    let stderr = read_in_background(child.stderr.take());
     let start = Instant::now();
     let status = loop {
         match child.try_wait() {
@@ -163,6 +151,21 @@ fn run_describe(path: &Path, timeout: Duration) -> Result<NodeDescription, Strin
     }
     serde_json::from_slice(&out.stdout)
         .map_err(|e| format!("{} --describe printed no valid description: {e}", path.display()))
+}
+
+/// Reads `pipe` to its end on a thread of its own; the bytes arrive on the returned channel.
+fn read_in_background<R: std::io::Read + Send + 'static>(
+    pipe: Option<R>,
+) -> std::sync::mpsc::Receiver<Vec<u8>> {
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let mut buf = Vec::new();
+        if let Some(mut p) = pipe {
+            let _ = p.read_to_end(&mut buf);
+        }
+        let _ = tx.send(buf);
+    });
+    rx
 }
 
 /// Kills `child`'s process group (it was started as its leader) and reaps it.

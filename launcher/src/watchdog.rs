@@ -37,8 +37,9 @@
 //!   [`WatchdogSettings::stall`], the run stops with every node's counters, instead of waiting
 //!   forever. In live mode only once every source has finished (before that a source may
 //!   idle: a camera with nothing to see); a live run hung that way about once in six when a
-//!   slow stage ended on a slice another input had lost (fixed in the joiner since). Receipts do not count: a stalled lock-step graph keeps receiving the
-//!   duplicates its idle producers publish again each second. A node whose heartbeat says it
+//!   slow stage ended on a slice another input had lost (fixed in the joiner since). Receipts
+//!   do not count: a stalled lock-step graph keeps receiving the duplicates its idle producers
+//!   publish again each second. A node whose heartbeat says it
 //!   has been computing one slice ([`Stats::computing_s`]) is named as busy, not as waiting.
 
 use std::collections::{BTreeMap, BTreeSet};

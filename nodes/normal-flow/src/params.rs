@@ -310,7 +310,7 @@ impl PlaneFitParams {
         }
         // (the node's parameter, its value in the parameter's unit, the rule holds, the rule):
         // the error speaks of what the user set (`dt_min_ms=-1`, not `dt_min -0.001`).
-        let (ms, deg) = (1e3, 180.0 / std::f64::consts::PI);
+        let ms = 1e3;
         let checks: [(&'static str, f64, bool, &'static str); 9] = [
             (
                 "check_skip_confidence",
@@ -320,13 +320,13 @@ impl PlaneFitParams {
             ),
             (
                 "check_skip_direction_sd_deg",
-                self.check_skip_direction_sd_rad * deg,
+                self.check_skip_direction_sd_rad.to_degrees(),
                 self.check_skip_direction_sd_rad >= 0.0,
                 ">= 0",
             ),
             (
                 "check_max_angle_deg",
-                self.check_max_angle_rad * deg,
+                self.check_max_angle_rad.to_degrees(),
                 self.check_max_angle_rad > 0.0,
                 "> 0",
             ),
