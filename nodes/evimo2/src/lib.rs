@@ -43,8 +43,8 @@ pub mod writer;
 pub use error::{Evimo2Error, Result};
 pub use meta::{CameraFallback, EVIMO2_IMU_TIME_OFFSET_S, EVIMO2_IMU_TO_CAMERA, FrameTruth, MetaOptions};
 pub use reader::{
-    DepthFrame, DepthReader, EVENTS_T, EventReader, FrameEntry, MAX_TIME_GAP_S, MaskReader, ReadOptions,
-    Sequence, find_sequence_folders,
+    DEFAULT_MAX_TIME_GAP_S, DepthFrame, DepthReader, EVENTS_T, EventReader, FrameEntry, MAX_TIME_GAP_RANGE_S,
+    MaskReader, ReadOptions, Sequence, find_sequence_folders,
 };
 pub use writer::{
     DEFAULT_IMU_TOPIC, MetaForm, SequenceData, SequenceWriter, WriteOptions, write_sequence,

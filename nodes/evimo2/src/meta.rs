@@ -282,6 +282,10 @@ pub struct MetaOptions {
     /// Sensor name for [`CameraInfo::sensor`]. Default: `meta['meta']['evseg_sensor']` if present,
     /// else `"evimo2"`.
     pub sensor: Option<String>,
+    /// Largest time gap, s, of an event from the last one kept before it in the event files
+    /// (not meta: the event reader's, see [`crate::EventReader::open_with_gap`]). Default:
+    /// [`crate::DEFAULT_MAX_TIME_GAP_S`].
+    pub max_time_gap_s: Option<f64>,
 }
 
 /// One ground-truth frame of `meta['frames']`.

@@ -35,14 +35,19 @@ pub const INFO_NPZ: &str = "dataset_info.npz";
 /// EVIMO2 stores object id * this factor in masks.
 pub const MASK_ID_SCALE: u16 = 1000;
 
-/// Largest time difference, seconds, between an event and the last event kept before it (in file
-/// order) for the event to count as part of the recording. An event camera fires continually
-/// (background activity alone gives every pixel events within seconds), so an event stamped
-/// further than this from its predecessors is a corrupt time: it is dropped and counted
+/// Default largest time difference, seconds, between an event and the last event kept before it
+/// (in file order) for the event to count as part of the recording (see
+/// [`EventReader::open_with_gap`]). An event camera fires continually (background activity
+/// alone gives every pixel events within seconds), so an event stamped further than this from
+/// its predecessors is a corrupt time: it is dropped and counted
 /// ([`EventReader::time_outliers`]) instead of opening a gap of millions of empty time slices.
-pub const MAX_TIME_GAP_S: f64 = 10.0;
+pub const DEFAULT_MAX_TIME_GAP_S: f64 = 10.0;
 
-/// Consecutive events beyond [`MAX_TIME_GAP_S`] from the last kept one after which the file is
+/// Allowed values, seconds, of the largest time gap ([`EventReader::open_with_gap`]): from a
+/// millisecond (a slice) to about eleven days (no practical limit).
+pub const MAX_TIME_GAP_RANGE_S: std::ops::RangeInclusive<f64> = 1e-3..=1e6;
+
+/// Consecutive events beyond the largest time gap from the last kept one after which the file is
 /// taken to jump (a clock reset or a shifted block, not a few corrupt values), and reading stops
 /// with an error naming the first of them.
 pub const MAX_CONSECUTIVE_TIME_OUTLIERS: u64 = 10_000;
@@ -145,7 +150,7 @@ fn is_float(d: DType) -> bool {
 ///
 /// Events come in file order. EVIMO2 files are time-sorted, but files in the wild may not be:
 /// a timestamp smaller than the previous one is counted ([`EventReader::non_monotonic`]) and passed
-/// through unchanged. A time that is not finite, or lies more than [`MAX_TIME_GAP_S`] from the
+/// through unchanged. A time that is not finite, or lies more than the largest time gap from the
 /// last event kept before it (the first block's median stands in before the first), is dropped
 /// with its event and counted ([`EventReader::time_outliers`]); a run of more than
 /// [`MAX_CONSECUTIVE_TIME_OUTLIERS`] of them is an error (the times jump).
@@ -175,6 +180,9 @@ pub struct EventReader {
     first_outlier: Option<(u64, f64)>,
     /// Rows read per block when scanning times, see [`DEFAULT_SCAN_BLOCK`].
     scan_block: usize,
+    /// Largest time gap, s, of an event from the last kept one (see
+    /// [`EventReader::open_with_gap`]).
+    max_gap_s: f64,
     buf: Vec<u8>,
 }
 
@@ -190,8 +198,27 @@ impl std::fmt::Debug for EventReader {
 
 impl EventReader {
     /// Opens the three event files of `folder` and checks their dtypes, shapes, sizes and that they
-    /// hold the same number of events.
+    /// hold the same number of events; the largest time gap is [`DEFAULT_MAX_TIME_GAP_S`].
     pub fn open(folder: &Path) -> Result<Self> {
+        Self::open_with_gap(folder, DEFAULT_MAX_TIME_GAP_S)
+    }
+
+    /// [`EventReader::open`] with the largest time gap `max_gap_s` (s, within
+    /// [`MAX_TIME_GAP_RANGE_S`]): an event whose time is not finite or lies further than this
+    /// from the last event kept before it (in file order) is dropped and counted
+    /// ([`EventReader::time_outliers`]). A recording with a real pause longer than the default
+    /// needs a larger value.
+    pub fn open_with_gap(folder: &Path, max_gap_s: f64) -> Result<Self> {
+        if !MAX_TIME_GAP_RANGE_S.contains(&max_gap_s) {
+            return Err(Evimo2Error::invalid(
+                folder.join(EVENTS_T).display().to_string(),
+                format!(
+                    "largest time gap {max_gap_s} s is outside {}..={} s",
+                    MAX_TIME_GAP_RANGE_S.start(),
+                    MAX_TIME_GAP_RANGE_S.end()
+                ),
+            ));
+        }
         let t = Column::open(&folder.join(EVENTS_T), 1, "float64/float32", is_float)?;
         let xy = Column::open(&folder.join(EVENTS_XY), 2, "an integer type", DType::is_integer)?;
         let p = Column::open(&folder.join(EVENTS_P), 1, "a bool, integer or float type", |d| {
@@ -222,6 +249,7 @@ impl EventReader {
             outliers_passed: 0,
             first_outlier: None,
             scan_block: DEFAULT_SCAN_BLOCK,
+            max_gap_s,
             buf: Vec::new(),
         };
         if reader.t.rows > 0 {
@@ -236,6 +264,11 @@ impl EventReader {
             reader.t0 = if earliest.is_finite() { earliest } else { 0.0 };
         }
         Ok(reader)
+    }
+
+    /// The largest time gap, s (see [`EventReader::open_with_gap`]).
+    pub fn max_time_gap_s(&self) -> f64 {
+        self.max_gap_s
     }
 
     /// Sets how many events are read per block while scanning times (default 65 536; min 1).
@@ -268,17 +301,18 @@ impl EventReader {
         self.non_monotonic
     }
 
-    /// Events dropped so far for their time (not finite, or beyond [`MAX_TIME_GAP_S`] from the
+    /// Events dropped so far for their time (not finite, or beyond the largest time gap from the
     /// events before them), with the row and stored time of the first; they are never returned.
     pub fn time_outliers(&self) -> (u64, Option<(u64, f64)>) {
         (self.time_outliers, self.first_outlier)
     }
 
     /// Marks the times of rows `first_row..` (cache entries `from..`) that are not finite or lie
-    /// beyond [`MAX_TIME_GAP_S`] from the last kept event as NaN (dropped by `take`).
+    /// beyond the largest time gap from the last kept event as NaN (dropped by `take`).
     fn screen_times(&mut self, from: usize, first_row: u64) -> Result<()> {
         let block = &self.t_cache[from..];
-        let near = |a: f64, b: f64| (b - a).abs() <= MAX_TIME_GAP_S;
+        let gap = self.max_gap_s;
+        let near = |a: f64, b: f64| (b - a).abs() <= gap;
         // The usual block: every time within the gap of the one before it (the first of the
         // file's: of itself; NaN fails every comparison), all kept. Tested without a carried
         // dependency, so it vectorises.
@@ -336,9 +370,9 @@ impl EventReader {
                 self.t.header.data_offset + start * self.t.row_bytes as u64,
                 format!(
                     "event times jump: from event {start} on, {} events in a row lie more than \
-                     {MAX_TIME_GAP_S} s from the event before them (t = {reference:.6} s); the \
-                     recording is not continuous",
-                    self.consecutive_outliers
+                     {} s (the largest time gap) from the event before them (t = \
+                     {reference:.6} s); the recording is not continuous, or pauses for longer",
+                    self.consecutive_outliers, self.max_gap_s
                 ),
             ));
         }
@@ -746,13 +780,16 @@ pub struct Sequence {
     /// `meta['meta']` has them all. A reader should say so: such a folder was written by a
     /// tool that does not follow the layout to the letter.
     pub camera_fallbacks: Vec<String>,
+    /// Largest time gap, s, of the event reader ([`EventReader::open_with_gap`]).
+    pub max_time_gap_s: f64,
 }
 
 impl Sequence {
     /// Reads `dataset_info.npz` and the first event time.
     pub fn open(folder: &Path, options: &ReadOptions) -> Result<Self> {
         check_sequence_folder(folder)?;
-        let events = EventReader::open(folder)?;
+        let max_time_gap_s = options.max_time_gap_s.unwrap_or(DEFAULT_MAX_TIME_GAP_S);
+        let events = EventReader::open_with_gap(folder, max_time_gap_s)?;
         let t0 = events.t0_s();
         let info_path = folder.join(INFO_NPZ);
         let mut info = NpzReader::open(&info_path)?;
@@ -781,12 +818,14 @@ impl Sequence {
             camera_poses: m.camera_poses,
             frames: m.frames,
             camera_fallbacks: m.camera_fallbacks,
+            max_time_gap_s,
         })
     }
 
-    /// Opens the event files for streaming from the first event.
+    /// Opens the event files for streaming from the first event (with the sequence's largest
+    /// time gap).
     pub fn events(&self) -> Result<EventReader> {
-        EventReader::open(&self.folder)
+        EventReader::open_with_gap(&self.folder, self.max_time_gap_s)
     }
 
     /// Opens `dataset_mask.npz`.

@@ -82,6 +82,7 @@ fn options_override_the_imu_convention() {
         imu_time_offset_s: Some(0.005),
         sensor: Some("x".into()),
         imu_topic: Some("/prophesee/left/imu".into()),
+        max_time_gap_s: None,
     };
     let seq = Sequence::open(dir.path(), &opts).unwrap();
     assert_eq!(seq.camera.imu_to_camera, r);
@@ -227,6 +228,46 @@ fn corrupt_event_times_are_dropped_and_counted_not_a_gap_of_empty_slices() {
                 data.events.p[i]
             ),
             "event {i}"
+        );
+    }
+}
+
+/// A recording that pauses for longer than the default largest gap loses its second part
+/// (counted) unless `max_time_gap_s` covers the pause; a gap outside the allowed range is
+/// refused naming the events file.
+#[test]
+fn a_long_pause_is_kept_with_a_larger_time_gap() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut data = common::sequence();
+    let half = common::N_EVENTS / 2;
+    for t in &mut data.events.t[half..] {
+        *t += 20.0;
+    }
+    write_sequence(dir.path(), &data).unwrap();
+    let read = |gap: Option<f64>| -> evseg_evimo2::Result<(usize, u64)> {
+        let options = ReadOptions {
+            max_time_gap_s: gap,
+            ..Default::default()
+        };
+        let mut r = Sequence::open(dir.path(), &options)?.events()?;
+        let mut n = 0;
+        while let Some(c) = r.next_chunk(333)? {
+            n += c.len();
+        }
+        Ok((n, r.time_outliers().0))
+    };
+    let after = (common::N_EVENTS - half) as u64;
+    assert_eq!(
+        read(None).unwrap(),
+        (half, after),
+        "the default drops the second part"
+    );
+    assert_eq!(read(Some(30.0)).unwrap(), (common::N_EVENTS, 0));
+    for bad in [0.0, -1.0, f64::NAN, 1e9] {
+        let e = read(Some(bad)).unwrap_err().to_string();
+        assert!(
+            e.contains("dataset_events_t.npy") && e.contains("largest time gap"),
+            "{bad}: {e}"
         );
     }
 }

@@ -139,9 +139,9 @@ impl Evimo2Source {
             tracing::warn!(
                 "{}: event {row} has time {t} s, not finite or more than {} s away from the events \
                  around it in the file (a corrupt time, or the file's times jump); such events \
-                 are dropped (counted: event_times_dropped)",
+                 are dropped (counted: event_times_dropped; parameter max_time_gap_s)",
                 self.folder.join(evseg_evimo2::EVENTS_T).display(),
-                evseg_evimo2::MAX_TIME_GAP_S
+                self.events.max_time_gap_s()
             );
         }
         Ok(())

@@ -100,6 +100,21 @@ impl Source for SourceNode {
 }
 
 /// The `reorder_window_ms` parameter in seconds (checked by the source that takes it).
+/// The `max_time_gap_s` parameter, s, checked against [`evseg_evimo2::MAX_TIME_GAP_RANGE_S`].
+fn max_time_gap_s(cfg: &NodeConfig) -> Result<f64, BoxError> {
+    let gap: f64 = cfg.param("max_time_gap_s")?;
+    let range = evseg_evimo2::MAX_TIME_GAP_RANGE_S;
+    if !range.contains(&gap) {
+        return Err(format!(
+            "max_time_gap_s: {gap} s is outside {}..={} s",
+            range.start(),
+            range.end()
+        )
+        .into());
+    }
+    Ok(gap)
+}
+
 fn reorder_window_s(cfg: &NodeConfig) -> Result<f64, BoxError> {
     let ms: f64 = cfg.param("reorder_window_ms")?;
     Ok(ms * 1e-3)
@@ -135,6 +150,7 @@ fn open(cfg: &NodeConfig) -> Result<Box<dyn EventSource>, BoxError> {
                 imu_to_camera: cfg.param_opt("imu_to_camera")?,
                 imu_time_offset_s: cfg.param_opt("imu_time_offset_s")?,
                 sensor: None,
+                max_time_gap_s: Some(max_time_gap_s(cfg)?),
             };
             let path = path_param(cfg)?;
             let mut source = Evimo2Source::open(&path, &options, seconds)?;
@@ -183,6 +199,7 @@ const KIND_PARAMS: &[(&str, &[&str])] = &[
     ("rotation_source", &["evimo2"]),
     ("imu_check", &["evimo2"]),
     ("reorder_window_ms", &["evimo2", "file"]),
+    ("max_time_gap_s", &["evimo2"]),
     ("rate", &["pattern"]),
     ("width", &["pattern"]),
     ("height", &["pattern"]),
@@ -240,6 +257,7 @@ fn description() -> NodeDescription {
     .param("imu_to_camera", serde_json::Value::Null, "evimo2: IMU-to-camera rotation, row-major 9 numbers (default: EVIMO2 convention)")
     .param("imu_time_offset_s", serde_json::Value::Null, "evimo2: IMU time offset, seconds (default: -0.02, EVIMO2 convention)")
     .param("reorder_window_ms", evseg_source::evimo2::DEFAULT_REORDER_WINDOW_S * 1e3, "evimo2, file: how far past each packet's end the input is read, so events stored out of time order still reach their packet, milliseconds (0 = none)")
+    .param("max_time_gap_s", evseg_evimo2::DEFAULT_MAX_TIME_GAP_S, "evimo2: an event stamped further than this from the last event kept before it (in file order) is a corrupt time, dropped and counted (event_times_dropped); raise it for a recording that pauses longer, seconds (0.001..=1e6)")
     .param("rotation_source", "imu", "evimo2: where the stages' camera rotation rate comes from: imu (the folder's IMU, the method's input) or trajectory (the folder's camera trajectory, differentiated: for folders without an IMU; it is the ground truth, so the run is not an IMU run)")
     .param("imu_check", "auto", "evimo2: check the IMU's axes and time offset against the camera trajectory (off, warn, auto = use the mapping that agrees when it was not set explicitly)")
     .param("batch_ms", 10.0, "sensor time per published packet, milliseconds")
