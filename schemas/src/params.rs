@@ -24,6 +24,16 @@ impl ParamError {
     }
 }
 
+/// `v` for a message: as Rust prints it between 1e-4 and 1e9 (and 0), else in exponent form,
+/// so that `1e200` is not printed as a 201-digit number.
+pub fn short_number(v: f64) -> String {
+    if v == 0.0 || !v.is_finite() || (1e-4..1e9).contains(&v.abs()) {
+        v.to_string()
+    } else {
+        format!("{v:e}")
+    }
+}
+
 /// `Ok` when `v` is in [0, 1].
 pub fn unit(name: &'static str, v: f64) -> Result<(), ParamError> {
     if (0.0..=1.0).contains(&v) {
@@ -45,6 +55,15 @@ pub fn finite_non_negative(name: &'static str, v: f64) -> Result<(), ParamError>
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn numbers_in_messages_stay_short() {
+        assert_eq!(short_number(2.5), "2.5");
+        assert_eq!(short_number(0.0), "0");
+        assert_eq!(short_number(1e200), "1e200");
+        assert_eq!(short_number(-3e-300), "-3e-300");
+        assert_eq!(short_number(f64::NAN), "NaN");
+    }
 
     #[test]
     fn ranges_and_message() {

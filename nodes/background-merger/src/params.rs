@@ -250,7 +250,9 @@ impl BackgroundParams {
         unit("flow_direction_min_spread", self.flow_direction_min_spread)?;
         nonneg("svm_c", self.egomotion.svm.c)?;
         nonneg("refine_huber_k", self.egomotion.huber_k)?;
-        nonneg("min_confidence", f64::from(self.min_confidence))?;
+        if let Some(problem) = evseg_geometry::min_confidence_problem(self.min_confidence) {
+            return Err(ParamError::new("min_confidence", self.min_confidence, problem));
+        }
         if self.warp_cell_px == 0 || self.map_cell_px == 0 {
             return Err(ParamError::new("warp_cell_px/map_cell_px", 0, "must be >= 1"));
         }

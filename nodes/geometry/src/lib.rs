@@ -50,6 +50,6 @@ pub use refine::{
     DepthMemory, grid_regions, refine_direction, refine_direction_robust, refine_direction_with_memory,
 };
 pub use rotation::RotationRate;
-pub use samples::{FlowSample, flow_samples, median_length};
+pub use samples::{FlowSample, MIN_CONFIDENCE_RANGE, flow_samples, median_length, min_confidence_problem};
 pub use svm::{SvmDirection, SvmParams, translation_direction};
 pub use translation::TranslationFit;

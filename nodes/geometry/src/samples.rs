@@ -57,6 +57,18 @@ pub fn median_length<'a>(samples: impl IntoIterator<Item = &'a FlowSample>) -> O
 /// The samples of a slice: every event whose flow has confidence above `min_confidence` and a
 /// finite non-zero length, derotated with the rotation `rate` at each event's time when given.
 ///
+/// The values a stage's `min_confidence` may take: flow counts as valid where its confidence
+/// (0..=1; 0 marks no estimate, the `NormalFlow` convention) is above it, so a value below 0
+/// would take flow that has no estimate and one of 1 or more would leave no flow at all.
+pub const MIN_CONFIDENCE_RANGE: std::ops::Range<f32> = 0.0..1.0;
+
+/// The words of a `min_confidence` outside [`MIN_CONFIDENCE_RANGE`], for stages' parameter
+/// errors; `None` when it is inside.
+pub fn min_confidence_problem(value: f32) -> Option<&'static str> {
+    (!MIN_CONFIDENCE_RANGE.contains(&value))
+        .then_some("must be in [0, 1): flow is used where its confidence (0..=1) is above it")
+}
+
 /// Errors when the flow does not fit the events or an event lies outside the table's sensor.
 pub fn flow_samples(
     table: &UndistortTable,
@@ -103,6 +115,19 @@ mod tests {
     use super::*;
     use crate::camera::Camera;
     use evseg_schemas::CameraInfo;
+
+    #[test]
+    fn min_confidence_must_leave_some_flow_and_exclude_flow_without_an_estimate() {
+        for ok in [0.0, 0.5, 0.999] {
+            assert_eq!(min_confidence_problem(ok), None, "{ok}");
+        }
+        for bad in [-0.1, 1.0, 7.0, f32::NAN, f32::INFINITY] {
+            assert!(
+                min_confidence_problem(bad).is_some_and(|w| w.contains("[0, 1)")),
+                "{bad}"
+            );
+        }
+    }
 
     #[test]
     fn each_event_is_derotated_with_the_rate_at_its_own_time() {

@@ -175,12 +175,9 @@ impl HierParams {
             self.egomotion.svm.c > 0.0,
             "must be finite and > 0",
         )?;
-        check(
-            "min_confidence",
-            f64::from(self.min_confidence),
-            true,
-            "must be a number",
-        )?;
+        if let Some(problem) = evseg_geometry::min_confidence_problem(self.min_confidence) {
+            check("min_confidence", f64::from(self.min_confidence), false, problem)?;
+        }
         check(
             "direction_prior_samples",
             self.direction_prior_samples,

@@ -113,8 +113,8 @@ impl Oversegmenter {
         if params.max_samples == 0 {
             return bad("max_samples", "0".into(), "must be positive");
         }
-        if params.min_confidence.is_nan() {
-            return bad("min_confidence", "NaN".into(), "must be a number");
+        if let Some(problem) = evseg_geometry::min_confidence_problem(params.min_confidence) {
+            return bad("min_confidence", params.min_confidence.to_string(), problem);
         }
         Ok(Self {
             params,

@@ -447,8 +447,11 @@ impl PlanarSegmenter {
                 "must be within 1..=10000",
             );
         }
-        if params.min_confidence.is_nan() || params.min_support.is_nan() {
-            return bad("min_confidence/min_support", "NaN".into(), "must be numbers");
+        if let Some(problem) = evseg_geometry::min_confidence_problem(params.min_confidence) {
+            return bad("min_confidence", params.min_confidence.to_string(), problem);
+        }
+        if params.min_support.is_nan() {
+            return bad("min_support", "NaN".into(), "must be a number");
         }
         Ok(Self {
             params,

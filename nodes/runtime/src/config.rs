@@ -170,11 +170,19 @@ impl NodeConfig {
             name: name.to_string(),
             reason: "missing".into(),
         })?;
-        serde_json::from_value(value.clone()).map_err(|e| RuntimeError::Param {
+        let error = |reason: String| RuntimeError::Param {
             node: self.node.clone(),
             name: name.to_string(),
-            reason: format!("{e} (value {value})"),
-        })
+            reason,
+        };
+        // serde converts a number beyond f32's range to infinity without a word.
+        if std::any::type_name::<T>().contains("f32") && exceeds_f32(value) {
+            return Err(error(format!(
+                "{value} is beyond a 32-bit float's range (about +-3.4e38)"
+            )));
+        }
+        serde_json::from_value(value.clone())
+            .map_err(|e| error(format!("{} (value {value})", plain_type_names(&e.to_string()))))
     }
 
     /// True when some node of the graph consumes output `port` (a recorder included): a node
@@ -194,9 +202,82 @@ impl NodeConfig {
     }
 }
 
+/// True when `value` holds a finite number beyond `f32`'s range (anywhere inside it).
+fn exceeds_f32(value: &serde_json::Value) -> bool {
+    match value {
+        serde_json::Value::Number(n) => n
+            .as_f64()
+            .is_some_and(|x| x.is_finite() && x.abs() > f32::MAX as f64),
+        serde_json::Value::Array(a) => a.iter().any(exceeds_f32),
+        serde_json::Value::Object(o) => o.values().any(exceeds_f32),
+        _ => false,
+    }
+}
+
+/// serde's message with Rust's integer and float type names said in words, e.g. "expected
+/// u16" -> "expected a whole number in 0..=65535 (u16)".
+fn plain_type_names(message: &str) -> String {
+    const NAMES: [(&str, &str); 10] = [
+        ("u8", "a whole number in 0..=255"),
+        ("u16", "a whole number in 0..=65535"),
+        ("u32", "a whole number in 0..=4294967295"),
+        ("u64", "a whole number in 0..=18446744073709551615"),
+        ("usize", "a whole number >= 0"),
+        ("i32", "a whole number in -2147483648..=2147483647"),
+        ("i64", "a whole number"),
+        ("f32", "a number"),
+        ("f64", "a number"),
+        ("bool", "true or false"),
+    ];
+    for (rust, words) in NAMES {
+        let from = format!("expected {rust}");
+        // Only the whole word: "expected u16" but not "expected u160".
+        if let Some(at) = message.find(&from)
+            && !message[at + from.len()..].starts_with(|c: char| c.is_ascii_alphanumeric())
+        {
+            return message.replacen(&from, &format!("expected {words} ({rust})"), 1);
+        }
+    }
+    message.to_string()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn parameter_errors_say_the_range_in_words_and_refuse_floats_that_would_be_infinite() {
+        let params = |v: serde_json::Value| {
+            let mut m = serde_json::Map::new();
+            m.insert("x".into(), v);
+            NodeConfig::with_params("planar", m)
+        };
+        let e = params(serde_json::json!(70000))
+            .param::<u16>("x")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("node planar: parameter `x`") && e.contains("a whole number in 0..=65535 (u16)"),
+            "{e}"
+        );
+        let e = params(serde_json::json!(1e30))
+            .param::<u32>("x")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("a whole number in 0..=4294967295 (u32)"), "{e}");
+        let e = params(serde_json::json!(1e300))
+            .param::<f32>("x")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("beyond a 32-bit float's range"), "{e}");
+        let e = params(serde_json::json!([1.0, -1e39]))
+            .param::<Vec<f32>>("x")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("beyond a 32-bit float's range"), "{e}");
+        assert_eq!(params(serde_json::json!(1e300)).param::<f64>("x").unwrap(), 1e300);
+        assert_eq!(params(serde_json::json!(3e38)).param::<f32>("x").unwrap(), 3e38);
+    }
 
     #[test]
     fn an_output_is_read_only_when_it_has_a_consumer() {
