@@ -6,7 +6,7 @@
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum TrackerError {
     /// A parameter is outside its valid range.
-    #[error("parameter {name} = {value} is invalid: {reason}")]
+    #[error("parameter {name} = {} is invalid: {reason}", evseg_schemas::params::short_number(*.value))]
     InvalidParam {
         /// Parameter name (as in [`crate::TrackerParams`] and the node config).
         name: &'static str,

@@ -3,6 +3,16 @@
 
 use crate::error::TrackerError;
 
+/// Largest length parameter of the tracker, pixels (ten times a 1 kpx sensor's width).
+const MAX_PIXELS: f64 = 1e4;
+/// Largest velocity standard deviation, px/s.
+const MAX_SPEED_PX_S: f64 = 1e6;
+/// Largest acceleration standard deviation, px/s^2.
+const MAX_ACCEL_PX_S2: f64 = 1e8;
+/// Largest `split_gap_px / split_cell_px`: the split grouping visits (2 r + 3)^2 cells around
+/// each occupied cell.
+const MAX_SPLIT_REACH_CELLS: f64 = 32.0;
+
 /// How a tracker labels the events of a tentative track (one not yet matched `min_hits` times).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum TentativeEvents {
@@ -428,6 +438,65 @@ impl TrackerParams {
         }
         if self.min_hits == 0 {
             return Err(bad("min_hits", 0.0, "must be at least 1"));
+        }
+        // Upper bounds that keep the filter's variances (squares of these) finite and the
+        // cell search of `split_gap_px` small; each far beyond any sensor's use.
+        let at_most = [
+            (
+                "measurement_std_px",
+                self.measurement_std_px,
+                MAX_PIXELS,
+                "must be at most 1e4 px",
+            ),
+            (
+                "initial_velocity_std_px_s",
+                self.initial_velocity_std_px_s,
+                MAX_SPEED_PX_S,
+                "must be at most 1e6 px/s",
+            ),
+            (
+                "accel_std_px_s2",
+                self.accel_std_px_s2,
+                MAX_ACCEL_PX_S2,
+                "must be at most 1e8 px/s^2",
+            ),
+            (
+                "measurement_std_box_fraction",
+                self.measurement_std_box_fraction,
+                10.0,
+                "must be at most 10 (box sizes)",
+            ),
+            (
+                "max_distance_px",
+                self.max_distance_px,
+                MAX_PIXELS,
+                "must be at most 1e4 px",
+            ),
+            (
+                "merge_gap_px",
+                self.merge_gap_px,
+                MAX_PIXELS,
+                "must be at most 1e4 px",
+            ),
+            (
+                "split_gap_px",
+                self.split_gap_px,
+                MAX_PIXELS,
+                "must be at most 1e4 px",
+            ),
+        ];
+        for (name, v, max, reason) in at_most {
+            if v > max {
+                return Err(bad(name, v, reason));
+            }
+        }
+        if self.split_cell_px > 0 && self.split_gap_px / f64::from(self.split_cell_px) > MAX_SPLIT_REACH_CELLS
+        {
+            return Err(bad(
+                "split_gap_px",
+                self.split_gap_px,
+                "must be at most 32 times split_cell_px (the cells searched around each occupied cell grow with the square of the ratio)",
+            ));
         }
         Ok(())
     }

@@ -630,6 +630,29 @@ fn invalid_parameters_are_refused() {
             split_yield_min_share: f64::NAN,
             ..Default::default()
         },
+        // Finite but so large that the filter's variances overflow (NaN tracks), or the split
+        // grouping's cell search would run for minutes per slice.
+        TrackerParams {
+            accel_std_px_s2: 1e200,
+            ..Default::default()
+        },
+        TrackerParams {
+            initial_velocity_std_px_s: 1e200,
+            ..Default::default()
+        },
+        TrackerParams {
+            measurement_std_box_fraction: 1e300,
+            ..Default::default()
+        },
+        TrackerParams {
+            split_gap_px: 1e30,
+            ..Default::default()
+        },
+        TrackerParams {
+            split_cell_px: 1,
+            split_gap_px: 300.0,
+            ..Default::default()
+        },
     ];
     for p in bad {
         assert!(
@@ -637,6 +660,13 @@ fn invalid_parameters_are_refused() {
             "{p:?} accepted"
         );
     }
+    // The same gap with coarser cells is a small search, and accepted.
+    let coarse = TrackerParams {
+        split_cell_px: 10,
+        split_gap_px: 300.0,
+        ..Default::default()
+    };
+    assert!(Tracker::new(coarse).is_ok());
 }
 
 #[test]

@@ -866,7 +866,8 @@ impl SegmentCells {
     /// corner are 0 apart). Groups in the order of their first member, members sorted; a
     /// segment without cells is a group of its own.
     fn groups(&self, members: &[usize], gap_px: f64) -> Vec<Vec<usize>> {
-        let reach = (gap_px / f64::from(self.cell_px)).ceil() as i64 + 1;
+        // (Saturating: `as` saturates a huge ratio, the + 1 must not wrap.)
+        let reach = ((gap_px / f64::from(self.cell_px)).ceil() as i64).saturating_add(1);
         let mut parent: Vec<usize> = (0..members.len()).collect();
         fn root(parent: &mut [usize], mut a: usize) -> usize {
             while parent[a] != a {
