@@ -87,6 +87,9 @@ impl Default for TruthConfig {
     }
 }
 
+/// Longest sequence the simulator writes, seconds of sensor time (an hour).
+pub const MAX_DURATION_S: f64 = 3600.0;
+
 /// Everything that defines one simulated sequence. A preset ([`crate::preset`]) fills it; any
 /// field can be changed before [`crate::Simulator::new`].
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -130,9 +133,9 @@ impl SceneConfig {
 
     /// Checks every part; the error names the field.
     pub fn validate(&self) -> Result<(), SimError> {
-        if !(self.duration_s.is_finite() && self.duration_s > 0.0 && self.duration_s <= 3600.0) {
+        if !(self.duration_s.is_finite() && self.duration_s > 0.0 && self.duration_s <= MAX_DURATION_S) {
             return Err(SimError::Config(format!(
-                "duration_s = {} must be in (0, 3600]",
+                "duration_s = {} must be in (0, {MAX_DURATION_S}]",
                 self.duration_s
             )));
         }

@@ -50,7 +50,7 @@ pub mod unstable;
 use evseg_schemas::{CameraInfo, Events, ImuSample, Truth};
 
 pub use camera::CameraConfig;
-pub use config::{RenderConfig, SceneConfig, TruthConfig};
+pub use config::{MAX_DURATION_S, RenderConfig, SceneConfig, TruthConfig};
 pub use esim::EsimConfig;
 pub use imu::{IMU_TO_CAMERA, ImuConfig};
 pub use presets::{PRESET_NAMES, preset, scale_contrast};

@@ -40,7 +40,7 @@ pub const SETTINGS: &[(&str, &str)] = &[
     ),
     (
         "camera_motion",
-        "factor on every rate and amplitude of the camera trajectory (0 holds the camera still)",
+        "factor on every rate and amplitude of the camera trajectory, 0..=5 (0 holds the camera still)",
     ),
     (
         "edge_supersampling",
@@ -57,16 +57,37 @@ pub fn setting_names() -> String {
         .join(", ")
 }
 
-/// Changes setting `name` of `cfg` to `value` (see [`SETTINGS`]). Unknown names and values that
-/// are not finite (or, for `hot_pixels`, not a whole number >= 0) are refused here; ranges the
-/// simulator cannot run (a negative threshold, say) are refused by [`crate::Simulator::new`],
-/// which names the field.
+/// Changes setting `name` of `cfg` to `value` (see [`SETTINGS`]). Unknown names, values that
+/// are not finite (or, for `hot_pixels`, not a whole number >= 0), `camera_motion` outside
+/// 0..=[`MAX_CAMERA_MOTION`], and values that leave a valid configuration invalid (a negative
+/// threshold, say: the error names the setting and the field, as [`SceneConfig::validate`]
+/// does) are refused.
 pub fn apply_setting(cfg: &mut SceneConfig, name: &str, value: f64) -> Result<(), SimError> {
     if !value.is_finite() {
         return Err(SimError::Config(format!(
             "setting {name}: value {value} is not a finite number"
         )));
     }
+    // A configuration that was valid must stay so; the error then names the setting, not
+    // only the field it changed (`esim.c_on`).
+    // Changed on a copy, so that a refused setting leaves `cfg` as it was.
+    let was_valid = cfg.validate().is_ok();
+    let mut changed = cfg.clone();
+    set(&mut changed, name, value)?;
+    if was_valid && let Err(e) = changed.validate() {
+        return Err(SimError::Config(format!("setting {name} = {value}: {e}")));
+    }
+    *cfg = changed;
+    Ok(())
+}
+
+/// Largest `camera_motion` factor: five times the presets' motion is already faster than a
+/// hand-held camera; the render steps grow with it (10 took four times as long, 1000 ran for
+/// minutes per packet).
+pub const MAX_CAMERA_MOTION: f64 = 5.0;
+
+/// The change of [`apply_setting`], unchecked against the rest of the configuration.
+fn set(cfg: &mut SceneConfig, name: &str, value: f64) -> Result<(), SimError> {
     let e = &mut cfg.esim;
     match name {
         "contrast" => {
@@ -90,7 +111,14 @@ pub fn apply_setting(cfg: &mut SceneConfig, name: &str, value: f64) -> Result<()
         "gyro_noise_std" => cfg.imu.gyro_noise_std = value,
         "gyro_bias" => cfg.imu.gyro_bias = [value, -value, value],
         "texture_contrast" => crate::scale_contrast(cfg, value),
-        "camera_motion" => scale_camera_motion(&mut cfg.camera_trajectory, value),
+        "camera_motion" => {
+            if !(0.0..=MAX_CAMERA_MOTION).contains(&value) {
+                return Err(SimError::Config(format!(
+                    "setting camera_motion: {value} is outside 0..={MAX_CAMERA_MOTION} (a factor on the presets' camera motion)"
+                )));
+            }
+            scale_camera_motion(&mut cfg.camera_trajectory, value)
+        }
         "edge_supersampling" => {
             if value != 0.0 && value != 1.0 {
                 return Err(SimError::Config(format!(
@@ -175,16 +203,31 @@ mod tests {
             "{err}"
         );
         // A noise rate that would hold hundreds of millions of events per chunk.
-        let mut noisy = preset("one-object", 1).unwrap();
-        apply_setting(&mut noisy, "noise_rate_hz", 1e12).unwrap();
-        let err = crate::Simulator::new(noisy).unwrap_err().to_string();
+        let err = apply_setting(&mut cfg, "noise_rate_hz", 1e12)
+            .unwrap_err()
+            .to_string();
         assert!(
-            err.contains("esim.noise_rate_hz") && err.contains("above"),
+            err.contains("setting noise_rate_hz = 1000000000000")
+                && err.contains("esim.noise_rate_hz")
+                && err.contains("above"),
             "{err}"
         );
-        // Out of the simulator's range: refused when the simulator is built, naming the field.
-        apply_setting(&mut cfg, "contrast", -0.2).unwrap();
-        let err = crate::Simulator::new(cfg).unwrap_err().to_string();
-        assert!(err.contains("esim.c_on"), "{err}");
+        // Out of the simulator's range: named as the setting and as the field it changes.
+        for bad in [0.0, -0.2] {
+            let err = apply_setting(&mut cfg, "contrast", bad).unwrap_err().to_string();
+            assert!(
+                err.contains("setting contrast") && err.contains("esim.c_on"),
+                "{err}"
+            );
+        }
+        // Camera motion that would take minutes per packet.
+        for bad in [-1.0, 1000.0] {
+            let err = apply_setting(&mut cfg, "camera_motion", bad)
+                .unwrap_err()
+                .to_string();
+            assert!(err.contains("camera_motion") && err.contains("0..=5"), "{err}");
+        }
+        // A refused setting leaves the configuration as it was (a valid one).
+        assert!(crate::Simulator::new(cfg).is_ok());
     }
 }

@@ -74,8 +74,10 @@ impl Source for SourceNode {
                 .get_or_insert_with(Instant::now)
                 .elapsed()
                 .as_secs_f64();
-            if due > now {
-                std::thread::sleep(std::time::Duration::from_secs_f64(due - now));
+            if due > now
+                && let Ok(wait) = std::time::Duration::try_from_secs_f64(due - now)
+            {
+                std::thread::sleep(wait);
             }
         }
         self.summary.digest.add(&batch.events);
@@ -185,6 +187,13 @@ fn open(cfg: &NodeConfig) -> Result<Box<dyn EventSource>, BoxError> {
     }
 }
 
+/// Live mode's real-time factors other than 0 (as fast as possible): from a thousandth of real
+/// time (a 3 s sequence then takes 50 minutes) to a thousand times it.
+const SPEED_RANGE: std::ops::RangeInclusive<f64> = 1e-3..=1e3;
+
+/// Most events of one pattern packet (`rate` x `batch_ms`): 10 M events, about 130 MB.
+const MAX_PATTERN_PACKET_EVENTS: f64 = 1e7;
+
 /// Source parameters that only some kinds read. A value other than the default given to any
 /// other kind would be ignored, so the node names it in a warning instead (for example
 /// `rotation_source: trajectory` on a `file` recording, whose rotation still comes from its IMU).
@@ -261,9 +270,9 @@ fn description() -> NodeDescription {
     .param("rotation_source", "imu", "evimo2: where the stages' camera rotation rate comes from: imu (the folder's IMU, the method's input) or trajectory (the folder's camera trajectory, differentiated: for folders without an IMU; it is the ground truth, so the run is not an IMU run)")
     .param("imu_check", "auto", "evimo2: check the IMU's axes and time offset against the camera trajectory (off, warn, auto = use the mapping that agrees when it was not set explicitly)")
     .param("batch_ms", 10.0, "sensor time per published packet, milliseconds")
-    .param("speed", 0.0, "live mode: real-time factor (1 = sensor time), 0 = as fast as possible")
-    .param("seconds", serde_json::Value::Null, "stop after this many seconds of sensor time (simulator: default the preset's length; pattern: default 3 s)")
-    .param("rate", 1.0e6, "pattern: events per second of sensor time")
+    .param("speed", 0.0, "live mode: real-time factor (1 = sensor time), 0 = as fast as possible, else 0.001..=1000")
+    .param("seconds", serde_json::Value::Null, "stop after this many seconds of sensor time (simulator: default the preset's length, at most 3600 s; pattern: default 3 s)")
+    .param("rate", 1.0e6, "pattern: events per second of sensor time (up to 1e8, and at most 1e7 events per packet of batch_ms)")
     .param("width", 640, "pattern: sensor width, pixels")
     .param("height", 480, "pattern: sensor height, pixels")
     .param("seed", 7, "seed (pattern, simulator)")
@@ -289,7 +298,28 @@ fn main() -> ExitCode {
             // Shorter packets flood the graph (10 000 per second of sensor time at 0.1 ms).
             return Err(format!("batch_ms must be within 0.1..=60000 ms, got {batch_ms}").into());
         }
+        if kind == "pattern" {
+            // The pattern allocates a packet's events at once.
+            let rate: f64 = cfg.param("rate")?;
+            let per_packet = rate * batch_ms * 1e-3;
+            if per_packet > MAX_PATTERN_PACKET_EVENTS {
+                return Err(format!(
+                    "rate {rate} events/s x batch_ms {batch_ms} ms is {per_packet:.3e} events per \
+                     packet; at most {MAX_PATTERN_PACKET_EVENTS:.0e} (lower rate or batch_ms)"
+                )
+                .into());
+            }
+        }
         let speed: f64 = cfg.param("speed")?;
+        if !(speed == 0.0 || SPEED_RANGE.contains(&speed)) {
+            return Err(format!(
+                "speed must be 0 (as fast as possible) or within {}..={} (times real time), got {}",
+                SPEED_RANGE.start(),
+                SPEED_RANGE.end(),
+                evseg_schemas::params::short_number(speed)
+            )
+            .into());
+        }
         Ok(SourceNode {
             source: open(cfg)?,
             batch_s: batch_ms * 1e-3,

@@ -39,8 +39,11 @@ pub fn scene_config(
 ) -> Result<evseg_sim::SceneConfig, SourceError> {
     let mut config = preset(scene, seed).map_err(|e| SourceError::Param(e.to_string()))?;
     if let Some(s) = seconds {
-        if !(s.is_finite() && s > 0.0) {
-            return Err(SourceError::Param(format!("seconds must be > 0, got {s}")));
+        if !(s.is_finite() && s > 0.0 && s <= evseg_sim::MAX_DURATION_S) {
+            return Err(SourceError::Param(format!(
+                "seconds must be within (0, {}] for the simulator, got {s}",
+                evseg_sim::MAX_DURATION_S
+            )));
         }
         config.duration_s = s;
     }
