@@ -43,6 +43,9 @@ pub enum SlicerError {
     /// Window length outside [`MIN_WINDOW_S`]..=[`MAX_WINDOW_S`] (or not a number).
     #[error("window must be within {MIN_WINDOW_S}..={MAX_WINDOW_S} s (window_ms 0.1..=60000), got {0} s")]
     Window(f64),
+    /// IMU hold outside 0..=[`MAX_WINDOW_S`] (or not a number).
+    #[error("imu_hold_ms must be within 0..=60000 ms, got {} ms", .0 * 1e3)]
+    ImuHold(f64),
     /// The columns of an event packet have different lengths.
     #[error("event packet columns have different lengths")]
     Columns,
@@ -92,6 +95,9 @@ impl Slicer {
     pub fn new(params: SlicerParams) -> Result<Self, SlicerError> {
         if !(MIN_WINDOW_S..=MAX_WINDOW_S).contains(&params.window_s) {
             return Err(SlicerError::Window(params.window_s));
+        }
+        if !(0.0..=MAX_WINDOW_S).contains(&params.imu_hold_s) {
+            return Err(SlicerError::ImuHold(params.imu_hold_s));
         }
         Ok(Self {
             params,
@@ -405,6 +411,15 @@ mod tests {
             .unwrap_err()
             .to_string();
             assert!(e.contains("window_ms 0.1..=60000"), "{e}");
+        }
+        for imu_hold_s in [-0.001, f64::NAN, 1e9] {
+            let e = Slicer::new(SlicerParams {
+                imu_hold_s,
+                ..Default::default()
+            })
+            .unwrap_err()
+            .to_string();
+            assert!(e.contains("imu_hold_ms must be within 0..=60000 ms"), "{e}");
         }
         for window_s in [MIN_WINDOW_S, MAX_WINDOW_S] {
             assert!(

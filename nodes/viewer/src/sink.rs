@@ -41,10 +41,73 @@ pub fn open(sink: &Sink, recording_name: &str) -> Result<RecordingStream, ViewEr
             }
             builder.save(path)
         }
-        Sink::Grpc(url) => builder.connect_grpc_opts(url.clone()),
+        Sink::Grpc(url) => {
+            probe(url)?;
+            builder.connect_grpc_opts(url.clone())
+        }
     };
     opened.map_err(|source| ViewError::Open {
         sink: sink.to_string(),
         source,
     })
+}
+
+/// How long [`probe`] waits for a viewer's port to accept a connection.
+const PROBE_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(3);
+
+/// Checks that something accepts TCP connections at the host and port of viewer URL `url`
+/// (`rerun+http://HOST:PORT/proxy`). Rerun's stream connects lazily and buffers while it
+/// cannot, so without this a run to a viewer that is not there would stall its lock-step graph
+/// with no word of the URL.
+fn probe(url: &str) -> Result<(), ViewError> {
+    use std::net::{TcpStream, ToSocketAddrs};
+    let bad = |reason: String| ViewError::Param {
+        name: "connect".into(),
+        reason,
+    };
+    let rest = url.split_once("://").map_or(url, |(_, rest)| rest);
+    let authority = rest.split('/').next().unwrap_or_default();
+    if authority.is_empty() {
+        return Err(bad(format!("{url} names no host and port")));
+    }
+    // A URL without a port is Rerun's to refuse (it has its own defaults).
+    let Ok(addrs) = authority.to_socket_addrs() else {
+        return Ok(());
+    };
+    let mut last = None;
+    for addr in addrs {
+        match TcpStream::connect_timeout(&addr, PROBE_TIMEOUT) {
+            Ok(_) => return Ok(()),
+            Err(e) => last = Some(format!("{addr}: {e}")),
+        }
+    }
+    Err(bad(format!(
+        "cannot reach {url} ({}); start a Rerun viewer there first (`rerun` serves rerun+http://127.0.0.1:9876/proxy)",
+        last.unwrap_or_else(|| format!("{authority} resolves to no address"))
+    )))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_viewer_url_nobody_listens_on_is_refused_naming_it() {
+        // A port that was free a moment ago: nobody listens there.
+        let port = std::net::TcpListener::bind("127.0.0.1:0")
+            .and_then(|l| l.local_addr())
+            .map(|a| a.port())
+            .unwrap();
+        let url = format!("rerun+http://127.0.0.1:{port}/proxy");
+        let e = probe(&url).unwrap_err().to_string();
+        assert!(
+            e.contains("connect") && e.contains(&url) && e.contains("cannot reach"),
+            "{e}"
+        );
+        // One that listens passes.
+        let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+        let port = listener.local_addr().unwrap().port();
+        probe(&format!("rerun+http://127.0.0.1:{port}/proxy")).unwrap();
+        assert!(probe("rerun+http:///proxy").is_err());
+    }
 }
