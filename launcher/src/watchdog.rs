@@ -27,7 +27,8 @@
 //!   `evseg bench pipeline`: the evaluator (or six consumers) never received the slicer's
 //!   frames while they received the other producers' (`docs/speed-history.md`, session 40).
 //!   Nothing is lost here either: a node acknowledges a frame only once it has processed it.
-//!   Twice the limit leaves room for a slow first slice in a debug build. A producer whose
+//!   Twice the limit leaves room for a slow first slice in a debug build; a node whose
+//!   heartbeat says it is computing ([`Stats::computing_s`]) is not judged by this rule. A producer whose
 //!   own stats have not arrived (or are stale) counts as having published when a node
 //!   downstream of it has published, since no lock-step node publishes before all of its
 //!   inputs' producers have (in both stalls the launcher had the slicer's stats from before
@@ -228,7 +229,13 @@ impl Watchdog {
             None
         } else if own.received == 0 {
             Some(Starving::NothingReceived)
-        } else if seen.lockstep && own.processed == 0 && fed.len() == producers.len() {
+        } else if seen.lockstep
+            && own.processed == 0
+            && fed.len() == producers.len()
+            && own.computing_s.is_none()
+        {
+            // (A node whose heartbeat says it is computing has its first slice: it is busy,
+            // not missing an input; restarting it would only start that slice again.)
             Some(Starving::NothingProcessed)
         } else {
             None
@@ -636,6 +643,17 @@ mod tests {
         w.check(t0, &nodes, &all, &st, false);
         assert!(
             w.check(t0 + Duration::from_secs(100), &nodes, &all, &st, false)
+                .is_empty()
+        );
+        // Not while its heartbeat says it is computing its first slice (a slow parameter).
+        let mut busy = st.clone();
+        if let Some(e) = busy.get_mut("eval") {
+            e.computing_s = Some(35.0);
+        }
+        let mut w = Watchdog::new(settings(), t0);
+        w.check(t0, &nodes, &all, &busy, true);
+        assert!(
+            w.check(t0 + Duration::from_secs(100), &nodes, &all, &busy, true)
                 .is_empty()
         );
         let mut done = st.clone();
