@@ -285,7 +285,9 @@ mod tests {
         o.settings = vec![("contrast".into(), -1.0)];
         let e = format!("{:#}", bench(&o).unwrap_err());
         assert!(
-            e.contains("with the settings given") && e.contains("c_on = -1"),
+            e.contains("preset `one-object`")
+                && e.contains("setting contrast = -1")
+                && e.contains("c_on = -1"),
             "{e}"
         );
         o.settings.clear();

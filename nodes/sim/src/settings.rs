@@ -75,7 +75,11 @@ pub fn apply_setting(cfg: &mut SceneConfig, name: &str, value: f64) -> Result<()
     let mut changed = cfg.clone();
     set(&mut changed, name, value)?;
     if was_valid && let Err(e) = changed.validate() {
-        return Err(SimError::Config(format!("setting {name} = {value}: {e}")));
+        let what = match e {
+            SimError::Config(m) => m,
+            other => other.to_string(),
+        };
+        return Err(SimError::Config(format!("setting {name} = {value}: {what}")));
     }
     *cfg = changed;
     Ok(())
