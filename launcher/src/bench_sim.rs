@@ -11,7 +11,7 @@
 use std::path::PathBuf;
 
 use anyhow::Context;
-use evseg_sim::throughput::{Timing, time_simulation};
+use evseg_sim::throughput::{Timing, reference_rate, time_simulation};
 
 use crate::spread::median_and_range;
 
@@ -91,6 +91,10 @@ pub struct SimBench {
     pub cpu_time: bool,
     /// One row per preset.
     pub rows: Vec<SimBenchRow>,
+    /// [`reference_rate`] before every run, in the order run (million iterations per CPU
+    /// second): the machine's own speed at that moment, to compare benchmarks of different
+    /// hours.
+    pub reference_m_per_s: Vec<f64>,
 }
 
 /// The processor's model name, from `/proc/cpuinfo` (Linux), or "unknown".
@@ -145,8 +149,10 @@ pub fn bench(options: &SimBenchOptions) -> anyhow::Result<SimBench> {
     // every run.
     std::fs::create_dir_all(&options.work)
         .with_context(|| format!("cannot create the working folder {}", options.work.display()))?;
+    let mut reference_m_per_s = Vec::new();
     for run in 1..=options.runs {
         for (row, cfg) in rows.iter_mut().zip(&configs) {
+            reference_m_per_s.push(reference_rate());
             let (_, timing) = time_simulation(cfg.clone(), options.seconds, |_| {})
                 .with_context(|| format!("simulating preset `{}`", row.scene))?;
             eprintln!(
@@ -170,6 +176,7 @@ pub fn bench(options: &SimBenchOptions) -> anyhow::Result<SimBench> {
         logical_cpus: std::thread::available_parallelism().map_or(1, usize::from),
         cpu_time,
         rows,
+        reference_m_per_s,
     })
 }
 
@@ -191,6 +198,14 @@ pub fn markdown(b: &SimBench) -> String {
          least 1.00 (real time) on one core.\n\n",
         b.seconds, b.seed, b.cpu, b.logical_cpus
     );
+    if let Some((median, lo, hi)) = median_and_range(&b.reference_m_per_s) {
+        out.push_str(&format!(
+            "Machine reference before each run (`evseg_sim::throughput::reference_rate`, a fixed \
+             loop shaped like the simulator's, independent of its code): {median:.1} M iterations \
+             per {per}-s, median ({lo:.1}-{hi:.1}). On a shared host it moves with the hour; \
+             compare benchmarks of different hours by it.\n\n"
+        ));
+    }
     out.push_str(&format!(
         "| preset | sensor | M events / sensor-s | sensor-s per {per}-s, median | lowest | highest | M events per {per}-s | real time |\n"
     ));
@@ -253,8 +268,13 @@ mod tests {
                     runs: vec![timing(4_000_000, 2.5), timing(4_000_000, 4.0)],
                 },
             ],
+            reference_m_per_s: vec![80.0, 100.0, 90.0, 70.0, 95.0],
         };
         let md = markdown(&b);
+        assert!(
+            md.contains("90.0 M iterations per CPU-s, median (70.0-100.0)"),
+            "{md}"
+        );
         assert!(md.contains("settings contrast=0.3"), "{md}");
         assert!(md.contains("Test CPU (2 logical CPUs)"), "{md}");
         // 2 s in 1.6 s of CPU is 1.25; lowest 2 / 2.5, highest 2 / 1.0; 2 M events per 1.6 s.

@@ -98,9 +98,50 @@ pub fn time_simulation(
     ))
 }
 
+/// Iterations of [`reference_rate`]'s loop: about 0.25 s on a 2020s server core, so that the
+/// thread CPU clock's granularity (a scheduler tick, 4 ms here) stays under 2 %.
+const REFERENCE_ITERATIONS: u32 = 50_000_000;
+/// Entries of [`reference_rate`]'s table (256 KiB of f32: in a core's L2 cache, as the
+/// simulator's hot texture texels are).
+const REFERENCE_TABLE: usize = 1 << 16;
+
+/// This machine's speed at a fixed piece of work shaped like the simulator's inner loops (a
+/// table lookup, a square root, a division, dependent float arithmetic), in million iterations
+/// per CPU second of the calling thread (per wall second where thread CPU time is not
+/// available). It does not depend on the simulator's code, so two benchmarks of the same code
+/// at different hours can be compared: a shared host whose other tenants slow its cores slows
+/// this figure as much as the simulator's.
+pub fn reference_rate() -> f64 {
+    let table: Vec<f32> = (0..REFERENCE_TABLE)
+        .map(|i| 1.0 + (i % 97) as f32 * 0.01)
+        .collect();
+    let (cpu0, wall0) = (thread_cpu_seconds(), Instant::now());
+    let mut state = 0x9e37_79b9u32;
+    let mut acc = 0.0f32;
+    for _ in 0..REFERENCE_ITERATIONS {
+        state ^= state << 13;
+        state ^= state >> 17;
+        state ^= state << 5;
+        let v = table[state as usize % REFERENCE_TABLE];
+        acc = (acc * 0.5 + v.sqrt() / (v + acc.abs() + 1.0)).min(1e6);
+    }
+    std::hint::black_box(acc);
+    let seconds = match (cpu0, thread_cpu_seconds()) {
+        (Some(a), Some(b)) if b > a => b - a,
+        _ => wall0.elapsed().as_secs_f64(),
+    };
+    f64::from(REFERENCE_ITERATIONS) / seconds.max(1e-9) / 1e6
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_reference_rate_is_a_positive_finite_figure() {
+        let r = reference_rate();
+        assert!(r.is_finite() && r > 0.0, "{r}");
+    }
 
     #[test]
     fn a_short_run_is_timed_and_counts_every_event() {
