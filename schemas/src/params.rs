@@ -14,13 +14,15 @@ pub struct ParamError {
 }
 
 impl ParamError {
-    /// The error for `name` with `value` and the rule `why`.
+    /// The error for `name` with `value` and the rule `why` (a number that would print as a
+    /// long string of digits, such as 1e200, is given in exponent form: [`short_number`]).
     pub fn new(name: &'static str, value: impl ToString, why: &'static str) -> Self {
-        Self {
-            name,
-            value: value.to_string(),
-            why,
-        }
+        let text = value.to_string();
+        let value = match text.parse::<f64>() {
+            Ok(v) if text.len() > 16 => short_number(v),
+            _ => text,
+        };
+        Self { name, value, why }
     }
 }
 
@@ -63,6 +65,12 @@ mod tests {
         assert_eq!(short_number(1e200), "1e200");
         assert_eq!(short_number(-3e-300), "-3e-300");
         assert_eq!(short_number(f64::NAN), "NaN");
+        assert_eq!(
+            ParamError::new("lambda", 1e200, "must be at most 1").to_string(),
+            "parameter lambda = 1e200 is invalid: must be at most 1"
+        );
+        assert_eq!(ParamError::new("k", 0.25, "x").value, "0.25");
+        assert_eq!(ParamError::new("k", "abc", "x").value, "abc");
     }
 
     #[test]
