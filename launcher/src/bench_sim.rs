@@ -11,7 +11,7 @@
 use std::path::PathBuf;
 
 use anyhow::Context;
-use evseg_sim::throughput::{Timing, reference_rate, time_simulation};
+use evseg_sim::throughput::{Timing, reference_memory_gb_s, reference_rate, time_simulation};
 
 use crate::spread::median_and_range;
 
@@ -95,6 +95,10 @@ pub struct SimBench {
     /// second): the machine's own speed at that moment, to compare benchmarks of different
     /// hours.
     pub reference_m_per_s: Vec<f64>,
+    /// [`reference_memory_gb_s`] before every run, in the order run (GB per CPU second): the
+    /// memory's speed at that moment, which the simulator's key frames depend on and the
+    /// in-cache reference does not see.
+    pub memory_gb_per_s: Vec<f64>,
 }
 
 /// The processor's model name, from `/proc/cpuinfo` (Linux), or "unknown".
@@ -149,10 +153,11 @@ pub fn bench(options: &SimBenchOptions) -> anyhow::Result<SimBench> {
     // every run.
     std::fs::create_dir_all(&options.work)
         .with_context(|| format!("cannot create the working folder {}", options.work.display()))?;
-    let mut reference_m_per_s = Vec::new();
+    let (mut reference_m_per_s, mut memory_gb_per_s) = (Vec::new(), Vec::new());
     for run in 1..=options.runs {
         for (row, cfg) in rows.iter_mut().zip(&configs) {
             reference_m_per_s.push(reference_rate());
+            memory_gb_per_s.push(reference_memory_gb_s());
             let (_, timing) = time_simulation(cfg.clone(), options.seconds, |_| {})
                 .with_context(|| format!("simulating preset `{}`", row.scene))?;
             eprintln!(
@@ -177,6 +182,7 @@ pub fn bench(options: &SimBenchOptions) -> anyhow::Result<SimBench> {
         cpu_time,
         rows,
         reference_m_per_s,
+        memory_gb_per_s,
     })
 }
 
@@ -198,12 +204,16 @@ pub fn markdown(b: &SimBench) -> String {
          least 1.00 (real time) on one core.\n\n",
         b.seconds, b.seed, b.cpu, b.logical_cpus
     );
-    if let Some((median, lo, hi)) = median_and_range(&b.reference_m_per_s) {
+    if let (Some((median, lo, hi)), Some((mm, mlo, mhi))) = (
+        median_and_range(&b.reference_m_per_s),
+        median_and_range(&b.memory_gb_per_s),
+    ) {
         out.push_str(&format!(
-            "Machine reference before each run (`evseg_sim::throughput::reference_rate`, a fixed \
-             loop shaped like the simulator's, independent of its code): {median:.1} M iterations \
-             per {per}-s, median ({lo:.1}-{hi:.1}). On a shared host it moves with the hour; \
-             compare benchmarks of different hours by it.\n\n"
+            "Machine references before each run, independent of the simulator's code (compare \
+             benchmarks of different hours by them): a loop shaped like the simulator's, in a \
+             core's cache (`evseg_sim::throughput::reference_rate`), {median:.1} M iterations per \
+             {per}-s, median ({lo:.1}-{hi:.1}); passes over 64 MiB of memory \
+             (`reference_memory_gb_s`), {mm:.2} GB per {per}-s ({mlo:.2}-{mhi:.2}).\n\n"
         ));
     }
     out.push_str(&format!(
@@ -269,12 +279,14 @@ mod tests {
                 },
             ],
             reference_m_per_s: vec![80.0, 100.0, 90.0, 70.0, 95.0],
+            memory_gb_per_s: vec![9.0, 10.0, 11.0, 8.0, 12.0],
         };
         let md = markdown(&b);
         assert!(
             md.contains("90.0 M iterations per CPU-s, median (70.0-100.0)"),
             "{md}"
         );
+        assert!(md.contains("10.00 GB per CPU-s (8.00-12.00)"), "{md}");
         assert!(md.contains("settings contrast=0.3"), "{md}");
         assert!(md.contains("Test CPU (2 logical CPUs)"), "{md}");
         // 2 s in 1.6 s of CPU is 1.25; lowest 2 / 2.5, highest 2 / 1.0; 2 M events per 1.6 s.

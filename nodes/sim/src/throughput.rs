@@ -133,6 +133,37 @@ pub fn reference_rate() -> f64 {
     f64::from(REFERENCE_ITERATIONS) / seconds.max(1e-9) / 1e6
 }
 
+/// Bytes of [`reference_memory_gb_s`]'s buffer: 64 MiB, twice the L3 cache of this kind of
+/// server, as the simulator's per-pixel arrays and key frames (about 23 MB) are streamed
+/// through memory at every key frame.
+const REFERENCE_BUFFER_BYTES: usize = 64 << 20;
+/// Passes of [`reference_memory_gb_s`] over its buffer: about 0.15 s, so that the thread CPU
+/// clock's granularity (4 ms here) stays under 3 %.
+const REFERENCE_PASSES: usize = 48;
+
+/// This machine's memory speed at the moment: GB per CPU second (per wall second where thread
+/// CPU time is not available) of read-modify-write passes over a buffer larger than the
+/// caches. [`reference_rate`] stays in a core's own cache, so a host whose other tenants take
+/// the shared cache and memory slows the simulator without slowing it; this figure shows that
+/// case.
+pub fn reference_memory_gb_s() -> f64 {
+    let mut buffer = vec![1.0f32; REFERENCE_BUFFER_BYTES / 4];
+    let (cpu0, wall0) = (thread_cpu_seconds(), Instant::now());
+    for pass in 0..REFERENCE_PASSES {
+        let k = 1.0 + pass as f32 * 1e-3;
+        for v in &mut buffer {
+            *v = *v * k + 1e-3;
+        }
+        std::hint::black_box(&mut buffer);
+    }
+    let seconds = match (cpu0, thread_cpu_seconds()) {
+        (Some(a), Some(b)) if b > a => b - a,
+        _ => wall0.elapsed().as_secs_f64(),
+    };
+    // Each pass reads and writes the buffer.
+    (2 * REFERENCE_PASSES * REFERENCE_BUFFER_BYTES) as f64 / seconds.max(1e-9) / 1e9
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -141,6 +172,8 @@ mod tests {
     fn the_reference_rate_is_a_positive_finite_figure() {
         let r = reference_rate();
         assert!(r.is_finite() && r > 0.0, "{r}");
+        let m = reference_memory_gb_s();
+        assert!(m.is_finite() && m > 0.0, "{m}");
     }
 
     #[test]
