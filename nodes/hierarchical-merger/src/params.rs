@@ -176,7 +176,7 @@ impl HierParams {
             "must be finite and > 0",
         )?;
         if let Some(problem) = evseg_geometry::min_confidence_problem(self.min_confidence) {
-            check("min_confidence", f64::from(self.min_confidence), false, problem)?;
+            return Err(ParamError::new("min_confidence", self.min_confidence, problem));
         }
         check(
             "direction_prior_samples",

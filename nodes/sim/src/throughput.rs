@@ -115,22 +115,31 @@ pub fn reference_rate() -> f64 {
     let table: Vec<f32> = (0..REFERENCE_TABLE)
         .map(|i| 1.0 + (i % 97) as f32 * 0.01)
         .collect();
+    let seconds = seconds_to_run(|| {
+        let mut state = 0x9e37_79b9u32;
+        let mut acc = 0.0f32;
+        for _ in 0..REFERENCE_ITERATIONS {
+            state ^= state << 13;
+            state ^= state >> 17;
+            state ^= state << 5;
+            let v = table[state as usize % REFERENCE_TABLE];
+            acc = (acc * 0.5 + v.sqrt() / (v + acc.abs() + 1.0)).min(1e6);
+        }
+        std::hint::black_box(acc);
+    });
+    f64::from(REFERENCE_ITERATIONS) / seconds / 1e6
+}
+
+/// Seconds `work` takes: the calling thread's CPU time ([`thread_cpu_seconds`]), or wall time
+/// where that is not available or did not advance; at least 1 ns (the references divide by it).
+fn seconds_to_run(work: impl FnOnce()) -> f64 {
     let (cpu0, wall0) = (thread_cpu_seconds(), Instant::now());
-    let mut state = 0x9e37_79b9u32;
-    let mut acc = 0.0f32;
-    for _ in 0..REFERENCE_ITERATIONS {
-        state ^= state << 13;
-        state ^= state >> 17;
-        state ^= state << 5;
-        let v = table[state as usize % REFERENCE_TABLE];
-        acc = (acc * 0.5 + v.sqrt() / (v + acc.abs() + 1.0)).min(1e6);
-    }
-    std::hint::black_box(acc);
+    work();
     let seconds = match (cpu0, thread_cpu_seconds()) {
         (Some(a), Some(b)) if b > a => b - a,
         _ => wall0.elapsed().as_secs_f64(),
     };
-    f64::from(REFERENCE_ITERATIONS) / seconds.max(1e-9) / 1e6
+    seconds.max(1e-9)
 }
 
 /// Bytes of [`reference_memory_gb_s`]'s buffer: 64 MiB, twice the L3 cache of this kind of
@@ -148,20 +157,17 @@ const REFERENCE_PASSES: usize = 48;
 /// case.
 pub fn reference_memory_gb_s() -> f64 {
     let mut buffer = vec![1.0f32; REFERENCE_BUFFER_BYTES / 4];
-    let (cpu0, wall0) = (thread_cpu_seconds(), Instant::now());
-    for pass in 0..REFERENCE_PASSES {
-        let k = 1.0 + pass as f32 * 1e-3;
-        for v in &mut buffer {
-            *v = *v * k + 1e-3;
+    let seconds = seconds_to_run(|| {
+        for pass in 0..REFERENCE_PASSES {
+            let k = 1.0 + pass as f32 * 1e-3;
+            for v in &mut buffer {
+                *v = *v * k + 1e-3;
+            }
+            std::hint::black_box(&mut buffer);
         }
-        std::hint::black_box(&mut buffer);
-    }
-    let seconds = match (cpu0, thread_cpu_seconds()) {
-        (Some(a), Some(b)) if b > a => b - a,
-        _ => wall0.elapsed().as_secs_f64(),
-    };
+    });
     // Each pass reads and writes the buffer.
-    (2 * REFERENCE_PASSES * REFERENCE_BUFFER_BYTES) as f64 / seconds.max(1e-9) / 1e9
+    (2 * REFERENCE_PASSES * REFERENCE_BUFFER_BYTES) as f64 / seconds / 1e9
 }
 
 #[cfg(test)]

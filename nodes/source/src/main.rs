@@ -101,7 +101,6 @@ impl Source for SourceNode {
     }
 }
 
-/// The `reorder_window_ms` parameter in seconds (checked by the source that takes it).
 /// The `max_time_gap_s` parameter, s, checked against [`evseg_evimo2::MAX_TIME_GAP_RANGE_S`].
 fn max_time_gap_s(cfg: &NodeConfig) -> Result<f64, BoxError> {
     let gap: f64 = cfg.param("max_time_gap_s")?;
@@ -117,6 +116,7 @@ fn max_time_gap_s(cfg: &NodeConfig) -> Result<f64, BoxError> {
     Ok(gap)
 }
 
+/// The `reorder_window_ms` parameter in seconds (checked by the source that takes it).
 fn reorder_window_s(cfg: &NodeConfig) -> Result<f64, BoxError> {
     let ms: f64 = cfg.param("reorder_window_ms")?;
     Ok(ms * 1e-3)
