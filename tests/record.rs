@@ -279,9 +279,20 @@ fn the_record_section_of_the_graph_selects_outputs_and_writes_into_the_run_folde
     let r = run(
         dir.path(),
         "section",
-        "record: { path: rec/out.mcap, outputs: [segmenter/tracks, evaluator/metrics] }\n",
+        "record: { path: rec/out.mcap, outputs: [segmenter/tracks, evaluator/metrics], \
+         chunk_bytes: 4096, zstd_level: 9 }\n",
         &[],
     );
+    // The writer settings reach the recorder as parameters.
+    let started = read_json(&r.out.join("graph.started.json"));
+    let recorder = started["nodes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|n| n["id"] == "recorder")
+        .unwrap();
+    assert_eq!(recorder["params"]["chunk_bytes"], 4096, "{recorder}");
+    assert_eq!(recorder["params"]["zstd_level"], 9, "{recorder}");
     let file = r.out.join("rec/out.mcap");
     let mut counts = BTreeMap::new();
     let text = evseg_recorder_read(&file, &mut counts);

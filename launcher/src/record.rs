@@ -5,7 +5,7 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
-use evseg_graph::{Consumer, Graph, InputSpec, NodeSpec, RestartPolicy};
+use evseg_graph::{Consumer, Graph, InputSpec, NodeSpec, RecordSpec, RestartPolicy};
 
 /// Binary of the recorder node.
 pub const RECORDER_BINARY: &str = "evseg-recorder";
@@ -35,16 +35,19 @@ pub fn recording_path(cli: Option<&Path>, graph: &Graph, run_dir: &Path) -> anyh
     Ok(Some(path))
 }
 
-/// `graph` with a recorder node on `machine` writing `path`, consuming `outputs` (`node/output`;
-/// empty = every published output). `metadata` is stored in the recording as the run's facts.
-/// Returns the new graph and the recorder's node id.
+/// `graph` with a recorder node on `machine` writing `path`, consuming `record.outputs`
+/// (`node/output`; empty = every published output), with `record`'s writer settings (chunk
+/// size, zstd level) as its parameters where given (`record.path` is not used: `path` is the
+/// file). `metadata` is stored in the recording as the run's facts. Returns the new graph and
+/// the recorder's node id.
 pub fn add_recorder(
     graph: &Graph,
     path: &Path,
-    outputs: &[String],
+    record: &RecordSpec,
     machine: &str,
     metadata: serde_json::Map<String, serde_json::Value>,
 ) -> anyhow::Result<(Graph, String)> {
+    let outputs = &record.outputs;
     let mut g = graph.clone();
     let mut id = RECORDER_ID.to_string();
     let mut k = 1;
@@ -98,6 +101,12 @@ pub fn add_recorder(
     let mut params = serde_json::Map::new();
     params.insert("path".into(), path.display().to_string().into());
     params.insert("metadata".into(), serde_json::Value::Object(metadata));
+    if let Some(b) = record.chunk_bytes {
+        params.insert("chunk_bytes".into(), b.into());
+    }
+    if let Some(z) = record.zstd_level {
+        params.insert("zstd_level".into(), z.into());
+    }
     g.nodes.push(NodeSpec {
         id: id.clone(),
         binary: RECORDER_BINARY.into(),
@@ -143,7 +152,7 @@ mod tests {
         let (g, id) = add_recorder(
             &graph(),
             Path::new("/tmp/r.mcap"),
-            &[],
+            &RecordSpec::default(),
             "local",
             Default::default(),
         )
@@ -170,17 +179,27 @@ mod tests {
         let (g, id) = add_recorder(
             &graph(),
             Path::new("r.mcap"),
-            &["slicer/slices".into()],
+            &RecordSpec {
+                outputs: vec!["slicer/slices".into()],
+                zstd_level: Some(9),
+                ..Default::default()
+            },
             "local",
             Default::default(),
         )
         .unwrap();
         assert_eq!(g.node(&id).unwrap().inputs.len(), 1);
+        // The writer settings given, and only those, become the recorder's parameters.
+        assert_eq!(g.node(&id).unwrap().params["zstd_level"], 9);
+        assert!(!g.node(&id).unwrap().params.contains_key("chunk_bytes"));
         assert_eq!(g.node("source").unwrap().outputs[0].consumers.len(), 1);
         let err = add_recorder(
             &graph(),
             Path::new("r"),
-            &["slicer/nope".into()],
+            &RecordSpec {
+                outputs: vec!["slicer/nope".into()],
+                ..Default::default()
+            },
             "local",
             Default::default(),
         )

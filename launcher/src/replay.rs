@@ -594,7 +594,7 @@ mod tests {
         let (with_rec, rec) = crate::record::add_recorder(
             &g,
             std::path::Path::new("/x.mcap"),
-            &[],
+            &evseg_graph::RecordSpec::default(),
             "local",
             Default::default(),
         )

@@ -354,13 +354,10 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
         } else {
             graph.machines[0].name.clone()
         };
-        let outputs = graph
-            .record
-            .as_ref()
-            .map(|r| r.outputs.clone())
-            .unwrap_or_default();
+        // The section's outputs and writer settings also apply with `--record`.
+        let record = graph.record.clone().unwrap_or_default();
         let metadata = run_metadata(&graph, &opts.graph, &machine.name);
-        let (with_recorder, id) = crate::record::add_recorder(&graph, path, &outputs, &on, metadata)?;
+        let (with_recorder, id) = crate::record::add_recorder(&graph, path, &record, &on, metadata)?;
         graph = with_recorder;
         if on == machine.name {
             recorder_here = Some(path.clone());

@@ -26,6 +26,7 @@ pub mod digest;
 pub mod keys;
 pub mod messages;
 pub mod params;
+pub mod recording;
 
 pub use codec::{CodecError, Envelope, Frame, FrameKind, Message, decode, decode_header, encode, encode_end};
 pub use messages::*;

@@ -165,6 +165,8 @@ fn check_record(
     Some(RecordSpec {
         path: path.value.clone(),
         outputs,
+        chunk_bytes: record.chunk_bytes,
+        zstd_level: record.zstd_level,
     })
 }
 

@@ -269,14 +269,22 @@ pub struct NodeKeys {
     pub outputs: Vec<PortKey>,
 }
 
-/// What to record (`record: { path, outputs }` in graph.yaml).
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+/// What to record (`record: { path, outputs, chunk_bytes, zstd_level }` in graph.yaml).
+#[derive(Debug, Clone, PartialEq, Eq, Default, Serialize, Deserialize)]
 pub struct RecordSpec {
     /// MCAP file to write; a relative path is inside the run folder.
     pub path: String,
     /// Outputs to record as `node/output`, each checked to exist; empty = every output.
     #[serde(default)]
     pub outputs: Vec<String>,
+    /// Target uncompressed chunk size, bytes, within
+    /// [`evseg_schemas::recording::CHUNK_BYTES_RANGE`]; `None` = the recorder's default (1 MiB).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub chunk_bytes: Option<u64>,
+    /// zstd level of the chunks, within [`evseg_schemas::recording::ZSTD_LEVEL_RANGE`]; `None` =
+    /// the recorder's default (0, zstd's own default level 3).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub zstd_level: Option<u32>,
 }
 
 /// A checked graph.

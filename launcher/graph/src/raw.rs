@@ -8,7 +8,7 @@ use crate::shape::{self, Spanned};
 use crate::yaml::{Entry, Node, Value};
 
 const TOP_KEYS: &[&str] = &["name", "mode", "window", "queue", "zenoh", "nodes", "record"];
-const RECORD_KEYS: &[&str] = &["path", "outputs"];
+const RECORD_KEYS: &[&str] = &["path", "outputs", "chunk_bytes", "zstd_level"];
 const ZENOH_KEYS: &[&str] = &["machines", "shared_memory"];
 const SHARED_MEMORY_KEYS: &[&str] = &["enabled", "pool_mib"];
 const MACHINE_KEYS: &[&str] = &["listen", "connect"];
@@ -68,6 +68,9 @@ pub(crate) struct RawRecord {
     pub path: Option<Spanned<String>>,
     /// `node/output` references; `None` = every output.
     pub outputs: Option<Vec<Spanned<String>>>,
+    /// MCAP writer settings, checked against their ranges (`None` when absent or invalid).
+    pub chunk_bytes: Option<u64>,
+    pub zstd_level: Option<u32>,
 }
 
 /// The whole file as written.
@@ -158,10 +161,27 @@ fn read_record(node: &Node, p: &mut Problems) -> Option<RawRecord> {
     let outputs = fields
         .get("outputs")
         .and_then(|n| shape::string_list(n, "`record.outputs`", p));
+    let chunk_bytes = fields.get("chunk_bytes").and_then(|n| {
+        let r = evseg_schemas::recording::CHUNK_BYTES_RANGE;
+        shape::count_in(n, "`record.chunk_bytes`", *r.start(), *r.end(), p)
+    });
+    let zstd_level = fields.get("zstd_level").and_then(|n| {
+        let r = evseg_schemas::recording::ZSTD_LEVEL_RANGE;
+        shape::count_in(
+            n,
+            "`record.zstd_level`",
+            (*r.start()).into(),
+            (*r.end()).into(),
+            p,
+        )
+        .and_then(|v| u32::try_from(v).ok())
+    });
     Some(RawRecord {
         at: node.at,
         path,
         outputs,
+        chunk_bytes,
+        zstd_level,
     })
 }
 

@@ -123,6 +123,29 @@ pub(crate) fn count(node: &Node, what: &str, min: u32, p: &mut Problems) -> Opti
     }
 }
 
+/// An integer in `min..=max`; the error names both ends.
+pub(crate) fn count_in(node: &Node, what: &str, min: u64, max: u64, p: &mut Problems) -> Option<u64> {
+    match &node.value {
+        Value::Int(i) => match u64::try_from(*i) {
+            Ok(n) if (min..=max).contains(&n) => Some(n),
+            _ => {
+                p.error(node.at, format!("{what} must be in {min}..={max}, got {i}"));
+                None
+            }
+        },
+        _ => {
+            p.error(
+                node.at,
+                format!(
+                    "{what} must be an integer in {min}..={max}, got {}",
+                    node.describe()
+                ),
+            );
+            None
+        }
+    }
+}
+
 /// A boolean (`true` / `false`).
 pub(crate) fn boolean(node: &Node, what: &str, p: &mut Problems) -> Option<bool> {
     match &node.value {

@@ -29,6 +29,7 @@ fn record_section_is_read_with_checked_outputs() {
         Some(RecordSpec {
             path: "run.mcap".into(),
             outputs: vec!["slicer/slices".into(), "source/events".into()],
+            ..Default::default()
         })
     );
     // In the canonical form, and read back.
@@ -69,4 +70,35 @@ fn unknown_outputs_missing_path_and_unknown_keys_are_reported_with_positions() {
         .unwrap_err()
         .to_string();
     assert!(err.contains("g.yaml:8:9"), "{err}");
+}
+
+#[test]
+fn writer_settings_are_read_and_checked_against_their_ranges() {
+    let g = check(&format!(
+        "{BASE}record:\n  path: run.mcap\n  chunk_bytes: 4194304\n  zstd_level: 19\n"
+    ))
+    .unwrap_or_else(|e| panic!("{e}"));
+    let r = g.record.unwrap();
+    assert_eq!((r.chunk_bytes, r.zstd_level), (Some(4_194_304), Some(19)));
+    let plain = check(&format!("{BASE}record: {{ path: run.mcap }}\n")).unwrap();
+    let r = plain.record.unwrap();
+    assert_eq!((r.chunk_bytes, r.zstd_level), (None, None));
+    let err = check(&format!(
+        "{BASE}record:\n  path: run.mcap\n  chunk_bytes: 0\n  zstd_level: 40\n"
+    ))
+    .unwrap_err()
+    .to_string();
+    assert!(
+        err.contains("g.yaml:10:16")
+            && err.contains("`record.chunk_bytes` must be in 1024..=1073741824, got 0"),
+        "{err}"
+    );
+    assert!(
+        err.contains("g.yaml:11:15") && err.contains("`record.zstd_level` must be in 0..=22, got 40"),
+        "{err}"
+    );
+    let err = check(&format!("{BASE}record:\n  path: run.mcap\n  zstd_level: high\n"))
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("must be an integer in 0..=22"), "{err}");
 }

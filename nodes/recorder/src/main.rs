@@ -31,12 +31,12 @@ fn description() -> evseg_schemas::describe::NodeDescription {
     .param(
         "chunk_bytes",
         WriterSettings::default().chunk_bytes,
-        "target uncompressed MCAP chunk size, bytes (default: the mcap crate's 1 MiB)",
+        "target uncompressed MCAP chunk size, bytes, 1024..=1073741824 (default: the mcap crate's 1 MiB)",
     )
     .param(
         "zstd_level",
         WriterSettings::default().zstd_level,
-        "zstd level of the chunks (0 = zstd's default, 3)",
+        "zstd level of the chunks, 0..=22 (0 = zstd's default, 3; 20 and above need much memory)",
     )
     .build()
 }
@@ -86,9 +86,9 @@ fn make(cfg: &NodeConfig) -> Result<Recorder, BoxError> {
             .param_opt("zstd_level")?
             .unwrap_or(WriterSettings::default().zstd_level),
     };
-    if settings.chunk_bytes == 0 {
-        return Err(param_err("chunk_bytes", "must be >= 1").into());
-    }
+    settings
+        .check()
+        .map_err(|(name, reason)| param_err(name, reason))?;
     let channels: Vec<ChannelSpec> = cfg
         .inputs
         .iter()

@@ -44,6 +44,33 @@ impl Default for WriterSettings {
     }
 }
 
+impl WriterSettings {
+    /// Checks both settings against [`evseg_schemas::recording::CHUNK_BYTES_RANGE`] and
+    /// [`evseg_schemas::recording::ZSTD_LEVEL_RANGE`]; on error, the setting's name and why.
+    pub fn check(&self) -> Result<(), (&'static str, String)> {
+        let chunk = evseg_schemas::recording::CHUNK_BYTES_RANGE;
+        if !chunk.contains(&self.chunk_bytes) {
+            return Err((
+                "chunk_bytes",
+                format!(
+                    "{} bytes is outside {}..={} (1 KiB to 1 GiB)",
+                    self.chunk_bytes,
+                    chunk.start(),
+                    chunk.end()
+                ),
+            ));
+        }
+        let zstd = evseg_schemas::recording::ZSTD_LEVEL_RANGE;
+        if !zstd.contains(&self.zstd_level) {
+            return Err((
+                "zstd_level",
+                format!("{} is outside {}..={}", self.zstd_level, zstd.start(), zstd.end()),
+            ));
+        }
+        Ok(())
+    }
+}
+
 /// An MCAP file being written.
 pub struct McapRecorder {
     path: PathBuf,
@@ -64,7 +91,7 @@ pub fn schema_text(name: &str, version: u16) -> String {
 
 impl McapRecorder {
     /// Creates `path` (parent folders too) with one channel per entry of `channels` (in order;
-    /// port `i` of [`Self::write_frame`] is `channels[i]`), zstd-compressed chunks.
+    /// port `i` of [`Self::write_frame`] is `channels[i]`), zstd-compressed chunks; refuses `settings` outside their ranges ([`WriterSettings::check`]).
     pub fn create(
         path: &Path,
         channels: &[ChannelSpec],
@@ -78,6 +105,10 @@ impl McapRecorder {
             file: path.to_path_buf(),
             source: e,
         };
+        settings.check().map_err(|(name, reason)| RecordError::Param {
+            name: name.into(),
+            reason,
+        })?;
         if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
             std::fs::create_dir_all(dir).map_err(io)?;
         }

@@ -77,16 +77,23 @@ const EVENTS_PER_SLICE: usize = 4000;
 /// Writes a recording with tracks, flow and metrics channels (and one frame of an unknown schema
 /// version) with small chunks, so it has many; returns its bytes.
 fn write_recording(path: &Path) -> Vec<u8> {
+    write_recording_with(
+        path,
+        &WriterSettings {
+            chunk_bytes: 16 * 1024,
+            ..WriterSettings::default()
+        },
+    )
+}
+
+/// [`write_recording`] with the writer's `settings`.
+fn write_recording_with(path: &Path, settings: &WriterSettings) -> Vec<u8> {
     let channels = [
         channel("segmenter/tracks", Tracks::SCHEMA),
         channel("flow/flow", NormalFlow::SCHEMA),
         channel("evaluator/metrics", Metrics::SCHEMA),
     ];
-    let settings = WriterSettings {
-        chunk_bytes: 16 * 1024,
-        ..WriterSettings::default()
-    };
-    let mut rec = McapRecorder::create(path, &channels, &settings).unwrap();
+    let mut rec = McapRecorder::create(path, &channels, settings).unwrap();
     rec.metadata(
         "evseg.run",
         BTreeMap::from([("graph_hash".to_string(), "abc".to_string())]),
@@ -174,6 +181,78 @@ fn a_complete_recording_reads_back_exactly() {
         bytes.len() < 3 * SLICES as usize * EVENTS_PER_SLICE * 4,
         "compressed"
     );
+}
+
+/// Every message of the recording at `path`, in file order: topic, sequence number, the
+/// envelope without its publish time (the writer's clock) and the body's bytes.
+fn messages(path: &Path) -> Vec<(String, u32, Envelope, Vec<u8>)> {
+    let mut frames = Vec::new();
+    let rec = read(path, |m| {
+        let (mut env, header) = codec::decode_header(m.data).unwrap();
+        env.publish_ns = 0;
+        frames.push((
+            m.channel.topic.clone(),
+            m.sequence,
+            env,
+            m.data[header..].to_vec(),
+        ));
+        Ok(())
+    })
+    .unwrap();
+    assert!(rec.truncated.is_none(), "{}", rec.completeness());
+    frames
+}
+
+#[test]
+fn writer_settings_change_the_file_not_the_messages_and_are_checked() {
+    let dir = tempfile::tempdir().unwrap();
+    let (small, strong) = (dir.path().join("small.mcap"), dir.path().join("strong.mcap"));
+    let small_bytes = write_recording(&small);
+    let strong_bytes = write_recording_with(
+        &strong,
+        &WriterSettings {
+            chunk_bytes: 4 << 20,
+            zstd_level: 19,
+        },
+    );
+    assert_ne!(small_bytes, strong_bytes, "the settings reach the writer");
+    assert_eq!(messages(&small), messages(&strong));
+    assert!(
+        read(&strong, |_| Ok(())).unwrap().chunks < read(&small, |_| Ok(())).unwrap().chunks,
+        "4 MiB chunks are fewer than 16 KiB ones"
+    );
+    // Out of range: refused naming the setting, and no file is created.
+    for (settings, name) in [
+        (
+            WriterSettings {
+                chunk_bytes: 0,
+                ..WriterSettings::default()
+            },
+            "chunk_bytes",
+        ),
+        (
+            WriterSettings {
+                chunk_bytes: 1 << 40,
+                ..WriterSettings::default()
+            },
+            "chunk_bytes",
+        ),
+        (
+            WriterSettings {
+                zstd_level: 23,
+                ..WriterSettings::default()
+            },
+            "zstd_level",
+        ),
+    ] {
+        let path = dir.path().join("refused.mcap");
+        let err = match McapRecorder::create(&path, &[channel("a/b", Tracks::SCHEMA)], &settings) {
+            Err(e) => e.to_string(),
+            Ok(_) => panic!("{settings:?} accepted"),
+        };
+        assert!(err.contains(name), "{err}");
+        assert!(!path.exists(), "{err}");
+    }
 }
 
 #[test]
