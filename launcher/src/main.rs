@@ -586,7 +586,7 @@ fn main() -> ExitCode {
             skip_gaps,
         } => {
             if let Err(e) = replay::check_record_target(&recording, record.as_deref()) {
-                eprintln!("error: {e:#}");
+                print_error(&e);
                 return ExitCode::FAILURE;
             }
             let opts = run::RunOptions {
@@ -611,9 +611,29 @@ fn main() -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {e:#}");
+            print_error(&e);
             ExitCode::FAILURE
         }
+    }
+}
+
+/// Prints `e` on stderr as `error: ...` with its causes, except a graph file's errors: its
+/// diagnostics already read `file:line:column: error: ...` (one per line, the form editors jump
+/// to), and its other errors name their cause in their own message.
+fn print_error(e: &anyhow::Error) {
+    eprintln!("{}", error_text(e));
+}
+
+/// The text [`print_error`] prints.
+fn error_text(e: &anyhow::Error) -> String {
+    use evseg_graph::GraphError;
+    match e.downcast_ref::<GraphError>() {
+        // Only when nothing was added on top (a context would be lost).
+        Some(g) if e.to_string() == g.to_string() => match g {
+            GraphError::Invalid(_) => g.to_string(),
+            _ => format!("error: {g}"),
+        },
+        _ => format!("error: {e:#}"),
     }
 }
 
@@ -655,8 +675,27 @@ fn print_outcome(outcome: &run::RunOutcome) {
 #[cfg(test)]
 mod tests {
     use clap::Parser;
+    use evseg_graph::{Diagnostic, GraphError, Span};
 
-    use super::{Cli, Command};
+    use super::{Cli, Command, error_text};
+
+    #[test]
+    fn errors_print_once_with_their_causes_and_diagnostics_in_compiler_form() {
+        let d = |line| Diagnostic::new("g.yaml", Span::new(line, 3), "bad");
+        let invalid = anyhow::Error::from(GraphError::Invalid(vec![d(2), d(5)]));
+        assert_eq!(
+            error_text(&invalid),
+            "g.yaml:2:3: error: bad\ng.yaml:5:3: error: bad"
+        );
+        let io = anyhow::Error::from(GraphError::Io {
+            file: "g.yaml".into(),
+            source: std::io::Error::new(std::io::ErrorKind::NotFound, "gone"),
+        });
+        assert_eq!(error_text(&io), "error: cannot read graph file g.yaml: gone");
+        let wrapped = anyhow::Error::from(GraphError::Invalid(vec![d(2)])).context("replay");
+        assert_eq!(error_text(&wrapped), "error: replay: g.yaml:2:3: error: bad");
+        assert_eq!(error_text(&anyhow::anyhow!("plain")), "error: plain");
+    }
 
     #[test]
     fn sim_takes_every_preset_and_refuses_an_unknown_scene_naming_the_presets() {

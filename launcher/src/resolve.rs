@@ -40,7 +40,7 @@ impl BinaryResolver {
                 Err(format!("no file {}", p.display()))
             };
         }
-        let mut tried = Vec::new();
+        let mut beside = None;
         if let Ok(exe) = std::env::current_exe()
             && let Some(dir) = exe.parent()
         {
@@ -48,7 +48,7 @@ impl BinaryResolver {
             if p.is_file() {
                 return Ok(p);
             }
-            tried.push(dir.display().to_string());
+            beside = Some(dir.display().to_string());
         }
         if let Some(path) = std::env::var_os("PATH") {
             for dir in std::env::split_paths(&path) {
@@ -58,11 +58,12 @@ impl BinaryResolver {
                 }
             }
         }
-        tried.push("PATH".into());
-        Err(format!(
-            "binary `{name}` not found (looked next to the launcher in {} and on PATH)",
-            tried.join(", ")
-        ))
+        Err(match beside {
+            Some(dir) => {
+                format!("binary `{name}` not found (looked next to the launcher in {dir} and on PATH)")
+            }
+            None => format!("binary `{name}` not found (looked on PATH)"),
+        })
     }
 
     /// Path and description of `name`.

@@ -82,7 +82,7 @@ pub struct RunOutcome {
 /// Loads and checks `path`, asking each binary for its description.
 pub fn load_graph(path: &Path, resolver: &BinaryResolver) -> anyhow::Result<Graph> {
     let describe = |b: &str| resolver.describe(b).map(|(_, d)| d);
-    evseg_graph::load(path, &describe).map_err(|e| anyhow::anyhow!("{e}"))
+    Ok(evseg_graph::load(path, &describe)?)
 }
 
 /// Applies `node.param=value` overrides, checking node and parameter exist.
