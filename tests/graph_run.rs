@@ -543,6 +543,43 @@ fn assert_restarted_and_completed(run: &Finished, out: &Path, node: &str, why: &
     );
 }
 
+/// A node that stays deaf through its start-up restarts stops the run, and the error shows the
+/// last lines of its log (CI, 2026-12-07: an A/B variant's evaluator received nothing through
+/// two restarts, and the error only said "see its log", in a folder the test had removed).
+#[test]
+fn a_node_deaf_through_its_restarts_stops_the_run_showing_its_log() {
+    let dir = tempfile::tempdir().unwrap();
+    let env = [("EVSEG_TEST_DEAF_ONCE", "background=")];
+    let (run, _out) = run_default_graph_with(
+        dir.path(),
+        0.2,
+        &env,
+        &["--startup-timeout", "3"],
+        Duration::from_secs(180),
+    );
+    assert!(
+        !run.status.success(),
+        "the run should have stopped:\n{}",
+        run.stderr
+    );
+    assert!(
+        run.stderr.contains("node `background` received nothing")
+            && run.stderr.contains("after 2 restart(s)"),
+        "{}",
+        run.stderr
+    );
+    assert!(
+        run.stderr.contains("last lines of") && run.stderr.contains("background.log"),
+        "{}",
+        run.stderr
+    );
+    assert!(
+        run.stderr.contains("input subscriptions not declared"),
+        "the node's own log lines are shown:\n{}",
+        run.stderr
+    );
+}
+
 /// A producer blocked waiting for credit keeps its stats current: in the stalled `bench
 /// pipeline` runs the launcher showed the slicer as "published 0" (its stats from before it
 /// blocked) although it had published its window of slices. With the start-up rules off, a

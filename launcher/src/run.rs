@@ -517,6 +517,22 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
                     stop_all(&mut fleet.0);
                     bail!("{why}\nlogs in {}", dir.join("logs").display());
                 }
+                crate::watchdog::Action::GiveUp { node, why } => {
+                    display.clear();
+                    stop_all(&mut fleet.0);
+                    let log = fleet.0.iter().find(|p| p.id == node).map(|p| {
+                        format!(
+                            "\nlast lines of {}:\n{}",
+                            p.log.display(),
+                            indent(&p.log_tail(CRASH_LOG_LINES))
+                        )
+                    });
+                    bail!(
+                        "{why}{}\nlogs in {}",
+                        log.unwrap_or_default(),
+                        dir.join("logs").display()
+                    );
+                }
             }
         }
         if peers.pending() && start.elapsed() >= crate::peers::PEER_WARN_AFTER {

@@ -104,6 +104,9 @@ pub enum Action {
     Restart { node: String, why: String },
     /// Stop the run with this message.
     Stop(String),
+    /// Stop the run: `node` (of this machine) still starves after its start-up restarts; `why`
+    /// is for the user (the launcher adds the last lines of the node's log).
+    GiveUp { node: String, why: String },
 }
 
 /// The watchdog's memory between checks.
@@ -280,9 +283,10 @@ impl Watchdog {
             ),
         };
         if *done >= self.settings.startup_restarts {
-            return Some(Action::Stop(format!(
-                "{why}, after {done} restart(s); {cause} (see its log)"
-            )));
+            return Some(Action::GiveUp {
+                node: id.to_string(),
+                why: format!("{why}, after {done} restart(s); {cause}"),
+            });
         }
         *done += 1;
         self.starving_since.remove(id);
@@ -492,7 +496,7 @@ mod tests {
         let a = w.check(t3 + Duration::from_secs(20), &nodes, &all, &st, true);
         assert!(
             // (the stall rule fires too: nothing was published for 120 s)
-            matches!(&a[..], [Action::Stop(m), ..] if m.contains("`a`") && m.contains("1 restart")),
+            matches!(&a[..], [Action::GiveUp { node, why: m }, ..] if node == "a" && m.contains("`a`") && m.contains("1 restart")),
             "{a:?}"
         );
     }

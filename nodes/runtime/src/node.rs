@@ -179,8 +179,9 @@ pub const DROP_DONE_ENV: &str = "EVSEG_TEST_DROP_DONE";
 /// Environment variable that makes a node declare none of its input subscriptions once
 /// (`node=marker-file`), or none for one input port (`node/port=marker-file`): deaf while the
 /// marker file does not exist; the node creates it, so the node started again after it
-/// subscribes normally. As if its subscriptions (or one of them) had never reached its
-/// producers: for tests of the launcher's start-up watchdog.
+/// subscribes normally. With no marker (`node=`) it is deaf at every start. As if its
+/// subscriptions (or one of them) had never reached its producers: for tests of the
+/// launcher's start-up watchdog.
 pub const DEAF_ONCE_ENV: &str = "EVSEG_TEST_DEAF_ONCE";
 
 /// Which input subscriptions [`DEAF_ONCE_ENV`] leaves undeclared.
@@ -202,6 +203,9 @@ fn deaf_once_from_env(node: &str) -> Option<Deaf> {
         None if target == node => Deaf::All,
         _ => return None,
     };
+    if marker.is_empty() {
+        return Some(deaf);
+    }
     std::fs::OpenOptions::new()
         .write(true)
         .create_new(true)
