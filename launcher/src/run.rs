@@ -467,25 +467,17 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
                     p.restart()
                         .with_context(|| format!("cannot restart node `{}`", p.id))?;
                 } else {
-                    failed = Some((
-                        p.id.clone(),
-                        status,
-                        p.origin.clone(),
-                        p.log.clone(),
-                        p.log_tail(CRASH_LOG_LINES),
-                    ));
+                    failed = Some((p.id.clone(), status, p.origin.clone(), last_log_lines(p)));
                     break;
                 }
             }
         }
-        if let Some((id, status, origin, log, tail)) = failed {
+        if let Some((id, status, origin, last_lines)) = failed {
             display.clear();
             stop_all(&mut fleet.0);
             bail!(
-                "node `{id}` ({origin}) failed with {}\nlast lines of {}:\n{}",
-                describe_status(&status),
-                log.display(),
-                indent(&tail)
+                "node `{id}` ({origin}) failed with {}\n{last_lines}",
+                describe_status(&status)
             );
         }
         let snapshot = stats.lock().map(|m| m.clone()).unwrap_or_default();
@@ -520,16 +512,10 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
                 crate::watchdog::Action::GiveUp { node, why } => {
                     display.clear();
                     stop_all(&mut fleet.0);
-                    let log = fleet.0.iter().find(|p| p.id == node).map(|p| {
-                        format!(
-                            "\nlast lines of {}:\n{}",
-                            p.log.display(),
-                            indent(&p.log_tail(CRASH_LOG_LINES))
-                        )
-                    });
+                    let log = fleet.0.iter().find(|p| p.id == node).map(last_log_lines);
                     bail!(
                         "{why}{}\nlogs in {}",
-                        log.unwrap_or_default(),
+                        log.map(|l| format!("\n{l}")).unwrap_or_default(),
                         dir.join("logs").display()
                     );
                 }
@@ -801,6 +787,16 @@ pub fn flow_comparison(dir: &Path) -> Option<String> {
         ));
     }
     Some(s)
+}
+
+/// `last lines of LOG:` and the last [`CRASH_LOG_LINES`] lines of `p`'s log, indented: what a
+/// failed or given-up node's error shows.
+fn last_log_lines(p: &crate::supervise::NodeProcess) -> String {
+    format!(
+        "last lines of {}:\n{}",
+        p.log.display(),
+        indent(&p.log_tail(CRASH_LOG_LINES))
+    )
 }
 
 fn indent(text: &str) -> String {

@@ -9,7 +9,7 @@ use std::collections::BTreeMap;
 use std::path::PathBuf;
 
 use evseg_recorder::write::{ChannelSpec, McapRecorder, WriterSettings};
-use evseg_recorder::{END_METADATA, GRAPH_ATTACHMENT, PARAMS_METADATA, RUN_METADATA, RecordError};
+use evseg_recorder::{END_METADATA, GRAPH_ATTACHMENT, PARAMS_METADATA, RUN_METADATA};
 use evseg_runtime::describe::Describe;
 use evseg_runtime::{BoxError, NodeConfig, RawConsumer, run_raw_consumer};
 use evseg_schemas::Envelope;
@@ -53,13 +53,6 @@ fn now_ns() -> u64 {
         .unwrap_or(0)
 }
 
-fn param_err(name: &str, e: impl std::fmt::Display) -> RecordError {
-    RecordError::Param {
-        name: name.into(),
-        reason: e.to_string(),
-    }
-}
-
 fn string_map(value: &serde_json::Value) -> BTreeMap<String, String> {
     match value {
         serde_json::Value::Object(m) => m
@@ -86,9 +79,6 @@ fn make(cfg: &NodeConfig) -> Result<Recorder, BoxError> {
             .param_opt("zstd_level")?
             .unwrap_or(WriterSettings::default().zstd_level),
     };
-    settings
-        .check()
-        .map_err(|(name, reason)| param_err(name, reason))?;
     let channels: Vec<ChannelSpec> = cfg
         .inputs
         .iter()
