@@ -257,7 +257,11 @@ pub struct TrackerParams {
     /// worst-object switches 1.00 -> 1.42 (two-objects 13, whose objects cross, 1 -> 6).
     /// Also measured, not kept: the hierarchical merger publishing boxes without 2 / 5 % of a
     /// segment's events at each side (boxes by every grouping, absorption and merge rule
-    /// here): 79.24 / 3.0 and 78.17 / 4.8.
+    /// here): 79.24 / 3.0 and 78.17 / 4.8. Again on 2026-12-07 (session 50, the defaults of
+    /// 00116b7), 0 -> 8 px on twelve multi-object sequences the bench has not seen (`evseg run
+    /// graph.yaml`, three-objects and two-objects seeds 801-806, 3 s): mean per-object IoU
+    /// 44.52 -> 45.34 % and 52.09 -> 51.97 %, the worst objects' switches summed 27 -> 28 and
+    /// 18 -> 18; still too small a gain to change the default.
     pub split_cell_px: u16,
     /// See `split_gap_px`: fewest events of a group split off a track as a fraction of the
     /// events of the group that keeps it. 0 = no such condition (default). A small object seen
