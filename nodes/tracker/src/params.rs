@@ -150,7 +150,15 @@ pub struct TrackerParams {
     /// 22.3, 0.05 53.37 / 23.3, 0 (off) 36.57 / 60.8; 0.1 raised every scene's per-object IoU
     /// (two-objects, whose objects cross, 39.5 -> 43.0 %). Earlier, chosen together with
     /// `merge_velocity_px_s` (fdbc78d): 0.5 and 30 px/s 29.15 / 59.3; 0.3 and 30 30.83 / 51.8;
-    /// 0.2 and 30 31.01 / 49.8; 0.5 and 60 29.30 / 50.7; 0.3 and 60 31.89 / 36.8.
+    /// 0.2 and 30 31.01 / 49.8; 0.5 and 60 29.30 / 50.7; 0.3 and 60 31.89 / 36.8. Again on
+    /// 2026-12-07 (session 50, 00116b7's defaults), 0.1 -> 0.3: on twelve multi-object
+    /// sequences the bench has not seen (`evseg run graph.yaml`, three-objects and two-objects
+    /// seeds 801-806, 3 s) mean per-object IoU 44.52 -> 46.34 % and 52.09 -> 52.15 %, the worst
+    /// objects' switches summed 27 -> 25 and 18 -> 17 (a second object next to a first one's
+    /// grown box is taken by it less often); but `evseg bench` (evseg-bench-v3) per object 79.23
+    /// -> 77.66 %, worst-object switches 0.2 (0.5) -> 0.8 (1.8) (enter-leave 204 0 -> 6,
+    /// two-objects 202 57.12 -> 50.52 %, low-contrast 206 73.18 -> 67.97 %: objects seen in
+    /// pieces open tracks of their own again). Kept at 0.1.
     pub absorb_overlap: f64,
     /// Two tracks matched in the same slice, each matched at least `min_hits_to_merge` times,
     /// whose segments' boxes lie within `merge_gap_px` of each other and whose filtered image
