@@ -158,7 +158,11 @@ pub struct TrackerParams {
     /// grown box is taken by it less often); but `evseg bench` (evseg-bench-v3) per object 79.23
     /// -> 77.66 %, worst-object switches 0.2 (0.5) -> 0.8 (1.8) (enter-leave 204 0 -> 6,
     /// two-objects 202 57.12 -> 50.52 %, low-contrast 206 73.18 -> 67.97 %: objects seen in
-    /// pieces open tracks of their own again). Kept at 0.1.
+    /// pieces open tracks of their own again). Kept at 0.1. Also measured then, with a
+    /// throw-away patch: 0.3 only for a segment with at least half the events of the segment
+    /// that matched the track in that slice (a second object rather than a piece), 0.1 for
+    /// smaller ones: unseen 46.32 % and 52.24 %, switches 26 and 16; bench 78.57 %, 0.2 (0.8)
+    /// (low-contrast 206 67.75 %, one-object 101 85.91 -> 85.25 %). Neither is a clear gain.
     pub absorb_overlap: f64,
     /// Two tracks matched in the same slice, each matched at least `min_hits_to_merge` times,
     /// whose segments' boxes lie within `merge_gap_px` of each other and whose filtered image
