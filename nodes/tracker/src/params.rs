@@ -229,7 +229,13 @@ pub struct TrackerParams {
     /// two-objects, whose objects cross) keeps one id per object at 10 and merges them at 20 and
     /// 30; `evseg bench` per-object IoU % / worst object's switches: 10 60.76 / 3.3, 30
     /// 61.03 / 2.7, unbounded 61.01 / 2.5. An object that overlaps another within 0.3 s of
-    /// being first tracked is still merged into it.
+    /// being first tracked is still merged into it. Measured and not kept (2026-12-07, session
+    /// 50), 10 -> 4, so that a second object seen inside a young first track's box is merged
+    /// only in its first slices: on twelve multi-object sequences the bench has not seen
+    /// (three-objects and two-objects seeds 801-806, 3 s) mean per-object IoU 44.52 -> 44.65 %
+    /// and 52.09 -> 53.65 %, but the worst objects' switches summed 27 -> 27 and 18 -> 29;
+    /// `evseg bench` per object 79.23 -> 77.67 %, switches 0.2 (0.5) -> 1.5 (2.7) (low-contrast
+    /// 206 73.18 -> 65.58 %: its pieces stay apart).
     pub merge_inside_max_hits: u32,
     /// A track's segments in one slice are grouped by their boxes (boxes at most this far
     /// apart, pixels, transitively, are one group); the group with the most events keeps the
